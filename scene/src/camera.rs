@@ -306,7 +306,7 @@ impl Trajectory {
         if times.is_empty() {
             return Err("a trajectory needs at least one pose".into());
         }
-        if let Some(i) = times.windows(2).position(|w| !(w[1] > w[0])) {
+        if let Some(i) = times.windows(2).position(|w| w[1].partial_cmp(&w[0]) != Some(std::cmp::Ordering::Greater)) {
             return Err(format!(
                 "times are not increasing at index {}: {} then {}",
                 i + 1,

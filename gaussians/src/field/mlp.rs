@@ -1,0 +1,302 @@
+//! The Deform-GS deformation MLP, hand-written on `gemm`:
+//! `(δx, δq, δs) = F(γ(x), γ(t))` (DEGS §3.1, the deformation field of Eq. 3).
+//! Layers `D × W` with ReLU, the encoded input concatenated back after layer
+//! `D / 2` when `D ≥ 5` (Deform-GS: after layer 4 of 8), one linear head of 10 outputs
+//! (δx 3, δq 4, δs 3; equal to three separate heads), no output activation.
+
+use super::FieldSettings;
+use super::linalg::{Real, View, matmul};
+use rand::{RngExt, SeedableRng};
+
+/// Number of head outputs: δx (3), δq (4), δs (3).
+pub const HEAD_OUT: usize = 10;
+
+/// Offsets of one linear layer inside the flat parameter vector. Weights are stored
+/// `[in × out]` row-major (so `y = a · W + b`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LayerLayout {
+    pub weight: usize,
+    pub bias: usize,
+    pub fan_in: usize,
+    pub fan_out: usize,
+}
+
+/// NeRF positional encoding with the raw input kept:
+/// `[v, sin(2⁰v), cos(2⁰v), …, sin(2^{L−1}v), cos(2^{L−1}v)]`.
+pub fn encoded_len(dims: usize, freqs: usize) -> usize {
+    dims * (1 + 2 * freqs)
+}
+
+fn encode_into<T: Real>(v: &[T], freqs: usize, out: &mut [T]) {
+    let d = v.len();
+    out[..d].copy_from_slice(v);
+    // sin/cos of 2^l·x by the double-angle recurrence, in f64 (exact to ~1e-13 after
+    // 10 doublings, far below f32 resolution; one libm call per input value).
+    for (i, &x) in v.iter().enumerate() {
+        let (mut sn, mut cs) = x.to_f64().sin_cos();
+        for l in 0..freqs {
+            out[d + 2 * l * d + i] = T::from_f64(sn);
+            out[d + (2 * l + 1) * d + i] = T::from_f64(cs);
+            (sn, cs) = (2.0 * sn * cs, cs * cs - sn * sn);
+        }
+    }
+}
+
+/// Multi-layer perceptron with all parameters in one flat vector.
+#[derive(Clone, Debug)]
+pub struct Mlp<T: Real> {
+    pub settings: FieldSettings,
+    pub params: Vec<T>,
+    pub layers: Vec<LayerLayout>,
+}
+
+/// Activations kept from the forward pass for the backward pass.
+pub struct MlpCache<T: Real> {
+    pub n: usize,
+    /// Encoded input `n × in_dim`.
+    pub input: Vec<T>,
+    /// Post-ReLU output of each hidden layer, `n × W`.
+    pub hidden: Vec<Vec<T>>,
+}
+
+impl<T: Real> Mlp<T> {
+    pub fn input_dim(s: &FieldSettings) -> usize {
+        encoded_len(3, s.pos_freqs) + encoded_len(1, s.time_freqs)
+    }
+
+    /// Index of the hidden layer after which the input is concatenated back, if any.
+    pub fn skip_after(s: &FieldSettings) -> Option<usize> {
+        (s.depth >= 5).then_some(s.depth / 2)
+    }
+
+    /// Layout of the flat parameter vector.
+    pub fn layout(s: &FieldSettings) -> Vec<LayerLayout> {
+        let in_dim = Self::input_dim(s);
+        let skip = Self::skip_after(s);
+        let mut layers = Vec::new();
+        let mut off = 0;
+        let mut push = |fan_in: usize, fan_out: usize| {
+            layers.push(LayerLayout {
+                weight: off,
+                bias: off + fan_in * fan_out,
+                fan_in,
+                fan_out,
+            });
+            off += fan_in * fan_out + fan_out;
+        };
+        for i in 0..s.depth {
+            let fan_in = if i == 0 {
+                in_dim
+            } else if Some(i - 1) == skip {
+                s.width + in_dim
+            } else {
+                s.width
+            };
+            push(fan_in, s.width);
+        }
+        let head_in = if s.depth == 0 { in_dim } else { s.width };
+        push(head_in, HEAD_OUT);
+        layers
+    }
+
+    pub fn param_count(s: &FieldSettings) -> usize {
+        Self::layout(s)
+            .last()
+            .map(|l| l.bias + l.fan_out)
+            .unwrap_or(0)
+    }
+
+    /// PyTorch `nn.Linear` default init: weight and bias ~ U(±1/√fan_in).
+    pub fn new(settings: FieldSettings, seed: u64) -> Self {
+        let layers = Self::layout(&settings);
+        let mut params = vec![T::ZERO; Self::param_count(&settings)];
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        for l in &layers {
+            let bound = 1.0 / (l.fan_in as f64).sqrt();
+            for p in &mut params[l.weight..l.bias + l.fan_out] {
+                *p = T::from_f64(rng.random_range(-bound..bound));
+            }
+        }
+        Mlp {
+            settings,
+            params,
+            layers,
+        }
+    }
+
+    /// Build the encoded input rows `[γ(x), γ(t)]`. `t` has length 1 (broadcast) or n.
+    pub fn encode(&self, x: &[[T; 3]], t: &[T]) -> Vec<T> {
+        let s = &self.settings;
+        let in_dim = Self::input_dim(s);
+        let px = encoded_len(3, s.pos_freqs);
+        assert!(t.len() == 1 || t.len() == x.len(), "time batch length");
+        let mut out = vec![T::ZERO; x.len() * in_dim];
+        let chunk = 256;
+        use rayon::prelude::*;
+        out.par_chunks_mut(in_dim * chunk)
+            .enumerate()
+            .for_each(|(c, rows)| {
+                for (r, row) in rows.chunks_mut(in_dim).enumerate() {
+                    let i = c * chunk + r;
+                    let ti = if t.len() == 1 { t[0] } else { t[i] };
+                    encode_into(&x[i], s.pos_freqs, &mut row[..px]);
+                    encode_into(&[ti], s.time_freqs, &mut row[px..]);
+                }
+            });
+        out
+    }
+
+    /// Forward pass: returns `n × 10` head outputs (δx, δq, δs per row) and the cache.
+    pub fn forward(&self, x: &[[T; 3]], t: &[T]) -> (Vec<T>, MlpCache<T>) {
+        let n = x.len();
+        let s = &self.settings;
+        let in_dim = Self::input_dim(s);
+        let skip = Self::skip_after(s);
+        let input = self.encode(x, t);
+        let mut hidden: Vec<Vec<T>> = Vec::with_capacity(s.depth);
+        let mut cat = Vec::new();
+        for (i, l) in self.layers[..s.depth].iter().enumerate() {
+            let a: &[T] = if i == 0 {
+                &input
+            } else if Some(i - 1) == skip {
+                cat = concat_rows(&input, in_dim, &hidden[i - 1], s.width, n);
+                &cat
+            } else {
+                &hidden[i - 1]
+            };
+            let mut z = self.linear(a, n, l);
+            relu_inplace(&mut z);
+            hidden.push(z);
+        }
+        drop(cat);
+        let head = *self.layers.last().expect("head layer");
+        let last: &[T] = hidden.last().map(|h| h.as_slice()).unwrap_or(&input);
+        let out = self.linear(last, n, &head);
+        (out, MlpCache { n, input, hidden })
+    }
+
+    fn linear(&self, a: &[T], n: usize, l: &LayerLayout) -> Vec<T> {
+        let mut z = vec![T::ZERO; n * l.fan_out];
+        let bias = &self.params[l.bias..l.bias + l.fan_out];
+        for row in z.chunks_mut(l.fan_out) {
+            row.copy_from_slice(bias);
+        }
+        let w = View::new(
+            &self.params[l.weight..l.bias],
+            l.fan_in,
+            l.fan_out,
+            l.fan_out,
+        );
+        matmul(
+            &mut z,
+            l.fan_out,
+            View::new(a, n, l.fan_in, l.fan_in),
+            w,
+            true,
+        );
+        z
+    }
+
+    /// Backward pass: `grad_out` is `n × 10`; returns the gradient of every parameter
+    /// (same layout as `params`). No gradient flows into x or t (the field sees the
+    /// canonical positions detached, as in Deform-GS).
+    pub fn backward(&self, cache: &MlpCache<T>, grad_out: &[T]) -> Vec<T> {
+        let n = cache.n;
+        let s = &self.settings;
+        let in_dim = Self::input_dim(s);
+        let skip = Self::skip_after(s);
+        assert_eq!(grad_out.len(), n * HEAD_OUT);
+        let mut grads = vec![T::ZERO; self.params.len()];
+        let head = *self.layers.last().expect("head layer");
+        let last: &[T] = cache
+            .hidden
+            .last()
+            .map(|h| h.as_slice())
+            .unwrap_or(&cache.input);
+        let mut dz = grad_out.to_vec();
+        let mut da = self.linear_backward(last, &dz, n, &head, &mut grads, s.depth > 0);
+        for i in (0..s.depth).rev() {
+            let l = self.layers[i];
+            // dz = da ⊙ [h > 0]
+            dz = da;
+            for (g, &h) in dz.iter_mut().zip(&cache.hidden[i]) {
+                *g = if h > T::ZERO { *g } else { T::ZERO };
+            }
+            let cat;
+            let a: &[T] = if i == 0 {
+                &cache.input
+            } else if Some(i - 1) == skip {
+                cat = concat_rows(&cache.input, in_dim, &cache.hidden[i - 1], s.width, n);
+                &cat
+            } else {
+                &cache.hidden[i - 1]
+            };
+            let need_da = i > 0;
+            let d = self.linear_backward(a, &dz, n, &l, &mut grads, need_da);
+            da = if i > 0 && Some(i - 1) == skip {
+                // keep only the hidden part of the concatenated input's gradient
+                let w = l.fan_in;
+                let mut h = vec![T::ZERO; n * s.width];
+                for (dst, src) in h.chunks_mut(s.width).zip(d.chunks(w)) {
+                    dst.copy_from_slice(&src[in_dim..]);
+                }
+                h
+            } else {
+                d
+            };
+        }
+        grads
+    }
+
+    /// Accumulate dW = aᵀ dz and db = Σ dz into `grads`; return da = dz Wᵀ if asked.
+    fn linear_backward(
+        &self,
+        a: &[T],
+        dz: &[T],
+        n: usize,
+        l: &LayerLayout,
+        grads: &mut [T],
+        need_da: bool,
+    ) -> Vec<T> {
+        let va = View::new(a, n, l.fan_in, l.fan_in);
+        let vdz = View::new(dz, n, l.fan_out, l.fan_out);
+        matmul(&mut grads[l.weight..l.bias], l.fan_out, va.t(), vdz, true);
+        let gb = &mut grads[l.bias..l.bias + l.fan_out];
+        for row in dz.chunks(l.fan_out) {
+            for (g, &v) in gb.iter_mut().zip(row) {
+                *g += v;
+            }
+        }
+        if !need_da {
+            return Vec::new();
+        }
+        let mut da = vec![T::ZERO; n * l.fan_in];
+        let w = View::new(
+            &self.params[l.weight..l.bias],
+            l.fan_in,
+            l.fan_out,
+            l.fan_out,
+        );
+        matmul(&mut da, l.fan_in, vdz, w.t(), false);
+        da
+    }
+}
+
+fn relu_inplace<T: Real>(z: &mut [T]) {
+    use rayon::prelude::*;
+    z.par_chunks_mut(1 << 14).for_each(|c| {
+        for v in c {
+            // select form, so it vectorises
+            *v = if *v > T::ZERO { *v } else { T::ZERO };
+        }
+    });
+}
+
+fn concat_rows<T: Real>(a: &[T], wa: usize, b: &[T], wb: usize, n: usize) -> Vec<T> {
+    let mut out = vec![T::ZERO; n * (wa + wb)];
+    for (r, row) in out.chunks_mut(wa + wb).enumerate() {
+        row[..wa].copy_from_slice(&a[r * wa..(r + 1) * wa]);
+        row[wa..].copy_from_slice(&b[r * wb..(r + 1) * wb]);
+    }
+    out
+}

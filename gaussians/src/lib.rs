@@ -1,0 +1,6 @@
+//! gaussians
+pub mod densify;
+pub mod field;
+pub mod metrics;
+pub mod optim;
+pub mod train;

@@ -1,0 +1,420 @@
+//! RGB-only training of a dynamic Gaussian model (DEGS warm-up, DESIGN §5):
+//! canonical Gaussians optimised with Adam under L1 (+ D-SSIM), densified as 3DGS, and
+//! after a static phase a deformation field `F(γ(x), γ(t))` (Deform-GS).
+//!
+//! The rasterizer is reached through the [`Rasterizer`] trait so the loop can be tested
+//! on its own; [`Splats`] holds the trainable parameters as struct of arrays.
+
+pub mod init;
+pub mod settings;
+
+use crate::densify::{self, Geometry, GradStats};
+use crate::field::{self, Deformation, Mlp};
+use crate::metrics;
+use crate::optim::{Adam, ExpSchedule};
+use scene::Camera;
+pub use settings::TrainSettings;
+
+/// Trainable Gaussians (raw: log-scale, logit opacity, quaternion w-first; SH DC and
+/// rest stored apart as 3DGS `features_dc` / `features_rest`, rest coefficient-major:
+/// `rest[i][(k−1)·3 + c]` for k = 1..16).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Splats {
+    pub means: Vec<[f32; 3]>,
+    pub log_scales: Vec<[f32; 3]>,
+    pub rotations: Vec<[f32; 4]>,
+    pub opacity_logits: Vec<f32>,
+    pub sh_dc: Vec<[f32; 3]>,
+    pub sh_rest: Vec<[f32; 45]>,
+    /// Per Gaussian: deformed by the field (used when `TrainSettings::dynamic_only`).
+    pub dynamic: Vec<bool>,
+}
+
+impl Splats {
+    pub fn len(&self) -> usize {
+        self.means.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.means.is_empty()
+    }
+}
+
+/// A rendered image (planar RGB `3 × H × W`, depth and alpha `H × W`).
+#[derive(Clone, Debug, Default)]
+pub struct Frame {
+    pub width: usize,
+    pub height: usize,
+    pub rgb: Vec<f32>,
+    pub depth: Vec<f32>,
+    pub alpha: Vec<f32>,
+}
+
+/// Gradients from the rasterizer, per Gaussian, plus densification statistics.
+#[derive(Clone, Debug, Default)]
+pub struct SplatGrads {
+    pub means: Vec<[f32; 3]>,
+    pub log_scales: Vec<[f32; 3]>,
+    pub rotations: Vec<[f32; 4]>,
+    pub opacity_logits: Vec<f32>,
+    pub sh_dc: Vec<[f32; 3]>,
+    pub sh_rest: Vec<[f32; 45]>,
+    /// ‖∂L/∂(projected mean)‖ in NDC units as 3DGS (for densification).
+    pub screen_grad_norm: Vec<f32>,
+    /// Screen radius in pixels (0 = not rendered).
+    pub radius: Vec<f32>,
+}
+
+/// A differentiable renderer.
+pub trait Rasterizer: Sync {
+    type State;
+    fn render(
+        &self,
+        s: &Splats,
+        cam: &Camera,
+        sh_degree: u32,
+        background: [f32; 3],
+    ) -> (Frame, Self::State);
+    /// Backward from the gradient of the loss w.r.t. the planar RGB image.
+    fn backward(&self, s: &Splats, cam: &Camera, state: &Self::State, d_rgb: &[f32]) -> SplatGrads;
+}
+
+/// A training view: camera, normalised time, planar RGB target.
+#[derive(Clone, Debug)]
+pub struct View {
+    pub camera: Camera,
+    pub time: f32,
+    pub rgb: Vec<f32>,
+}
+
+/// Per-step figures.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct StepInfo {
+    pub iteration: u32,
+    pub loss: f64,
+    pub psnr: f64,
+    pub gaussians: usize,
+    pub field_on: bool,
+}
+
+/// The training state.
+pub struct Trainer {
+    pub settings: TrainSettings,
+    pub splats: Splats,
+    pub field: Mlp<f32>,
+    pub adam: Adam,
+    pub field_adam: Adam,
+    pub stats: GradStats,
+    pub extent: f32,
+    pub iteration: u32,
+    order: Vec<usize>,
+    rng: rand_chacha::ChaCha8Rng,
+}
+
+const GROUPS: [&str; 6] = [
+    "means",
+    "log_scales",
+    "rotations",
+    "opacity",
+    "sh_dc",
+    "sh_rest",
+];
+
+impl Trainer {
+    pub fn new(settings: TrainSettings, splats: Splats, extent: f32) -> Self {
+        use rand::SeedableRng;
+        let n = splats.len();
+        let mut adam = Adam::default();
+        let s = &settings;
+        let widths = [3, 3, 4, 1, 3, 45];
+        let lrs = [
+            s.position_lr_init * extent as f64,
+            s.scaling_lr,
+            s.rotation_lr,
+            s.opacity_lr,
+            s.feature_lr,
+            s.feature_lr / 20.0,
+        ];
+        for k in 0..6 {
+            adam.add_group(GROUPS[k], lrs[k], 1e-15, widths[k], n * widths[k]);
+        }
+        let field = Mlp::<f32>::new(s.field, s.field.seed);
+        let mut field_adam = Adam::default();
+        field_adam.add_group("field", s.field_lr_init, 1e-15, 1, field.params.len());
+        Trainer {
+            stats: GradStats::new(n),
+            rng: rand_chacha::ChaCha8Rng::seed_from_u64(s.seed),
+            settings,
+            splats,
+            field,
+            adam,
+            field_adam,
+            extent,
+            iteration: 0,
+            order: Vec::new(),
+        }
+    }
+
+    /// SH degree in use at the current iteration.
+    pub fn sh_degree(&self) -> u32 {
+        (self.iteration / self.settings.sh_interval.max(1)).min(self.settings.sh_degree)
+    }
+
+    pub fn field_on(&self) -> bool {
+        self.settings.deform && self.iteration >= self.settings.static_iterations
+    }
+
+    /// The Gaussians at time `t` (deformed when the field is on), with the deltas used.
+    pub fn deformed(&self, t: f32) -> (Splats, Option<(field::Deltas, field::MlpCache<f32>)>) {
+        if !self.field_on() {
+            return (self.splats.clone(), None);
+        }
+        let (d, cache) = self.field_deltas(t);
+        let g = field::apply_deltas(
+            &self.splats.means,
+            &self.splats.log_scales,
+            &self.splats.rotations,
+            &d,
+        );
+        let s = Splats {
+            means: g.means,
+            log_scales: g.log_scales,
+            rotations: g.rotations,
+            ..self.splats.clone()
+        };
+        (s, Some((d, cache)))
+    }
+
+    /// Indices the field is evaluated on: all, or the dynamic ones when `dynamic_only`.
+    fn field_indices(&self) -> Option<Vec<usize>> {
+        self.settings.dynamic_only.then(|| {
+            (0..self.splats.len())
+                .filter(|&i| self.splats.dynamic.get(i).copied().unwrap_or(true))
+                .collect()
+        })
+    }
+
+    /// Field deltas for every Gaussian at time `t` (zero for static-flagged ones when
+    /// `dynamic_only`; the field then runs on the dynamic subset only).
+    fn field_deltas(&self, t: f32) -> (field::Deltas, field::MlpCache<f32>) {
+        match self.field_indices() {
+            None => Deformation::forward(&self.field, &self.splats.means, &[t]),
+            Some(idx) => {
+                let sub: Vec<[f32; 3]> = idx.iter().map(|&i| self.splats.means[i]).collect();
+                let (ds, cache) = Deformation::forward(&self.field, &sub, &[t]);
+                let mut d = field::Deltas::zeros(self.splats.len());
+                for (k, &i) in idx.iter().enumerate() {
+                    d.dx[i] = ds.dx[k];
+                    d.dq[i] = ds.dq[k];
+                    d.ds[i] = ds.ds[k];
+                }
+                (d, cache)
+            }
+        }
+    }
+
+    /// Field parameter gradients from the gradients of all Gaussians' deltas.
+    fn field_backward(&self, cache: &field::MlpCache<f32>, g: &field::Deltas) -> Vec<f32> {
+        match self.field_indices() {
+            None => Deformation::backward(&self.field, cache, g),
+            Some(idx) => {
+                let sub = field::Deltas {
+                    dx: idx.iter().map(|&i| g.dx[i]).collect(),
+                    dq: idx.iter().map(|&i| g.dq[i]).collect(),
+                    ds: idx.iter().map(|&i| g.ds[i]).collect(),
+                };
+                Deformation::backward(&self.field, cache, &sub)
+            }
+        }
+    }
+
+    /// Render the model at a camera and time.
+    pub fn render<R: Rasterizer>(&self, r: &R, cam: &Camera, t: f32) -> Frame {
+        let (s, _) = self.deformed(t);
+        r.render(&s, cam, self.sh_degree(), self.settings.background)
+            .0
+    }
+
+    /// One optimisation step on a random view (each view once per epoch).
+    pub fn step<R: Rasterizer>(&mut self, r: &R, views: &[View]) -> StepInfo {
+        use rand::seq::SliceRandom;
+        if self.order.is_empty() {
+            self.order = (0..views.len()).collect();
+            self.order.shuffle(&mut self.rng);
+        }
+        let view = &views[self.order.pop().expect("views")];
+        let it = self.iteration;
+        let field_on = self.field_on();
+        let sh = self.sh_degree();
+        let (deformed, deltas) = self.deformed(view.time);
+        let (frame, state) = r.render(&deformed, &view.camera, sh, self.settings.background);
+        let (w, h) = (frame.width, frame.height);
+        let lam = self.settings.dssim_weight;
+        let (l1, mut grad) = metrics::l1_loss(&frame.rgb, &view.rgb);
+        let mut loss = (1.0 - lam) * l1;
+        if lam > 0.0 {
+            let (ds, gd) = metrics::dssim_loss(&frame.rgb, &view.rgb, w, h);
+            loss += lam * ds;
+            for (g, d) in grad.iter_mut().zip(gd) {
+                *g = (1.0 - lam) as f32 * *g + lam as f32 * d;
+            }
+        }
+        let psnr = metrics::psnr_u8(&frame.rgb, &view.rgb);
+        let mut g = r.backward(&deformed, &view.camera, &state, &grad);
+        drop(deformed);
+        if let Some((d, cache)) = deltas {
+            let dg = field::apply_deltas_backward(
+                &self.splats.log_scales,
+                &self.splats.rotations,
+                &d,
+                &g.means,
+                &g.log_scales,
+                &g.rotations,
+            );
+            let fg = self.field_backward(&cache, &dg.deltas);
+            self.field_adam.groups[0].lr = ExpSchedule::new(
+                self.settings.field_lr_init,
+                self.settings.field_lr_final,
+                self.settings.iterations as u64,
+            )
+            .at(it as u64);
+            self.field_adam.step(0, &mut self.field.params, &fg);
+            g.means = dg.means;
+            g.log_scales = dg.log_scales;
+            g.rotations = dg.rotations;
+        }
+        self.apply_grads(&g, it);
+        self.stats.add(&g.screen_grad_norm, &g.radius);
+        self.iteration += 1;
+        self.densify_if_due();
+        StepInfo {
+            iteration: self.iteration,
+            loss,
+            psnr,
+            gaussians: self.splats.len(),
+            field_on,
+        }
+    }
+
+    fn apply_grads(&mut self, g: &SplatGrads, it: u32) {
+        let s = &self.settings;
+        let pos = ExpSchedule::new(
+            s.position_lr_init * self.extent as f64,
+            s.position_lr_final * self.extent as f64,
+            s.iterations as u64,
+        );
+        self.adam.groups[0].lr = pos.at(it as u64);
+        let sp = &mut self.splats;
+        self.adam
+            .step(0, sp.means.as_flattened_mut(), g.means.as_flattened());
+        self.adam.step(
+            1,
+            sp.log_scales.as_flattened_mut(),
+            g.log_scales.as_flattened(),
+        );
+        self.adam.step(
+            2,
+            sp.rotations.as_flattened_mut(),
+            g.rotations.as_flattened(),
+        );
+        self.adam.step(3, &mut sp.opacity_logits, &g.opacity_logits);
+        self.adam
+            .step(4, sp.sh_dc.as_flattened_mut(), g.sh_dc.as_flattened());
+        self.adam
+            .step(5, sp.sh_rest.as_flattened_mut(), g.sh_rest.as_flattened());
+    }
+
+    fn densify_if_due(&mut self) {
+        let d = self.settings.densify;
+        let it = self.iteration;
+        if it < d.until_iter && it > d.from_iter && d.interval > 0 && it.is_multiple_of(d.interval)
+        {
+            let size_prune = d.opacity_reset_interval > 0 && it > d.opacity_reset_interval;
+            let sp = &self.splats;
+            let plan = densify::plan(
+                &Geometry {
+                    means: &sp.means,
+                    log_scales: &sp.log_scales,
+                    rotations: &sp.rotations,
+                    opacity_logits: &sp.opacity_logits,
+                },
+                &self.stats,
+                &d,
+                self.extent,
+                size_prune,
+                self.settings.seed ^ it as u64,
+            );
+            let new = Splats {
+                means: plan.means.clone(),
+                log_scales: plan.log_scales.clone(),
+                rotations: plan.gather(&sp.rotations),
+                opacity_logits: plan.gather(&sp.opacity_logits),
+                sh_dc: plan.gather(&sp.sh_dc),
+                sh_rest: plan.gather(&sp.sh_rest),
+                dynamic: if sp.dynamic.len() == sp.len() {
+                    plan.gather(&sp.dynamic)
+                } else {
+                    Vec::new()
+                },
+            };
+            let src = plan.moment_sources();
+            for k in 0..6 {
+                self.adam.remap(k, &src);
+            }
+            self.splats = new;
+            self.stats = GradStats::new(self.splats.len());
+        }
+        if d.opacity_reset_interval > 0
+            && it < d.until_iter
+            && it.is_multiple_of(d.opacity_reset_interval)
+        {
+            densify::reset_opacity(&mut self.splats.opacity_logits);
+            let n = self.splats.len();
+            self.adam.reset_items(3, 0..n);
+        }
+    }
+}
+
+/// Wall time per phase and how the run ended (for `report.json`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct RunSummary {
+    pub iterations: u32,
+    pub static_seconds: f64,
+    pub deform_seconds: f64,
+    pub interrupted: bool,
+    pub final_loss: f64,
+    pub gaussians: usize,
+}
+
+impl Trainer {
+    /// Train until `settings.iterations` or until `stop` is set (e.g. by a SIGINT
+    /// handler); the state stays consistent at every step boundary, so an interrupted
+    /// run can still be saved. `on_step` receives every step's figures (progress bar).
+    pub fn run<R: Rasterizer>(
+        &mut self,
+        r: &R,
+        views: &[View],
+        stop: &std::sync::atomic::AtomicBool,
+        mut on_step: impl FnMut(&StepInfo),
+    ) -> RunSummary {
+        let mut sum = RunSummary::default();
+        while self.iteration < self.settings.iterations {
+            if stop.load(std::sync::atomic::Ordering::Relaxed) {
+                sum.interrupted = true;
+                break;
+            }
+            let t0 = std::time::Instant::now();
+            let info = self.step(r, views);
+            let dt = t0.elapsed().as_secs_f64();
+            if info.field_on {
+                sum.deform_seconds += dt;
+            } else {
+                sum.static_seconds += dt;
+            }
+            sum.final_loss = info.loss;
+            on_step(&info);
+        }
+        sum.iterations = self.iteration;
+        sum.gaussians = self.splats.len();
+        sum
+    }
+}

@@ -1,0 +1,311 @@
+//! The training loop on a tiny scene, through a small differentiable test renderer
+//! (additive isotropic splats; its gradients are checked here against finite
+//! differences), so the loop is tested independently of the tile rasterizer.
+
+use gaussians::train::init::{SH_C0, camera_bounds, camera_extent, random_splats};
+use gaussians::train::{Frame, Rasterizer, SplatGrads, Splats, TrainSettings, Trainer, View};
+use glam::DVec3;
+use scene::{Camera, Intrinsics, Pose};
+
+const W: usize = 24;
+const H: usize = 24;
+
+struct Additive;
+
+fn sigmoid(x: f32) -> f32 {
+    1.0 / (1.0 + (-x).exp())
+}
+
+/// Projected centre, pixel radius and their derivatives w.r.t. the mean (by central
+/// differences of the camera projection: the test renderer only).
+fn project(cam: &Camera, m: [f32; 3], ls: [f32; 3]) -> Option<([f32; 2], f32, [[f32; 3]; 2])> {
+    let p = DVec3::new(m[0] as f64, m[1] as f64, m[2] as f64);
+    let (px, depth) = cam.project_world(p)?;
+    if depth < 0.1 {
+        return None;
+    }
+    let s = ((ls[0] + ls[1] + ls[2]) / 3.0).exp();
+    let r = (cam.intrinsics.fx * s as f64 / depth) as f32;
+    let mut jac = [[0.0f32; 3]; 2];
+    for k in 0..3 {
+        let mut e = DVec3::ZERO;
+        e[k] = 1e-4;
+        let (a, _) = cam.project_world(p + e)?;
+        let (b, _) = cam.project_world(p - e)?;
+        jac[0][k] = ((a.x - b.x) / 2e-4) as f32;
+        jac[1][k] = ((a.y - b.y) / 2e-4) as f32;
+    }
+    Some(([px.x as f32, px.y as f32], r.max(0.3), jac))
+}
+
+impl Rasterizer for Additive {
+    type State = ();
+    fn render(&self, s: &Splats, cam: &Camera, _sh: u32, bg: [f32; 3]) -> (Frame, ()) {
+        let mut rgb = vec![0.0f32; 3 * W * H];
+        for c in 0..3 {
+            rgb[c * W * H..(c + 1) * W * H].fill(bg[c]);
+        }
+        for i in 0..s.len() {
+            let Some((mu, r, _)) = project(cam, s.means[i], s.log_scales[i]) else {
+                continue;
+            };
+            let a = sigmoid(s.opacity_logits[i]);
+            let col: [f32; 3] = std::array::from_fn(|c| 0.5 + SH_C0 * s.sh_dc[i][c]);
+            for y in 0..H {
+                for x in 0..W {
+                    let d2 = (x as f32 - mu[0]).powi(2) + (y as f32 - mu[1]).powi(2);
+                    let g = a * (-0.5 * d2 / (r * r)).exp();
+                    for c in 0..3 {
+                        rgb[c * W * H + y * W + x] += g * col[c];
+                    }
+                }
+            }
+        }
+        (
+            Frame {
+                width: W,
+                height: H,
+                rgb,
+                depth: vec![0.0; W * H],
+                alpha: vec![1.0; W * H],
+            },
+            (),
+        )
+    }
+    fn backward(&self, s: &Splats, cam: &Camera, _: &(), d: &[f32]) -> SplatGrads {
+        let n = s.len();
+        let mut g = SplatGrads {
+            means: vec![[0.0; 3]; n],
+            log_scales: vec![[0.0; 3]; n],
+            rotations: vec![[0.0; 4]; n],
+            opacity_logits: vec![0.0; n],
+            sh_dc: vec![[0.0; 3]; n],
+            sh_rest: vec![[0.0; 45]; n],
+            screen_grad_norm: vec![0.0; n],
+            radius: vec![0.0; n],
+        };
+        for i in 0..n {
+            let Some((mu, r, jac)) = project(cam, s.means[i], s.log_scales[i]) else {
+                continue;
+            };
+            let a = sigmoid(s.opacity_logits[i]);
+            let col: [f32; 3] = std::array::from_fn(|c| 0.5 + SH_C0 * s.sh_dc[i][c]);
+            let (mut dmu, mut dr, mut da) = ([0.0f32; 2], 0.0f32, 0.0f32);
+            for y in 0..H {
+                for x in 0..W {
+                    let (dx, dy) = (x as f32 - mu[0], y as f32 - mu[1]);
+                    let e = (-0.5 * (dx * dx + dy * dy) / (r * r)).exp();
+                    let gc: f32 = (0..3).map(|c| d[c * W * H + y * W + x] * col[c]).sum();
+                    for c in 0..3 {
+                        g.sh_dc[i][c] += d[c * W * H + y * W + x] * a * e * SH_C0;
+                    }
+                    da += gc * e;
+                    dmu[0] += gc * a * e * dx / (r * r);
+                    dmu[1] += gc * a * e * dy / (r * r);
+                    dr += gc * a * e * (dx * dx + dy * dy) / (r * r * r);
+                }
+            }
+            g.opacity_logits[i] = da * a * (1.0 - a);
+            g.means[i] = std::array::from_fn(|k| dmu[0] * jac[0][k] + dmu[1] * jac[1][k]);
+            g.log_scales[i] = [dr * r / 3.0; 3];
+            g.screen_grad_norm[i] = (dmu[0].powi(2) + dmu[1].powi(2)).sqrt() * W as f32 / 2.0;
+            g.radius[i] = 3.0 * r;
+        }
+        g
+    }
+}
+
+fn cameras(n: usize) -> Vec<Camera> {
+    let intr = Intrinsics::from_fov_x(W as u32, H as u32, 0.9);
+    (0..n)
+        .map(|k| {
+            let a = k as f64 / n as f64 * 1.2 - 0.6;
+            let eye = DVec3::new(3.0 * a.sin(), 0.4, 3.0 * a.cos());
+            Camera {
+                intrinsics: intr,
+                cam_to_world: Pose::look_at(eye, DVec3::ZERO, DVec3::Y),
+            }
+        })
+        .collect()
+}
+
+fn truth() -> Splats {
+    let mut s = random_splats(6, DVec3::ZERO, 0.5, 99);
+    for (i, o) in s.opacity_logits.iter_mut().enumerate() {
+        *o = 1.0 + i as f32 * 0.1;
+        s.log_scales[i] = [0.12f32.ln(); 3];
+    }
+    s
+}
+
+#[test]
+fn test_renderer_gradients_match_finite_differences() {
+    let cam = cameras(3)[1];
+    let s = truth();
+    let target = Additive.render(&s, &cam, 0, [0.0; 3]).0.rgb;
+    let mut p = s.clone();
+    p.means[2][0] += 0.05;
+    p.opacity_logits[1] -= 0.3;
+    let loss = |q: &Splats| -> f64 {
+        let r = Additive.render(q, &cam, 0, [0.0; 3]).0.rgb;
+        r.iter()
+            .zip(&target)
+            .map(|(a, b)| 0.5 * ((a - b) as f64).powi(2))
+            .sum()
+    };
+    let r = Additive.render(&p, &cam, 0, [0.0; 3]).0.rgb;
+    let d: Vec<f32> = r.iter().zip(&target).map(|(a, b)| a - b).collect();
+    let g = Additive.backward(&p, &cam, &(), &d);
+    let h = 1e-3f32;
+    let mut q = p.clone();
+    q.means[2][0] += h;
+    let lp = loss(&q);
+    q.means[2][0] -= 2.0 * h;
+    let fd = (lp - loss(&q)) / (2.0 * h as f64);
+    assert!(
+        (fd - g.means[2][0] as f64).abs() < 0.02 * fd.abs().max(1e-3),
+        "{fd} vs {}",
+        g.means[2][0]
+    );
+    let mut q = p.clone();
+    q.opacity_logits[1] += h;
+    let lp = loss(&q);
+    q.opacity_logits[1] -= 2.0 * h;
+    let fd = (lp - loss(&q)) / (2.0 * h as f64);
+    assert!((fd - g.opacity_logits[1] as f64).abs() < 0.02 * fd.abs().max(1e-3));
+}
+
+#[test]
+fn bounds_and_extent_follow_the_cameras() {
+    let cams = cameras(5);
+    let (c, half) = camera_bounds(&cams);
+    assert!(c.length() < 1e-6, "{c}");
+    assert!(half > 0.5 && half < 3.0, "{half}");
+    let e = camera_extent(&cams);
+    assert!(e > 0.0 && e < 3.3);
+}
+
+#[test]
+fn training_reduces_the_loss_static_and_with_the_field() {
+    let cams = cameras(6);
+    let gt = truth();
+    let views: Vec<View> = cams
+        .iter()
+        .enumerate()
+        .map(|(k, c)| View {
+            camera: *c,
+            time: k as f32 / 5.0,
+            rgb: Additive.render(&gt, c, 0, [0.0; 3]).0.rgb,
+        })
+        .collect();
+    let mut s = TrainSettings {
+        iterations: 300,
+        static_iterations: 150,
+        dssim_weight: 0.2,
+        ..Default::default()
+    };
+    s.field.depth = 2;
+    s.field.width = 16;
+    s.densify.from_iter = 50;
+    s.densify.interval = 50;
+    s.densify.max_gaussians = 40;
+    s.densify.grad_threshold = 1e-4;
+    let (c, half) = camera_bounds(&cams);
+    let init = random_splats(12, c, half.min(0.6), 3);
+    let mut t = Trainer::new(s, init, camera_extent(&cams));
+    let eval = |t: &Trainer| -> f64 {
+        views
+            .iter()
+            .map(|v| {
+                let f = t.render(&Additive, &v.camera, v.time);
+                f.rgb
+                    .iter()
+                    .zip(&v.rgb)
+                    .map(|(a, b)| (a - b).abs() as f64)
+                    .sum::<f64>()
+            })
+            .sum()
+    };
+    let before = eval(&t);
+    let mut saw_field = false;
+    for _ in 0..300 {
+        let info = t.step(&Additive, &views);
+        assert!(info.loss.is_finite());
+        saw_field |= info.field_on;
+        assert!(info.gaussians <= 40);
+    }
+    let after = eval(&t);
+    assert!(saw_field);
+    assert!(after < 0.75 * before, "L1 {before} → {after}");
+    assert!(t.field.params.iter().all(|v| v.is_finite()));
+    assert_eq!(t.adam.groups[0].m.len(), 3 * t.splats.len());
+}
+
+#[test]
+fn dynamic_only_leaves_static_gaussians_undeformed() {
+    let mut init = random_splats(8, DVec3::ZERO, 0.5, 5);
+    for k in 0..4 {
+        init.dynamic[k] = false;
+    }
+    let s = TrainSettings {
+        static_iterations: 0,
+        dynamic_only: true,
+        ..Default::default()
+    };
+    let t = Trainer::new(s, init.clone(), 1.0);
+    let (d, _) = t.deformed(0.7);
+    for k in 0..8 {
+        let moved = d.means[k] != init.means[k];
+        assert_eq!(moved, k >= 4, "Gaussian {k}");
+    }
+    let cams = cameras(2);
+    let views: Vec<View> = cams
+        .iter()
+        .map(|c| View {
+            camera: *c,
+            time: 0.3,
+            rgb: vec![0.5; 3 * W * H],
+        })
+        .collect();
+    let mut t = t;
+    let before = t.field.params.clone();
+    let info = t.step(&Additive, &views);
+    assert!(info.field_on && info.loss.is_finite());
+    assert_ne!(before, t.field.params);
+}
+
+#[test]
+fn run_stops_on_the_flag_and_counts_phases() {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let cams = cameras(3);
+    let views: Vec<View> = cams
+        .iter()
+        .map(|c| View {
+            camera: *c,
+            time: 0.5,
+            rgb: Additive.render(&truth(), c, 0, [0.0; 3]).0.rgb,
+        })
+        .collect();
+    let mut s = TrainSettings {
+        iterations: 40,
+        static_iterations: 10,
+        ..Default::default()
+    };
+    s.field.width = 8;
+    let mut t = Trainer::new(s, random_splats(10, DVec3::ZERO, 0.5, 1), 1.0);
+    let stop = AtomicBool::new(false);
+    let mut seen = 0;
+    let sum = t.run(&Additive, &views, &stop, |info| {
+        seen += 1;
+        if info.iteration == 25 {
+            stop.store(true, Ordering::Relaxed);
+        }
+    });
+    assert!(sum.interrupted);
+    assert_eq!((sum.iterations, seen), (25, 25));
+    assert!(sum.static_seconds > 0.0 && sum.deform_seconds > 0.0);
+    stop.store(false, Ordering::Relaxed);
+    let sum = t.run(&Additive, &views, &stop, |_| {});
+    assert!(!sum.interrupted);
+    assert_eq!(sum.iterations, 40);
+}

@@ -1,0 +1,16 @@
+//! `scene` — the shared data layer of degs (DESIGN §2–§3): camera model, scene
+//! manifest, event streams and their readers/writers, image and EXR helpers, atomic
+//! outputs, and analytic synthetic scenes with ground truth.
+
+pub mod atomic;
+pub mod camera;
+pub mod error;
+pub mod events;
+
+pub use camera::{Camera, Distortion, Intrinsics, Pose, Trajectory};
+pub use error::{Error, IoContext, Result};
+pub use events::{EventSlice, EventStream};
+pub mod formats;
+pub mod image_io;
+pub mod manifest;
+pub mod synth;
