@@ -192,7 +192,11 @@ impl Pose {
             return Err("matrix has non-finite entries".into());
         }
         let bottom = m.row(3);
-        if (bottom - glam::DVec4::new(0.0, 0.0, 0.0, 1.0)).abs().max_element() > RIGID_TOLERANCE {
+        if (bottom - glam::DVec4::new(0.0, 0.0, 0.0, 1.0))
+            .abs()
+            .max_element()
+            > RIGID_TOLERANCE
+        {
             return Err(format!("bottom row is {bottom:?}, expected [0 0 0 1]"));
         }
         let r = DMat3::from_mat4(m);
@@ -306,7 +310,10 @@ impl Trajectory {
         if times.is_empty() {
             return Err("a trajectory needs at least one pose".into());
         }
-        if let Some(i) = times.windows(2).position(|w| w[1].partial_cmp(&w[0]) != Some(std::cmp::Ordering::Greater)) {
+        if let Some(i) = times
+            .windows(2)
+            .position(|w| w[1].partial_cmp(&w[0]) != Some(std::cmp::Ordering::Greater))
+        {
             return Err(format!(
                 "times are not increasing at index {}: {} then {}",
                 i + 1,

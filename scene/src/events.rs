@@ -117,7 +117,10 @@ impl EventStream {
             ));
         }
         if self.width == 0 || self.height == 0 {
-            return Err(format!("sensor size {}x{} is empty", self.width, self.height));
+            return Err(format!(
+                "sensor size {}x{} is empty",
+                self.width, self.height
+            ));
         }
         for i in 0..n {
             let t = self.t[i];
