@@ -1,1 +1,42 @@
-//! assoc
+//! `assoc` — ties 2D events to the 3D Gaussians that caused them (DEGS §3.3, DESIGN §5
+//! "Association"): events near a frame time t0 are lifted to 3D through the depth
+//! rendered at t0, a k-d tree (kiddo) is built over the lifted points, and every
+//! Gaussian (deformed to t0) binds to its k nearest points within a radius, weighted by
+//! normalised inverse distance. The result is a compact CSR table ([`Bindings`]); many
+//! frames are stored together in an `assoc.bin` file ([`file`]).
+
+pub mod bind;
+pub mod file;
+pub mod unproject;
+
+pub use bind::{Bindings, bind_nearest, footprint_radii};
+pub use file::{FrameBindings, read_assoc, write_assoc};
+pub use unproject::{LiftedEvents, lift_events};
+
+use serde::{Deserialize, Serialize};
+
+/// Settings of the association (all have defaults that work on the synthetic scenes).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct AssocSettings {
+    /// Half-width of the event window around the frame time t0, in seconds.
+    pub delta_t: f64,
+    /// Number of events each Gaussian binds to.
+    pub k: usize,
+    /// Search radius in pixels; converted per Gaussian to world units through its depth
+    /// (`r = radius_px · depth / fx`) so it means the same footprint at every distance.
+    pub radius_px: f64,
+    /// Events on pixels whose rendered alpha is below this are dropped.
+    pub min_alpha: f32,
+}
+
+impl Default for AssocSettings {
+    fn default() -> Self {
+        Self {
+            delta_t: 0.01,
+            k: 3,
+            radius_px: 2.0,
+            min_alpha: 0.5,
+        }
+    }
+}

@@ -1,0 +1,143 @@
+//! kNN binding against brute force; weights; radius; degenerate inputs.
+
+use assoc::bind_nearest;
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+/// Brute force: (squared distance, index) of the k nearest within r, ties by index.
+fn brute(points: &[[f32; 3]], c: [f32; 3], r: f32, k: usize) -> Vec<(f32, usize)> {
+    let mut v: Vec<(f32, usize)> = points
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let d2 = (0..3).map(|a| (p[a] - c[a]) * (p[a] - c[a])).sum::<f32>();
+            (d2, i)
+        })
+        .filter(|&(d2, _)| d2 <= r * r)
+        .collect();
+    v.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    v.truncate(k);
+    v
+}
+
+fn check_against_brute(points: &[[f32; 3]], centres: &[[f32; 3]], radii: &[f32], k: usize) {
+    let ids: Vec<u64> = (0..points.len() as u64).map(|i| 1000 + i).collect();
+    let (b, dist) = bind_nearest(points, &ids, centres, radii, k);
+    assert_eq!(b.gaussians(), centres.len());
+    assert_eq!(dist.len(), b.events.len());
+    for (g, c) in centres.iter().enumerate() {
+        let want = brute(points, *c, radii[g], k);
+        let (ev, w) = b.of(g);
+        assert_eq!(ev.len(), want.len(), "Gaussian {g}: binding count");
+        for (j, &(d2, i)) in want.iter().enumerate() {
+            // Same distance always; same index unless tied with another candidate.
+            let got = (ev[j] - 1000) as usize;
+            let got_d2 = (0..3)
+                .map(|a| (points[got][a] - c[a]) * (points[got][a] - c[a]))
+                .sum::<f32>();
+            assert!(
+                (got_d2 - d2).abs() <= 1e-6 * d2.max(1e-6),
+                "Gaussian {g} slot {j}"
+            );
+            let all = brute(points, *c, radii[g], usize::MAX);
+            let tied = all.iter().filter(|x| x.0 == d2).count() > 1;
+            if !tied {
+                assert_eq!(got, i, "Gaussian {g} slot {j}");
+            }
+        }
+        if !ev.is_empty() {
+            let s: f32 = w.iter().sum();
+            assert!((s - 1.0).abs() < 1e-6, "weights sum {s}");
+            // Inverse-distance: nearer gets more weight.
+            for j in 1..w.len() {
+                assert!(w[j] <= w[j - 1] + 1e-6);
+            }
+            for (j, &d) in dist[b.offsets[g] as usize..b.offsets[g + 1] as usize]
+                .iter()
+                .enumerate()
+            {
+                assert!(
+                    d <= radii[g] * (1.0 + 1e-6),
+                    "slot {j}: {d} beyond {}",
+                    radii[g]
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn random_clouds_match_brute_force() {
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    for trial in 0..20 {
+        let n = [0, 1, 2, 5, 50, 2000][trial % 6];
+        let points: Vec<[f32; 3]> = (0..n)
+            .map(|_| {
+                [
+                    rng.random::<f32>(),
+                    rng.random::<f32>(),
+                    rng.random::<f32>(),
+                ]
+            })
+            .collect();
+        let centres: Vec<[f32; 3]> = (0..300)
+            .map(|_| {
+                [
+                    rng.random::<f32>(),
+                    rng.random::<f32>(),
+                    rng.random::<f32>(),
+                ]
+            })
+            .collect();
+        let radii: Vec<f32> = (0..300).map(|_| rng.random::<f32>() * 0.3).collect();
+        for k in [1, 3, 7] {
+            check_against_brute(&points, &centres, &radii, k);
+        }
+    }
+}
+
+#[test]
+fn ties_and_duplicates_on_a_grid() {
+    // Integer grid: many equal distances; plus exact duplicates of points.
+    let mut points = Vec::new();
+    for x in 0..6 {
+        for y in 0..6 {
+            for z in 0..3 {
+                points.push([x as f32, y as f32, z as f32]);
+            }
+        }
+    }
+    points.extend_from_slice(&points.clone()[..20]);
+    let centres: Vec<[f32; 3]> = (0..40)
+        .map(|i| [(i % 6) as f32, ((i / 6) % 6) as f32 + 0.5, 1.0])
+        .collect();
+    let radii = vec![1.2f32; centres.len()];
+    check_against_brute(&points, &centres, &radii, 3);
+}
+
+#[test]
+fn k_larger_than_points_and_exact_hits() {
+    let points = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0]];
+    let (b, _) = bind_nearest(&points, &[5, 9], &[[0.0, 0.0, 0.0]], &[10.0], 8);
+    let (ev, w) = b.of(0);
+    assert_eq!(ev, &[5, 9]);
+    // An event at the centre dominates but stays finite.
+    assert!(w[0] > 0.999 && w[0].is_finite() && (w[0] + w[1] - 1.0).abs() < 1e-6);
+}
+
+#[test]
+fn zero_radius_nan_centre_and_k_zero_bind_nothing() {
+    let points = [[0.0f32, 0.0, 0.0]];
+    let (b, _) = bind_nearest(
+        &points,
+        &[0],
+        &[[0.0, 0.0, 0.0], [f32::NAN, 0.0, 0.0], [0.1, 0.0, 0.0]],
+        &[0.0, 1.0, 1.0],
+        3,
+    );
+    assert_eq!(b.offsets, vec![0, 0, 0, 1]);
+    let (b, d) = bind_nearest(&points, &[0], &[[0.0, 0.0, 0.0]], &[1.0], 0);
+    assert_eq!((b.bound(), b.gaussians(), d.len()), (0, 1, 0));
+    let (b, _) = bind_nearest(&[], &[], &[[0.0, 0.0, 0.0]], &[1.0], 3);
+    assert_eq!(b.offsets, vec![0, 0]);
+}
