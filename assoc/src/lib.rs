@@ -40,3 +40,25 @@ impl Default for AssocSettings {
         }
     }
 }
+
+impl AssocSettings {
+    /// Checks every setting is in range; the message names the setting.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(self.delta_t.is_finite() && self.delta_t > 0.0) {
+            return Err(format!(
+                "delta_t = {} must be a positive number of seconds",
+                self.delta_t
+            ));
+        }
+        if self.k == 0 || self.k > 64 {
+            return Err(format!("k = {} must be in 1..=64", self.k));
+        }
+        if !(self.radius_px.is_finite() && self.radius_px > 0.0) {
+            return Err(format!("radius_px = {} must be positive", self.radius_px));
+        }
+        if !(0.0..=1.0).contains(&self.min_alpha) {
+            return Err(format!("min_alpha = {} must be in [0, 1]", self.min_alpha));
+        }
+        Ok(())
+    }
+}

@@ -3,6 +3,8 @@
 
 pub mod cm;
 pub mod cm_grad;
+pub mod lora;
+pub mod net;
 pub mod sim;
 pub mod synthesize;
 pub mod voxel;

@@ -3,4 +3,6 @@ pub mod densify;
 pub mod field;
 pub mod metrics;
 pub mod optim;
+pub mod ply;
+pub mod raster;
 pub mod train;

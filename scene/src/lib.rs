@@ -14,3 +14,6 @@ pub mod formats;
 pub mod image_io;
 pub mod manifest;
 pub mod synth;
+pub use formats::{ReadOptions, read_events, write_evs};
+pub use image_io::Image;
+pub use manifest::{EventsRef, Frame, Manifest, Scene};

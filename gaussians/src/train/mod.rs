@@ -169,47 +169,17 @@ impl Trainer {
             return (self.splats.clone(), None);
         }
         let (d, cache) = self.field_deltas(t);
-        let g = field::apply_deltas(
-            &self.splats.means,
-            &self.splats.log_scales,
-            &self.splats.rotations,
-            &d,
-        );
-        let s = Splats {
-            means: g.means,
-            log_scales: g.log_scales,
-            rotations: g.rotations,
-            ..self.splats.clone()
-        };
-        (s, Some((d, cache)))
+        (apply_field(&self.splats, &d), Some((d, cache)))
     }
 
     /// Indices the field is evaluated on: all, or the dynamic ones when `dynamic_only`.
     fn field_indices(&self) -> Option<Vec<usize>> {
-        self.settings.dynamic_only.then(|| {
-            (0..self.splats.len())
-                .filter(|&i| self.splats.dynamic.get(i).copied().unwrap_or(true))
-                .collect()
-        })
+        field_indices(&self.splats, self.settings.dynamic_only)
     }
 
-    /// Field deltas for every Gaussian at time `t` (zero for static-flagged ones when
-    /// `dynamic_only`; the field then runs on the dynamic subset only).
+    /// Field deltas for every Gaussian at time `t`.
     fn field_deltas(&self, t: f32) -> (field::Deltas, field::MlpCache<f32>) {
-        match self.field_indices() {
-            None => Deformation::forward(&self.field, &self.splats.means, &[t]),
-            Some(idx) => {
-                let sub: Vec<[f32; 3]> = idx.iter().map(|&i| self.splats.means[i]).collect();
-                let (ds, cache) = Deformation::forward(&self.field, &sub, &[t]);
-                let mut d = field::Deltas::zeros(self.splats.len());
-                for (k, &i) in idx.iter().enumerate() {
-                    d.dx[i] = ds.dx[k];
-                    d.dq[i] = ds.dq[k];
-                    d.ds[i] = ds.ds[k];
-                }
-                (d, cache)
-            }
-        }
+        field_deltas(&self.field, &self.splats, t, self.settings.dynamic_only)
     }
 
     /// Field parameter gradients from the gradients of all Gaussians' deltas.
@@ -371,6 +341,51 @@ impl Trainer {
             let n = self.splats.len();
             self.adam.reset_items(3, 0..n);
         }
+    }
+}
+
+/// Indices the field is evaluated on: all (`None`), or the dynamic ones when
+/// `dynamic_only` (missing flags count as dynamic).
+pub fn field_indices(splats: &Splats, dynamic_only: bool) -> Option<Vec<usize>> {
+    dynamic_only.then(|| {
+        (0..splats.len())
+            .filter(|&i| splats.dynamic.get(i).copied().unwrap_or(true))
+            .collect()
+    })
+}
+
+/// Field deltas for every Gaussian at time `t` (zero for static-flagged ones when
+/// `dynamic_only`; the field then runs on the dynamic subset only).
+pub fn field_deltas(
+    mlp: &Mlp<f32>,
+    splats: &Splats,
+    t: f32,
+    dynamic_only: bool,
+) -> (field::Deltas, field::MlpCache<f32>) {
+    match field_indices(splats, dynamic_only) {
+        None => Deformation::forward(mlp, &splats.means, &[t]),
+        Some(idx) => {
+            let sub: Vec<[f32; 3]> = idx.iter().map(|&i| splats.means[i]).collect();
+            let (ds, cache) = Deformation::forward(mlp, &sub, &[t]);
+            let mut d = field::Deltas::zeros(splats.len());
+            for (k, &i) in idx.iter().enumerate() {
+                d.dx[i] = ds.dx[k];
+                d.dq[i] = ds.dq[k];
+                d.ds[i] = ds.ds[k];
+            }
+            (d, cache)
+        }
+    }
+}
+
+/// The Gaussians deformed by `deltas` (Deform-GS: after activation).
+pub fn apply_field(splats: &Splats, deltas: &field::Deltas) -> Splats {
+    let g = field::apply_deltas(&splats.means, &splats.log_scales, &splats.rotations, deltas);
+    Splats {
+        means: g.means,
+        log_scales: g.log_scales,
+        rotations: g.rotations,
+        ..splats.clone()
     }
 }
 

@@ -1,0 +1,282 @@
+//! Backward pass. Each tile walks its list back to front (recovering the transmittance
+//! in front of each Gaussian by division, as 3DGS) and writes the screen-space gradient
+//! of every (Gaussian, tile) pair into its own slice of one array, so there are no
+//! shared writes; the pairs are then summed per Gaussian and chained through the
+//! projection in parallel. The camera gradient is reduced in f64.
+
+use super::forward::{Plane, lane_bits, row_span};
+use super::project::{ScreenGrad, project, project_backward};
+use super::simd::{self, F4, Lanes, Mask};
+use super::{ALPHA_MAX, RenderState, TILE, eval_alpha};
+use crate::train::{SplatGrads, Splats};
+use glam::{DMat3, DVec3};
+use rayon::prelude::*;
+use scene::Camera;
+
+/// Per-pixel inputs of one tile's backward.
+struct PixelGrads<'a> {
+    d_rgb: &'a [f32],
+    d_depth: Option<&'a [f32]>,
+    d_alpha: Option<&'a [f32]>,
+}
+
+/// Back to front over one tile's list with the widest lanes this CPU has.
+fn tile_backward(st: &RenderState, t: usize, g: &PixelGrads, out: &mut [ScreenGrad]) {
+    #[cfg(target_arch = "x86_64")]
+    if simd::use_wide() {
+        // SAFETY: `use_wide` checked that the CPU has AVX-512F.
+        return unsafe { tile_backward_avx512(st, t, g, out) };
+    }
+    tile_backward_lanes::<F4>(st, t, g, out)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+fn tile_backward_avx512(st: &RenderState, t: usize, g: &PixelGrads, out: &mut [ScreenGrad]) {
+    tile_backward_lanes::<simd::F16>(st, t, g, out)
+}
+
+/// `out[k]` receives entry k's screen gradient. Per lane branch-free (lanes outside
+/// the ellipse or past the pixel's last contributor get α = 0, which makes every update
+/// a no-op), with per-lane accumulators summed once per Gaussian.
+#[inline(always)]
+fn tile_backward_lanes<V: Lanes>(
+    st: &RenderState,
+    t: usize,
+    g: &PixelGrads,
+    out: &mut [ScreenGrad],
+) {
+    let (w, h) = (st.cam.width, st.cam.height);
+    let np = w * h;
+    let r = st.tiles.rect(t, w, h);
+    let list = st.tiles.of(t);
+    let p = &st.proj;
+    let bg = st.background;
+    let z = [[0.0f32; TILE]; TILE];
+    // Per pixel: transmittance (walked back), colour/depth behind, loss gradients.
+    let mut tt: Plane<f32> = z;
+    let mut t_fin: Plane<f32> = z;
+    let mut last: Plane<f32> = z;
+    let mut behind: [Plane<f32>; 4] = [z; 4];
+    let mut dl: [Plane<f32>; 5] = [z; 5];
+    let mut max_last = 0u32;
+    for y in r[2]..r[3] {
+        for x in r[0]..r[1] {
+            let (ty, tx) = (y - r[2], x - r[0]);
+            let pix = y * w + x;
+            let tf = st.t_final[pix];
+            tt[ty][tx] = tf;
+            t_fin[ty][tx] = tf;
+            last[ty][tx] = st.last[pix] as f32;
+            max_last = max_last.max(st.last[pix]);
+            for c in 0..3 {
+                behind[c][ty][tx] = tf * bg[c];
+                dl[c][ty][tx] = g.d_rgb[c * np + pix];
+            }
+            dl[3][ty][tx] = g.d_depth.map_or(0.0, |d| d[pix]);
+            dl[4][ty][tx] = g.d_alpha.map_or(0.0, |d| d[pix]);
+        }
+    }
+    let n = V::N;
+    let s = V::splat;
+    let xs: [V; 4] = std::array::from_fn(|c| V::iota((r[0] + (c * n) % TILE) as f32));
+    for k in (0..max_last as usize).rev() {
+        let gi = list[k] as usize;
+        let b = p.bbox[gi];
+        let (x0, x1) = ((b[0] as usize).max(r[0]), (b[1] as usize + 1).min(r[1]));
+        let (y0, y1) = ((b[2] as usize).max(r[2]), (b[3] as usize + 1).min(r[3]));
+        let [u, v] = p.xy[gi];
+        let (conic, op, col, dep) = (p.conic[gi], p.opacity[gi], p.color[gi], p.depth[gi]);
+        let (u4, col4, dep4, inv_op) = (s(u), col.map(s), s(dep), s(1.0 / op));
+        let (qa, qb, qc) = (s(conic[0]), s(conic[1]), s(conic[2]));
+        let kk = s(k as f32);
+        let mut acc = [s(0.0); 10];
+        for y in y0..y1 {
+            let ro = y - r[2];
+            let dyf = y as f32 - v;
+            // One vector covers the row: the ellipse test per lane is enough. Narrow
+            // lanes skip the chunks outside the ellipse's span on this row.
+            let (lo, hi) = if n == TILE {
+                (x0 - r[0], x1 - r[0])
+            } else {
+                row_span(conic, p.cut[gi], u, dyf, [x0, x1, r[0]])
+            };
+            let inb = lane_bits(lo, hi);
+            let dy = s(dyf);
+            for c in lo / n..hi.div_ceil(n) {
+                let l = n * c..n * c + n;
+                let bits = (inb >> (n * c)) & V::load(&last[ro][l.clone()]).gt(kk).bits();
+                if bits == 0 {
+                    continue;
+                }
+                let dx = xs[c] - u4;
+                let (a0, raw) = eval_alpha(conic, op, dx, dy);
+                let a = a0.and(V::M::from_bits(bits));
+                let inv = s(1.0) / (s(1.0) - a);
+                let t_in = V::load(&tt[ro][l.clone()]) * inv;
+                let wgt = a * t_in;
+                let mut ga = V::load(&dl[4][ro][l.clone()]) * V::load(&t_fin[ro][l.clone()]) * inv;
+                for ch in 0..4 {
+                    let cv = if ch < 3 { col4[ch] } else { dep4 };
+                    let d = V::load(&dl[ch][ro][l.clone()]);
+                    let bh = V::load(&behind[ch][ro][l.clone()]);
+                    ga = ga + d * (cv * t_in - bh * inv);
+                    acc[6 + ch] = acc[6 + ch] + wgt * d;
+                    (bh + cv * wgt).store(&mut behind[ch][ro][l.clone()]);
+                }
+                t_in.store(&mut tt[ro][l]);
+                // α = o·exp(−½ m), m = dᵀQd with d = pixel − mean; no gradient through
+                // the clamp at ALPHA_MAX.
+                let ga = ga.and(raw.lt(s(ALPHA_MAX)));
+                acc[5] = acc[5] + ga * a * inv_op;
+                let gm = s(-0.5) * a * ga;
+                let gm2 = gm + gm;
+                acc[0] = acc[0] - gm2 * (qa * dx + qb * dy);
+                acc[1] = acc[1] - gm2 * (qb * dx + qc * dy);
+                acc[2] = acc[2] + gm * dx * dx;
+                acc[3] = acc[3] + gm2 * dx * dy;
+                acc[4] = acc[4] + gm * dy * dy;
+            }
+        }
+        out[k] = std::array::from_fn(|c| acc[c].sum());
+    }
+}
+
+pub(crate) fn backward(
+    s: &Splats,
+    cam: &Camera,
+    st: &RenderState,
+    d_rgb: &[f32],
+    d_depth: Option<&[f32]>,
+    d_alpha: Option<&[f32]>,
+) -> (SplatGrads, [f64; 6]) {
+    let (w, h) = (st.cam.width, st.cam.height);
+    assert_eq!(
+        s.len(),
+        st.n,
+        "backward: Splats differ from the rendered ones"
+    );
+    assert_eq!(d_rgb.len(), 3 * w * h, "backward: d_rgb must be 3×H×W");
+    assert!(
+        d_depth.is_none_or(|d| d.len() == w * h),
+        "backward: d_depth must be H×W"
+    );
+    assert!(
+        d_alpha.is_none_or(|d| d.len() == w * h),
+        "backward: d_alpha must be H×W"
+    );
+    let pg = PixelGrads {
+        d_rgb,
+        d_depth,
+        d_alpha,
+    };
+    // Screen gradients per (Gaussian, tile) pair; each tile owns its slice.
+    let mut pairs: Vec<ScreenGrad> = vec![[0.0; 10]; st.tiles.list.len()];
+    let ntiles = st.tiles.nx * st.tiles.ny;
+    let mut slices = Vec::with_capacity(ntiles);
+    let mut rest = pairs.as_mut_slice();
+    for t in 0..ntiles {
+        let len = (st.tiles.ranges[t + 1] - st.tiles.ranges[t]) as usize;
+        let (a, b) = rest.split_at_mut(len);
+        slices.push((t, a));
+        rest = b;
+    }
+    slices
+        .into_par_iter()
+        .for_each(|(t, out)| tile_backward(st, t, &pg, out));
+    let nv = st.proj.id.len();
+    let mut screen = vec![[0.0f32; 10]; nv];
+    for (g, &k) in pairs.iter().zip(&st.tiles.list) {
+        let acc = &mut screen[k as usize];
+        for c in 0..10 {
+            acc[c] += g[c];
+        }
+    }
+    let mut slot = vec![u32::MAX; s.len()];
+    for (k, &id) in st.proj.id.iter().enumerate() {
+        slot[id as usize] = k as u32;
+    }
+
+    let n = s.len();
+    let mut g = SplatGrads {
+        means: vec![[0.0; 3]; n],
+        log_scales: vec![[0.0; 3]; n],
+        rotations: vec![[0.0; 4]; n],
+        opacity_logits: vec![0.0; n],
+        sh_dc: vec![[0.0; 3]; n],
+        sh_rest: vec![[0.0; 45]; n],
+        screen_grad_norm: vec![0.0; n],
+        radius: st.radius.clone(),
+    };
+    let cam32 = &st.cam;
+    let (half_w, half_h) = (0.5 * w as f32, 0.5 * h as f32);
+    let cam_grad = (
+        g.means.par_iter_mut(),
+        g.log_scales.par_iter_mut(),
+        g.rotations.par_iter_mut(),
+        g.opacity_logits.par_iter_mut(),
+        g.sh_dc.par_iter_mut(),
+        g.sh_rest.par_iter_mut(),
+        g.screen_grad_norm.par_iter_mut(),
+    )
+        .into_par_iter()
+        .enumerate()
+        .with_min_len(256)
+        .map(|(i, (m, ls, rot, op, dc, rest, sgn))| {
+            let k = slot[i];
+            if k == u32::MAX {
+                return [0.0f64; 15];
+            }
+            let sg = &screen[k as usize];
+            let geo = project(s, i, cam32, st.sh_degree).expect("visible in the forward pass");
+            let gg = project_backward(s, i, &geo, cam32, st.sh_degree, sg);
+            *m = gg.mean;
+            *ls = gg.log_scale;
+            *rot = gg.rotation;
+            *op = gg.opacity_logit;
+            *dc = gg.sh[0];
+            for kk in 1..16 {
+                rest[(kk - 1) * 3..kk * 3].copy_from_slice(&gg.sh[kk]);
+            }
+            // 3DGS measures the mean's gradient in NDC (pixels · 2 / size).
+            *sgn = ((sg[0] * half_w).powi(2) + (sg[1] * half_h).powi(2)).sqrt();
+            let mut c = [0.0f64; 15];
+            for col in 0..3 {
+                for row in 0..3 {
+                    c[col * 3 + row] = gg.w.col(col)[row] as f64;
+                }
+            }
+            for a in 0..3 {
+                c[9 + a] = gg.tw[a] as f64;
+                c[12 + a] = gg.centre[a] as f64;
+            }
+            c
+        })
+        .reduce(
+            || [0.0f64; 15],
+            |mut a, b| {
+                for k in 0..15 {
+                    a[k] += b[k];
+                }
+                a
+            },
+        );
+    (g, pose_twist_grad(cam, &cam_grad))
+}
+
+/// `∂L/∂(W, t_w, C)` → `∂L/∂δ` for the left twist of the module docs. With
+/// `W' ≈ W(I − [ω]×)`, `t_w' ≈ t_w − W v`, `C' ≈ C + ω×C + v`.
+fn pose_twist_grad(cam: &Camera, c: &[f64; 15]) -> [f64; 6] {
+    let inv = cam.cam_to_world.inverse();
+    let wm = DMat3::from_quat(inv.rotation);
+    let g_w = DMat3::from_cols_slice(&c[0..9]);
+    let g_tw = DVec3::new(c[9], c[10], c[11]);
+    let g_c = DVec3::new(c[12], c[13], c[14]);
+    let centre = cam.cam_to_world.translation;
+    let g_v = -(wm.transpose() * g_tw) + g_c;
+    let m = wm.transpose() * g_w;
+    let e = |i: usize, j: usize| m.col(j)[i];
+    let g_omega =
+        -DVec3::new(e(2, 1) - e(1, 2), e(0, 2) - e(2, 0), e(1, 0) - e(0, 1)) + centre.cross(g_c);
+    [g_v.x, g_v.y, g_v.z, g_omega.x, g_omega.y, g_omega.z]
+}

@@ -1,0 +1,338 @@
+//! Forward pass: project every Gaussian (rayon), sort the visible ones by depth, bin
+//! them into 16×16 tiles (a stable counting sort, so every tile list stays in depth
+//! order), then composite each tile front to back (DEGS Eq. 1) in parallel.
+
+use super::project::{CamSetup, project};
+use super::simd::{self, F4, Lanes, Mask};
+use super::{RenderState, T_MIN, TILE, eval_alpha};
+use crate::train::{Frame, Splats};
+use rayon::prelude::*;
+
+/// Visible projected Gaussians in depth order (struct of arrays).
+#[derive(Clone, Debug, Default)]
+pub struct Projected {
+    /// Index into the input `Splats`.
+    pub id: Vec<u32>,
+    pub xy: Vec<[f32; 2]>,
+    pub conic: Vec<[f32; 3]>,
+    pub opacity: Vec<f32>,
+    pub color: Vec<[f32; 3]>,
+    pub depth: Vec<f32>,
+    /// Inclusive pixel box `[x0, x1, y0, y1]`.
+    pub bbox: Vec<[u32; 4]>,
+    /// Largest composited `dᵀΣ⁻¹d` (see [`super::project::reach`]).
+    pub cut: Vec<f32>,
+}
+
+/// Columns `[lo, hi)` (tile-relative, within `[x0, x1)`) of the row at offset `dy` from
+/// the mean where `dᵀQd ≤ cut` can hold; empty when the row misses the ellipse.
+#[inline(always)]
+pub(crate) fn row_span(
+    conic: [f32; 3],
+    cut: f32,
+    u: f32,
+    dy: f32,
+    xr: [usize; 3],
+) -> (usize, usize) {
+    let [x0, x1, base] = xr;
+    let [a, b, c] = conic;
+    let disc = b * b * dy * dy - a * (c * dy * dy - cut);
+    if !(disc >= 0.0) {
+        return (0, 0);
+    }
+    let (mid, half) = (u - b * dy / a, disc.sqrt() / a);
+    let lo = ((mid - half - 0.01).ceil().max(x0 as f32) as usize).max(x0);
+    let hi = (((mid + half + 0.01).floor() + 1.0).max(0.0) as usize).min(x1);
+    if lo >= hi {
+        return (0, 0);
+    }
+    (lo - base, hi - base)
+}
+
+/// Per-pixel planes of one tile, row-major `[row][column]`.
+pub(crate) type Plane<T> = [[T; TILE]; TILE];
+
+/// One tile's composited output, before it is scattered into the frame.
+struct TileOut {
+    rgb: [Plane<f32>; 3],
+    depth: Plane<f32>,
+    t: Plane<f32>,
+    /// Entries processed up to the last contributor (f32 for vector selects; exact
+    /// below 2^24).
+    last: Plane<f32>,
+}
+
+pub(crate) struct Tiles {
+    pub nx: usize,
+    pub ny: usize,
+    /// `ranges[t]..ranges[t + 1]` indexes `list` for tile `t`.
+    pub ranges: Vec<u32>,
+    /// Indices into [`Projected`], depth-ordered within each tile.
+    pub list: Vec<u32>,
+}
+
+impl Tiles {
+    pub fn of(&self, t: usize) -> &[u32] {
+        &self.list[self.ranges[t] as usize..self.ranges[t + 1] as usize]
+    }
+    /// Pixel rectangle `[x0, x1, y0, y1]` (exclusive ends) of tile `t`.
+    pub fn rect(&self, t: usize, width: usize, height: usize) -> [usize; 4] {
+        let (tx, ty) = (t % self.nx, t / self.nx);
+        [
+            tx * TILE,
+            ((tx + 1) * TILE).min(width),
+            ty * TILE,
+            ((ty + 1) * TILE).min(height),
+        ]
+    }
+}
+
+/// What the tile passes need of one projected Gaussian.
+#[derive(Clone, Copy)]
+struct Splat2d {
+    xy: [f32; 2],
+    conic: [f32; 3],
+    opacity: f32,
+    color: [f32; 3],
+    depth: f32,
+    bbox: [u32; 4],
+    cut: f32,
+}
+
+/// Project all Gaussians; returns the visible ones in depth order and every radius.
+pub(crate) fn project_all(s: &Splats, cam: &CamSetup, sh_degree: u32) -> (Projected, Vec<f32>) {
+    let splats: Vec<(f32, Option<Splat2d>)> = (0..s.len())
+        .into_par_iter()
+        .with_min_len(256)
+        .map(|i| match project(s, i, cam, sh_degree) {
+            None => (0.0, None),
+            Some(g) => (
+                g.radius,
+                Some(Splat2d {
+                    xy: g.uv,
+                    conic: g.conic,
+                    opacity: g.opacity,
+                    color: g.color,
+                    depth: g.depth,
+                    bbox: g.bbox,
+                    cut: g.cut,
+                }),
+            ),
+        })
+        .collect();
+    let radius = splats.iter().map(|g| g.0).collect();
+    let mut order: Vec<(u32, u32)> = splats
+        .iter()
+        .enumerate()
+        .filter_map(|(i, g)| g.1.as_ref().map(|g| (g.depth.to_bits(), i as u32)))
+        .collect();
+    // Depth > 0, so the IEEE bit pattern orders like the value; ties by index.
+    order.par_sort_unstable();
+    let n = order.len();
+    let mut p = Projected {
+        id: Vec::with_capacity(n),
+        xy: Vec::with_capacity(n),
+        conic: Vec::with_capacity(n),
+        opacity: Vec::with_capacity(n),
+        color: Vec::with_capacity(n),
+        depth: Vec::with_capacity(n),
+        bbox: Vec::with_capacity(n),
+        cut: Vec::with_capacity(n),
+    };
+    for &(_, i) in &order {
+        let g = splats[i as usize].1.as_ref().expect("visible");
+        p.id.push(i);
+        p.xy.push(g.xy);
+        p.conic.push(g.conic);
+        p.opacity.push(g.opacity);
+        p.color.push(g.color);
+        p.depth.push(g.depth);
+        p.bbox.push(g.bbox);
+        p.cut.push(g.cut);
+    }
+    (p, radius)
+}
+
+/// Counting sort of (Gaussian, tile) pairs by tile, stable in depth order.
+pub(crate) fn bin(p: &Projected, width: usize, height: usize) -> Tiles {
+    let nx = width.div_ceil(TILE);
+    let ny = height.div_ceil(TILE);
+    let mut counts = vec![0u32; nx * ny + 1];
+    let tiles_of = |b: &[u32; 4]| {
+        let (tx0, tx1) = (b[0] as usize / TILE, b[1] as usize / TILE);
+        let (ty0, ty1) = (b[2] as usize / TILE, b[3] as usize / TILE);
+        (ty0..=ty1).flat_map(move |ty| (tx0..=tx1).map(move |tx| ty * nx + tx))
+    };
+    for b in &p.bbox {
+        for t in tiles_of(b) {
+            counts[t + 1] += 1;
+        }
+    }
+    for t in 0..nx * ny {
+        counts[t + 1] += counts[t];
+    }
+    let mut fill = counts.clone();
+    let mut list = vec![0u32; counts[nx * ny] as usize];
+    for (k, b) in p.bbox.iter().enumerate() {
+        for t in tiles_of(b) {
+            list[fill[t] as usize] = k as u32;
+            fill[t] += 1;
+        }
+    }
+    Tiles {
+        nx,
+        ny,
+        ranges: counts,
+        list,
+    }
+}
+
+/// Bits of the lanes `[lo, hi)` of a tile row (a Gaussian's box within the tile).
+#[inline(always)]
+pub(crate) fn lane_bits(lo: usize, hi: usize) -> u32 {
+    ((1u64 << hi) - 1) as u32 & !((1u32 << lo) - 1)
+}
+
+/// Composite one tile front to back with the widest lanes this CPU has.
+fn tile_forward(p: &Projected, list: &[u32], r: [usize; 4]) -> TileOut {
+    #[cfg(target_arch = "x86_64")]
+    if simd::use_wide() {
+        // SAFETY: `use_wide` checked that the CPU has AVX-512F.
+        return unsafe { tile_forward_avx512(p, list, r) };
+    }
+    tile_forward_lanes::<F4>(p, list, r)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+fn tile_forward_avx512(p: &Projected, list: &[u32], r: [usize; 4]) -> TileOut {
+    tile_forward_lanes::<simd::F16>(p, list, r)
+}
+
+/// Gaussian-outer, then for each row of the Gaussian's box the lane chunks that meet
+/// its ellipse; per lane branch-free (masked lanes get α = 0).
+#[inline(always)]
+fn tile_forward_lanes<V: Lanes>(p: &Projected, list: &[u32], r: [usize; 4]) -> TileOut {
+    let mut o = TileOut {
+        rgb: [[[0.0; TILE]; TILE]; 3],
+        depth: [[0.0; TILE]; TILE],
+        t: [[1.0; TILE]; TILE],
+        last: [[0.0; TILE]; TILE],
+    };
+    let n = V::N;
+    let chunk_bits = lane_bits(0, n);
+    // Bit per pixel of each row: set while the pixel still composites.
+    let mut active = [lane_bits(0, r[1] - r[0]); TILE];
+    let mut remaining = ((r[1] - r[0]) * (r[3] - r[2])) as u32;
+    let s = V::splat;
+    let xs: [V; 4] = std::array::from_fn(|c| V::iota((r[0] + (c * n) % TILE) as f32));
+    for (k, &g) in list.iter().enumerate() {
+        if remaining == 0 {
+            break;
+        }
+        let g = g as usize;
+        let b = p.bbox[g];
+        let (x0, x1) = ((b[0] as usize).max(r[0]), (b[1] as usize + 1).min(r[1]));
+        let (y0, y1) = ((b[2] as usize).max(r[2]), (b[3] as usize + 1).min(r[3]));
+        let [u, v] = p.xy[g];
+        let (conic, op, col, dep) = (p.conic[g], p.opacity[g], p.color[g], p.depth[g]);
+        let (u4, col4, dep4) = (s(u), col.map(s), s(dep));
+        let kk = s((k + 1) as f32);
+        for y in y0..y1 {
+            let row = y - r[2];
+            let dyf = y as f32 - v;
+            // One vector covers the row: the ellipse test per lane is enough. Narrow
+            // lanes skip the chunks outside the ellipse's span on this row.
+            let (lo, hi) = if n == TILE {
+                (x0 - r[0], x1 - r[0])
+            } else {
+                row_span(conic, p.cut[g], u, dyf, [x0, x1, r[0]])
+            };
+            let inb = lane_bits(lo, hi);
+            let dy = s(dyf);
+            for c in lo / n..hi.div_ceil(n) {
+                let bits = (inb & active[row]) >> (n * c) & chunk_bits;
+                if bits == 0 {
+                    continue;
+                }
+                let l = n * c..n * c + n;
+                let (a0, _) = eval_alpha(conic, op, xs[c] - u4, dy);
+                let a0 = a0.and(V::M::from_bits(bits));
+                let t = V::load(&o.t[row][l.clone()]);
+                let test_t = t * (s(1.0) - a0);
+                let stop = a0.gt(s(0.0)).and(test_t.lt(s(T_MIN)));
+                let sb = stop.bits();
+                active[row] &= !(sb << (n * c));
+                remaining -= sb.count_ones();
+                let a = V::select(stop, s(0.0), a0);
+                let w = a * t;
+                for ch in 0..3 {
+                    let dst = &mut o.rgb[ch][row][l.clone()];
+                    (V::load(dst) + w * col4[ch]).store(dst);
+                }
+                let dst = &mut o.depth[row][l.clone()];
+                (V::load(dst) + w * dep4).store(dst);
+                let used = a.gt(s(0.0));
+                V::select(used, test_t, t).store(&mut o.t[row][l.clone()]);
+                let dst = &mut o.last[row][l];
+                V::select(used, kk, V::load(dst)).store(dst);
+            }
+        }
+    }
+    o
+}
+
+/// Render; fills the frame and the per-pixel state the backward needs.
+pub(crate) fn render(
+    s: &Splats,
+    cam: &CamSetup,
+    sh_degree: u32,
+    background: [f32; 3],
+) -> (Frame, RenderState) {
+    let (w, h) = (cam.width, cam.height);
+    let (proj, radius) = project_all(s, cam, sh_degree);
+    let tiles = bin(&proj, w, h);
+    let outs: Vec<TileOut> = (0..tiles.nx * tiles.ny)
+        .into_par_iter()
+        .map(|t| tile_forward(&proj, tiles.of(t), tiles.rect(t, w, h)))
+        .collect();
+    let np = w * h;
+    let mut f = Frame {
+        width: w,
+        height: h,
+        rgb: vec![0.0; 3 * np],
+        depth: vec![0.0; np],
+        alpha: vec![0.0; np],
+    };
+    let mut t_final = vec![1.0f32; np];
+    let mut last = vec![0u32; np];
+    for (t, o) in outs.iter().enumerate() {
+        let r = tiles.rect(t, w, h);
+        for y in r[2]..r[3] {
+            for x in r[0]..r[1] {
+                let (ty, tx) = (y - r[2], x - r[0]);
+                let pix = y * w + x;
+                let tt = o.t[ty][tx];
+                for c in 0..3 {
+                    f.rgb[c * np + pix] = o.rgb[c][ty][tx] + tt * background[c];
+                }
+                f.depth[pix] = o.depth[ty][tx];
+                f.alpha[pix] = 1.0 - tt;
+                t_final[pix] = tt;
+                last[pix] = o.last[ty][tx] as u32;
+            }
+        }
+    }
+    let state = RenderState {
+        cam: *cam,
+        sh_degree,
+        background,
+        n: s.len(),
+        proj,
+        tiles,
+        radius,
+        t_final,
+        last,
+    };
+    (f, state)
+}

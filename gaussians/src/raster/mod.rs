@@ -1,0 +1,167 @@
+//! Differentiable tile rasterizer for 3D Gaussians on the CPU (3DGS; DEGS Eq. 1–2).
+//!
+//! [`TileRasterizer`] renders colour (SH up to degree 3), alpha-blended camera depth and
+//! accumulated alpha, and back-propagates gradients of all three to every Gaussian
+//! parameter and to the camera pose. [`reference`] is a plain f64 renderer with the same
+//! cut-offs, used by the tests.
+//!
+//! Cut-offs (shared with the reference): near plane `d > 0.01`, low-pass `0.3 px²` on
+//! the 2-D covariance, Gaussians evaluated only inside their 3σ ellipse
+//! (`dᵀΣ⁻¹d ≤ 9`), `α = min(0.99, o·exp(−½dᵀΣ⁻¹d))`, contributions with `α < 1/255`
+//! skipped, a pixel stops before the Gaussian that would take its transmittance below
+//! `1e-4`.
+//!
+//! **Pose gradient convention**: the camera twist `δ = (v, ω)` perturbs the
+//! camera-to-world pose on the left, `T(δ) = [exp([ω]×) | v] · T`, i.e.
+//! `R' = exp([ω]×)·R`, `t' = exp([ω]×)·t + v` (world-frame rotation about the world origin,
+//! then translation); [`apply_twist`] implements it. The gradient returned by
+//! [`TileRasterizer::backward_full`] is `∂L/∂δ` at `δ = 0`, ordered `[v_x, v_y, v_z,
+//! ω_x, ω_y, ω_z]`. To first order this is the SE(3) exponential's left perturbation.
+
+// Index loops mirror the math; negated comparisons deliberately reject NaN.
+#![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
+
+mod backward;
+mod forward;
+pub mod project;
+pub mod reference;
+pub mod sh;
+
+pub mod simd;
+
+pub use forward::Projected;
+
+use crate::train::{Frame, Rasterizer, SplatGrads, Splats};
+use glam::{DQuat, DVec3};
+use project::CamSetup;
+use scene::{Camera, Pose};
+use simd::{Lanes, Mask};
+
+/// Tile side in pixels.
+pub const TILE: usize = 16;
+/// Gaussians with camera depth at or below this are culled.
+pub const NEAR: f32 = 0.01;
+/// Added to the diagonal of every 2-D covariance (pixels²).
+pub const LOW_PASS: f32 = 0.3;
+/// Gaussians are evaluated inside `dᵀΣ⁻¹d ≤ SIGMA_CUTOFF²`.
+pub const SIGMA_CUTOFF: f32 = 3.0;
+/// Largest alpha of one Gaussian at one pixel.
+pub const ALPHA_MAX: f32 = 0.99;
+/// Contributions below this alpha are skipped.
+pub const ALPHA_MIN: f32 = 1.0 / 255.0;
+/// Gaussians less opaque than this cannot reach `ALPHA_MIN` and are culled.
+pub const CULL_OPACITY: f32 = 1.0 / 255.0;
+/// A pixel stops compositing before its transmittance would drop below this.
+pub const T_MIN: f32 = 1e-4;
+
+/// `(α, raw)` of a Gaussian with `conic` and opacity `op` at a few pixels with offsets
+/// `(dx, dy)` = pixel − mean; `α = 0` outside the 3σ ellipse or where `α < ALPHA_MIN`;
+/// `raw = o·G` before the clamp at `ALPHA_MAX` (the clamp stops the gradient). Forward
+/// and backward call this same function, so their decisions agree bit for bit.
+#[inline(always)]
+pub(crate) fn eval_alpha<V: Lanes>(conic: [f32; 3], op: f32, dx: V, dy: V) -> (V, V) {
+    let s = V::splat;
+    let maha = (s(conic[0]) * dx + s(2.0 * conic[1]) * dy) * dx + s(conic[2]) * dy * dy;
+    let raw = s(op) * simd::fast_exp(s(-0.5) * maha);
+    let alpha = raw.min(s(ALPHA_MAX));
+    let ok = maha
+        .le(s(SIGMA_CUTOFF * SIGMA_CUTOFF))
+        .and(s(ALPHA_MIN).le(alpha));
+    (alpha.and(ok), raw)
+}
+
+/// Apply a twist `δ = (v, ω)` to a camera-to-world pose by left perturbation (see the
+/// module docs): `R' = exp([ω]×)·R`, `t' = exp([ω]×)·t + v`.
+pub fn apply_twist(pose: &Pose, twist: [f64; 6]) -> Pose {
+    let v = DVec3::new(twist[0], twist[1], twist[2]);
+    let w = DVec3::new(twist[3], twist[4], twist[5]);
+    let dq = DQuat::from_scaled_axis(w);
+    Pose {
+        rotation: (dq * pose.rotation).normalize(),
+        translation: dq * pose.translation + v,
+    }
+}
+
+/// Everything the backward needs from a forward pass.
+pub struct RenderState {
+    pub(crate) cam: CamSetup,
+    pub(crate) sh_degree: u32,
+    pub(crate) background: [f32; 3],
+    pub(crate) n: usize,
+    pub(crate) proj: Projected,
+    pub(crate) tiles: forward::Tiles,
+    pub(crate) radius: Vec<f32>,
+    pub(crate) t_final: Vec<f32>,
+    /// Per pixel: number of entries of its tile list processed up to and including the
+    /// last one that contributed.
+    pub(crate) last: Vec<u32>,
+}
+
+impl RenderState {
+    /// The visible Gaussians in depth order.
+    pub fn projected(&self) -> &Projected {
+        &self.proj
+    }
+    /// Screen radius per input Gaussian (0 = culled).
+    pub fn radius(&self) -> &[f32] {
+        &self.radius
+    }
+    /// Number of (Gaussian, tile) pairs composited.
+    pub fn pairs(&self) -> usize {
+        self.tiles.list.len()
+    }
+}
+
+/// The CPU tile rasterizer (rayon over tiles and Gaussians).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct TileRasterizer;
+
+impl TileRasterizer {
+    pub fn new() -> Self {
+        TileRasterizer
+    }
+
+    /// Render colour, depth and alpha.
+    pub fn render_full(
+        &self,
+        s: &Splats,
+        cam: &Camera,
+        sh_degree: u32,
+        background: [f32; 3],
+    ) -> (Frame, RenderState) {
+        forward::render(s, &CamSetup::new(cam), sh_degree.min(3), background)
+    }
+
+    /// Backward from `∂L/∂rgb` (planar `3×H×W`), and optionally `∂L/∂depth` and
+    /// `∂L/∂alpha` (`H×W`), to every Gaussian parameter and the camera twist
+    /// (convention in the module docs).
+    pub fn backward_full(
+        &self,
+        s: &Splats,
+        cam: &Camera,
+        state: &RenderState,
+        d_rgb: &[f32],
+        d_depth: Option<&[f32]>,
+        d_alpha: Option<&[f32]>,
+    ) -> (SplatGrads, [f64; 6]) {
+        backward::backward(s, cam, state, d_rgb, d_depth, d_alpha)
+    }
+}
+
+impl Rasterizer for TileRasterizer {
+    type State = RenderState;
+
+    fn render(
+        &self,
+        s: &Splats,
+        cam: &Camera,
+        sh_degree: u32,
+        background: [f32; 3],
+    ) -> (Frame, RenderState) {
+        self.render_full(s, cam, sh_degree, background)
+    }
+
+    fn backward(&self, s: &Splats, cam: &Camera, state: &RenderState, d_rgb: &[f32]) -> SplatGrads {
+        self.backward_full(s, cam, state, d_rgb, None, None).0
+    }
+}

@@ -1,0 +1,166 @@
+//! A plain f64 renderer for tests: every Gaussian at every pixel, one global depth
+//! sort, no tiles, the same cut-offs as [`super::TileRasterizer`]. Slow by design.
+
+use super::{ALPHA_MAX, ALPHA_MIN, CULL_OPACITY, LOW_PASS, NEAR, SIGMA_CUTOFF, T_MIN};
+use super::{project::jacobian_limits, sh};
+use crate::train::Splats;
+use glam::{DMat3, DQuat, DVec3};
+use scene::Camera;
+
+/// Gaussian parameters in f64 (same layout and meaning as [`Splats`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Gaussians64 {
+    pub means: Vec<[f64; 3]>,
+    pub log_scales: Vec<[f64; 3]>,
+    pub rotations: Vec<[f64; 4]>,
+    pub opacity_logits: Vec<f64>,
+    pub sh_dc: Vec<[f64; 3]>,
+    pub sh_rest: Vec<[f64; 45]>,
+}
+
+impl From<&Splats> for Gaussians64 {
+    fn from(s: &Splats) -> Self {
+        Gaussians64 {
+            means: s.means.iter().map(|v| v.map(f64::from)).collect(),
+            log_scales: s.log_scales.iter().map(|v| v.map(f64::from)).collect(),
+            rotations: s.rotations.iter().map(|v| v.map(f64::from)).collect(),
+            opacity_logits: s.opacity_logits.iter().map(|&v| v as f64).collect(),
+            sh_dc: s.sh_dc.iter().map(|v| v.map(f64::from)).collect(),
+            sh_rest: s.sh_rest.iter().map(|v| v.map(f64::from)).collect(),
+        }
+    }
+}
+
+/// Planar RGB `3×H×W`, depth and alpha `H×W`.
+#[derive(Clone, Debug, Default)]
+pub struct RefFrame {
+    pub width: usize,
+    pub height: usize,
+    pub rgb: Vec<f64>,
+    pub depth: Vec<f64>,
+    pub alpha: Vec<f64>,
+}
+
+struct Splat2 {
+    mean: [f64; 2],
+    conic: [f64; 3],
+    opacity: f64,
+    color: [f64; 3],
+    depth: f64,
+}
+
+fn splat2(g: &Gaussians64, i: usize, cam: &Camera, sh_degree: u32) -> Option<Splat2> {
+    let k = &cam.intrinsics;
+    let opacity = 1.0 / (1.0 + (-g.opacity_logits[i]).exp());
+    if opacity < CULL_OPACITY as f64 {
+        return None;
+    }
+    let [qw, qx, qy, qz] = g.rotations[i];
+    let q = DQuat::from_xyzw(qx, qy, qz, qw);
+    if q.length() < 1e-12 {
+        return None;
+    }
+    let r = DMat3::from_quat(q.normalize());
+    let s = DMat3::from_diagonal(DVec3::from(g.log_scales[i]).exp());
+    let sigma = r * s * s * r.transpose();
+    let world_to_cam = DMat3::from_quat(cam.cam_to_world.rotation.inverse());
+    let mean = DVec3::from(g.means[i]);
+    let pc = cam.cam_to_world.to_camera(mean);
+    let d = -pc.z;
+    if d <= NEAR as f64 {
+        return None;
+    }
+    let lim = jacobian_limits(k.fx, k.fy, k.cx, k.cy, k.width as f64, k.height as f64);
+    let tx = (pc.x / d).clamp(lim[0], lim[1]);
+    let ty = (pc.y / d).clamp(lim[2], lim[3]);
+    // Rows of J (u = cx + fx·x/d, v = cy − fy·y/d, d = −z).
+    let j0 = DVec3::new(k.fx / d, 0.0, k.fx * tx / d);
+    let j1 = DVec3::new(0.0, -k.fy / d, -k.fy * ty / d);
+    let sc = world_to_cam * sigma * world_to_cam.transpose();
+    let a = j0.dot(sc * j0) + LOW_PASS as f64;
+    let b = j0.dot(sc * j1);
+    let c = j1.dot(sc * j1) + LOW_PASS as f64;
+    let det = a * c - b * b;
+    if det <= 0.0 {
+        return None;
+    }
+    let px = k.project(pc)?;
+    let dir = (mean - cam.cam_to_world.translation).normalize();
+    let basis = sh::basis_f64(dir.into(), sh_degree);
+    let color = std::array::from_fn(|ch| {
+        let mut v = 0.5 + basis[0] * g.sh_dc[i][ch];
+        for (kk, bk) in basis
+            .iter()
+            .enumerate()
+            .take(sh::num_coeffs(sh_degree))
+            .skip(1)
+        {
+            v += bk * g.sh_rest[i][(kk - 1) * 3 + ch];
+        }
+        v.max(0.0)
+    });
+    Some(Splat2 {
+        mean: [px.x, px.y],
+        conic: [c / det, -b / det, a / det],
+        opacity,
+        color,
+        depth: d,
+    })
+}
+
+/// Render `g` from `cam`.
+pub fn render(g: &Gaussians64, cam: &Camera, sh_degree: u32, background: [f64; 3]) -> RefFrame {
+    let (w, h) = (
+        cam.intrinsics.width as usize,
+        cam.intrinsics.height as usize,
+    );
+    let sh_degree = sh_degree.min(3);
+    let mut splats: Vec<(usize, Splat2)> = (0..g.means.len())
+        .filter_map(|i| splat2(g, i, cam, sh_degree).map(|s| (i, s)))
+        .collect();
+    splats.sort_by(|a, b| a.1.depth.total_cmp(&b.1.depth).then(a.0.cmp(&b.0)));
+    let np = w * h;
+    let mut f = RefFrame {
+        width: w,
+        height: h,
+        rgb: vec![0.0; 3 * np],
+        depth: vec![0.0; np],
+        alpha: vec![0.0; np],
+    };
+    let cut2 = (SIGMA_CUTOFF * SIGMA_CUTOFF) as f64;
+    for y in 0..h {
+        for x in 0..w {
+            let mut t = 1.0f64;
+            let mut rgb = [0.0f64; 3];
+            let mut depth = 0.0;
+            for (_, s) in &splats {
+                let dx = x as f64 - s.mean[0];
+                let dy = y as f64 - s.mean[1];
+                let m = s.conic[0] * dx * dx + 2.0 * s.conic[1] * dx * dy + s.conic[2] * dy * dy;
+                if m > cut2 {
+                    continue;
+                }
+                let alpha = (s.opacity * (-0.5 * m).exp()).min(ALPHA_MAX as f64);
+                if alpha < ALPHA_MIN as f64 {
+                    continue;
+                }
+                let next = t * (1.0 - alpha);
+                if next < T_MIN as f64 {
+                    break;
+                }
+                for c in 0..3 {
+                    rgb[c] += alpha * t * s.color[c];
+                }
+                depth += alpha * t * s.depth;
+                t = next;
+            }
+            let p = y * w + x;
+            for c in 0..3 {
+                f.rgb[c * np + p] = rgb[c] + t * background[c];
+            }
+            f.depth[p] = depth;
+            f.alpha[p] = 1.0 - t;
+        }
+    }
+    f
+}

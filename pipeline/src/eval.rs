@@ -1,0 +1,403 @@
+//! `degs eval RUN` and `degs compare RUN…`: image quality of the final renders on the
+//! held-out test frames, flow error where the stages report it.
+
+use crate::record::RunRecord;
+use anyhow::{Context, Result, bail};
+use rayon::prelude::*;
+use scene::image_io::{Image, read_image};
+use scene::manifest::Scene;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// metrics.json of a run.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Metrics {
+    pub experiment: String,
+    /// The stage whose `renders/` were evaluated.
+    pub render_stage: Option<String>,
+    pub frames: Vec<FrameMetrics>,
+    pub psnr_mean: Option<f64>,
+    pub ssim_mean: Option<f64>,
+    /// Mean end-point error of the flow (px/s) as reported by the evflow stage against
+    /// the scene's ground truth, when it has one.
+    pub flow_epe: Option<f64>,
+    /// Total wall time of the stages that built this run's entries, seconds.
+    pub total_stage_s: f64,
+    pub stage_s: Vec<(String, f64)>,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct FrameMetrics {
+    pub test_image: PathBuf,
+    pub render: PathBuf,
+    pub psnr: f64,
+    pub ssim: f64,
+}
+
+fn to_u8_levels(img: &Image) -> Vec<f32> {
+    img.data
+        .iter()
+        .map(|v| (v.clamp(0.0, 1.0) * 255.0).round())
+        .collect()
+}
+
+/// PSNR (dB) of two 8-bit images given as 0–255 levels; `f64::INFINITY` when equal.
+pub fn psnr_u8(a: &[f32], b: &[f32]) -> f64 {
+    let mse = a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| ((x - y) as f64).powi(2))
+        .sum::<f64>()
+        / a.len().max(1) as f64;
+    if mse == 0.0 {
+        f64::INFINITY
+    } else {
+        10.0 * (255.0f64 * 255.0 / mse).log10()
+    }
+}
+
+/// Mean SSIM (Wang et al. 2004: 11×11 Gaussian window, σ = 1.5, K1 = 0.01, K2 = 0.03,
+/// L = 255) over the valid windows of every channel of interleaved images.
+pub fn ssim_u8(a: &[f32], b: &[f32], width: usize, height: usize, channels: usize) -> f64 {
+    const R: usize = 5;
+    if width < 2 * R + 1 || height < 2 * R + 1 {
+        return if a == b { 1.0 } else { 0.0 };
+    }
+    let mut w = [0f64; 2 * R + 1];
+    for (i, wi) in w.iter_mut().enumerate() {
+        let d = i as f64 - R as f64;
+        *wi = (-d * d / (2.0 * 1.5 * 1.5)).exp();
+    }
+    let s: f64 = w.iter().sum();
+    w.iter_mut().for_each(|x| *x /= s);
+    let (c1, c2) = ((0.01f64 * 255.0).powi(2), (0.03f64 * 255.0).powi(2));
+    let (ow, oh) = (width - 2 * R, height - 2 * R);
+    let total: f64 = (0..channels)
+        .into_par_iter()
+        .map(|c| {
+            // separable blur of x, y, x², y², xy: horizontal pass then vertical
+            let px = |img: &[f32], x: usize, y: usize| img[(y * width + x) * channels + c] as f64;
+            let mut h = vec![[0f64; 5]; ow * height];
+            for y in 0..height {
+                for x in 0..ow {
+                    let mut acc = [0f64; 5];
+                    for (k, wk) in w.iter().enumerate() {
+                        let (p, q) = (px(a, x + k, y), px(b, x + k, y));
+                        acc[0] += wk * p;
+                        acc[1] += wk * q;
+                        acc[2] += wk * p * p;
+                        acc[3] += wk * q * q;
+                        acc[4] += wk * p * q;
+                    }
+                    h[y * ow + x] = acc;
+                }
+            }
+            let mut sum = 0.0;
+            for y in 0..oh {
+                for x in 0..ow {
+                    let mut m = [0f64; 5];
+                    for (k, wk) in w.iter().enumerate() {
+                        let v = h[(y + k) * ow + x];
+                        for j in 0..5 {
+                            m[j] += wk * v[j];
+                        }
+                    }
+                    let (mx, my) = (m[0], m[1]);
+                    let (vx, vy, cxy) = (m[2] - mx * mx, m[3] - my * my, m[4] - mx * my);
+                    sum += ((2.0 * mx * my + c1) * (2.0 * cxy + c2))
+                        / ((mx * mx + my * my + c1) * (vx + vy + c2));
+                }
+            }
+            sum / (ow * oh) as f64
+        })
+        .sum();
+    total / channels as f64
+}
+
+/// PSNR of identical images is reported as this (dB), so means and JSON stay finite.
+pub const PSNR_CAP: f64 = 100.0;
+
+/// Compare two images (3 channels after reading) on 8-bit levels: (PSNR, SSIM).
+pub fn compare_images(test: &Path, render: &Path) -> Result<(f64, f64)> {
+    let a = read_image(test)?;
+    let b = read_image(render)?;
+    if (a.width, a.height, a.channels) != (b.width, b.height, b.channels) {
+        bail!(
+            "{}: {}x{}x{} but the test image {} is {}x{}x{}",
+            render.display(),
+            b.width,
+            b.height,
+            b.channels,
+            test.display(),
+            a.width,
+            a.height,
+            a.channels
+        );
+    }
+    let (qa, qb) = (to_u8_levels(&a), to_u8_levels(&b));
+    Ok((
+        psnr_u8(&qa, &qb).min(PSNR_CAP),
+        ssim_u8(
+            &qa,
+            &qb,
+            a.width as usize,
+            a.height as usize,
+            a.channels as usize,
+        ),
+    ))
+}
+
+/// Image files of `dir`, sorted by name.
+fn images_in(dir: &Path) -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| {
+            matches!(
+                p.extension()
+                    .and_then(|e| e.to_str())
+                    .map(str::to_ascii_lowercase)
+                    .as_deref(),
+                Some("png" | "jpg" | "jpeg")
+            )
+        })
+        .collect();
+    v.sort();
+    v
+}
+
+/// Pair each test frame with a render: same file stem when the stage kept the names,
+/// else in order when the counts agree.
+fn pair_renders(tests: &[PathBuf], renders: &[PathBuf]) -> Result<Vec<(PathBuf, PathBuf)>> {
+    let stem = |p: &Path| p.file_stem().map(|s| s.to_string_lossy().to_string());
+    let by_stem: Vec<_> = tests
+        .iter()
+        .filter_map(|t| {
+            renders
+                .iter()
+                .find(|r| stem(r) == stem(t))
+                .map(|r| (t.clone(), r.clone()))
+        })
+        .collect();
+    if by_stem.len() == tests.len() {
+        return Ok(by_stem);
+    }
+    if renders.len() == tests.len() {
+        return Ok(tests.iter().cloned().zip(renders.iter().cloned()).collect());
+    }
+    bail!(
+        "{} test frames but {} renders, and their names do not match",
+        tests.len(),
+        renders.len()
+    )
+}
+
+/// Look for a number under a key containing "epe" in a stage report.
+fn find_epe(v: &serde_json::Value) -> Option<f64> {
+    match v {
+        serde_json::Value::Object(m) => m
+            .iter()
+            .find_map(|(k, x)| {
+                k.to_ascii_lowercase()
+                    .contains("epe")
+                    .then(|| x.as_f64())
+                    .flatten()
+            })
+            .or_else(|| m.values().find_map(find_epe)),
+        _ => None,
+    }
+}
+
+/// Evaluate the run in `run_dir` (a `runs/<name>/` directory) and write its metrics.json.
+pub fn eval_run(run_dir: &Path) -> Result<Metrics> {
+    let record = RunRecord::read(&run_dir.join("run.json"))?;
+    let entry_of = |stage: &str| {
+        record
+            .stage(stage)
+            .filter(|s| s.action.has_output())
+            .and_then(|s| s.entry.clone())
+    };
+    let scene_dir = record
+        .stages
+        .first()
+        .filter(|s| s.action.has_output())
+        .and_then(|s| s.entry.clone())
+        .with_context(|| format!("{}: the run has no scene", run_dir.display()))?;
+    let scene = Scene::open(&scene_dir)?;
+    let tests: Vec<PathBuf> = scene
+        .test
+        .frames
+        .iter()
+        .map(|f| scene.image_path(f))
+        .collect();
+
+    let mut render_stage = None;
+    let mut frames = Vec::new();
+    for stage in ["deform", "gaussians"] {
+        let Some(entry) = entry_of(stage) else {
+            continue;
+        };
+        let renders = images_in(&entry.join("renders"));
+        if renders.is_empty() {
+            continue;
+        }
+        let pairs = pair_renders(&tests, &renders)
+            .with_context(|| format!("{}", entry.join("renders").display()))?;
+        frames = pairs
+            .par_iter()
+            .map(|(t, r)| {
+                let (psnr, ssim) = compare_images(t, r)?;
+                Ok(FrameMetrics {
+                    test_image: t.clone(),
+                    render: r.clone(),
+                    psnr,
+                    ssim,
+                })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        render_stage = Some(stage.to_string());
+        break;
+    }
+    let mean = |f: &dyn Fn(&FrameMetrics) -> f64| {
+        (!frames.is_empty()).then(|| frames.iter().map(f).sum::<f64>() / frames.len() as f64)
+    };
+    let flow_epe = if scene_dir.join("gt").is_dir() {
+        entry_of("evflow")
+            .and_then(|e| std::fs::read(e.join("report.json")).ok())
+            .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
+            .and_then(|v| find_epe(&v))
+    } else {
+        None
+    };
+    let stage_s: Vec<(String, f64)> = record
+        .stages
+        .iter()
+        .filter(|s| s.action.has_output())
+        .map(|s| (s.stage.clone(), s.built_wall_s.unwrap_or(s.wall_s)))
+        .collect();
+    let metrics = Metrics {
+        experiment: record.experiment.clone(),
+        render_stage,
+        psnr_mean: mean(&|f| f.psnr),
+        ssim_mean: mean(&|f| f.ssim),
+        frames,
+        flow_epe,
+        total_stage_s: stage_s.iter().map(|(_, t)| t).sum(),
+        stage_s,
+    };
+    scene::atomic::write_json_atomic(&run_dir.join("metrics.json"), &metrics)?;
+    Ok(metrics)
+}
+
+/// The table of `degs compare`.
+pub fn compare_table(runs: &[(String, Metrics)]) -> String {
+    let f = |v: Option<f64>, p: usize| v.map_or("-".to_string(), |x| format!("{x:.p$}"));
+    let mut s = format!(
+        "{:<24} {:>8} {:>7} {:>9} {:>10} {:>8}\n",
+        "run", "PSNR dB", "SSIM", "flow EPE", "renders", "time s"
+    );
+    for (name, m) in runs {
+        s += &format!(
+            "{:<24} {:>8} {:>7} {:>9} {:>10} {:>8.1}\n",
+            name,
+            f(m.psnr_mean, 2),
+            f(m.ssim_mean, 4),
+            f(m.flow_epe, 3),
+            m.render_stage.as_deref().unwrap_or("-"),
+            m.total_stage_s
+        );
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ramp(w: usize, h: usize, c: usize, k: f32) -> Vec<f32> {
+        (0..w * h * c)
+            .map(|i| ((i * 37 % 251) as f32 * k).round().min(255.0))
+            .collect()
+    }
+
+    #[test]
+    fn psnr_known_values() {
+        let a = vec![0.0f32; 100];
+        let mut b = a.clone();
+        assert_eq!(psnr_u8(&a, &b), f64::INFINITY);
+        b.iter_mut().for_each(|x| *x = 1.0); // MSE 1 → 48.1308 dB
+        assert!((psnr_u8(&a, &b) - 48.130_803_608_679_1).abs() < 1e-9);
+        b.iter_mut().for_each(|x| *x = 255.0); // MSE 255² → 0 dB
+        assert!(psnr_u8(&a, &b).abs() < 1e-12);
+    }
+
+    #[test]
+    fn ssim_identity_symmetry_and_constant_shift() {
+        let (w, h) = (24, 20);
+        let a = ramp(w, h, 3, 1.0);
+        assert!((ssim_u8(&a, &a, w, h, 3) - 1.0).abs() < 1e-12);
+        let b = ramp(w, h, 3, 0.7);
+        let s = ssim_u8(&a, &b, w, h, 3);
+        assert!(s < 0.999 && s > -1.0);
+        assert!((s - ssim_u8(&b, &a, w, h, 3)).abs() < 1e-12);
+        // constant images differing by d: only the luminance term remains
+        let (x, y) = (vec![100.0f32; w * h], vec![110.0f32; w * h]);
+        let c1 = (0.01f64 * 255.0).powi(2);
+        let want = (2.0 * 100.0 * 110.0 + c1) / (100.0f64.powi(2) + 110.0f64.powi(2) + c1);
+        assert!((ssim_u8(&x, &y, w, h, 1) - want).abs() < 1e-9);
+    }
+
+    #[test]
+    fn ssim_matches_a_direct_window_sum() {
+        // brute force, one 11x11 window (the image is exactly 11x11)
+        let (w, h) = (11, 11);
+        let a = ramp(w, h, 1, 1.0);
+        let b = ramp(w, h, 1, 0.5);
+        let g = |i: usize| (-((i as f64 - 5.0).powi(2)) / 4.5).exp();
+        let norm: f64 = (0..11).map(g).sum::<f64>().powi(2);
+        let mut m = [0f64; 5];
+        for y in 0..h {
+            for x in 0..w {
+                let wt = g(x) * g(y) / norm;
+                let (p, q) = (a[y * w + x] as f64, b[y * w + x] as f64);
+                m[0] += wt * p;
+                m[1] += wt * q;
+                m[2] += wt * p * p;
+                m[3] += wt * q * q;
+                m[4] += wt * p * q;
+            }
+        }
+        let (c1, c2) = (6.5025, 58.5225);
+        let want = ((2.0 * m[0] * m[1] + c1) * (2.0 * (m[4] - m[0] * m[1]) + c2))
+            / ((m[0] * m[0] + m[1] * m[1] + c1) * (m[2] - m[0] * m[0] + m[3] - m[1] * m[1] + c2));
+        assert!((ssim_u8(&a, &b, w, h, 1) - want).abs() < 1e-9);
+    }
+
+    #[test]
+    fn renders_pair_by_name_then_by_order() {
+        let t: Vec<PathBuf> = ["a/test_0000.png", "a/test_0001.png"]
+            .map(PathBuf::from)
+            .into();
+        let r: Vec<PathBuf> = ["r/test_0001.png", "r/test_0000.png"]
+            .map(PathBuf::from)
+            .into();
+        let p = pair_renders(&t, &r).unwrap();
+        assert_eq!(p[0].1, PathBuf::from("r/test_0000.png"));
+        let r2: Vec<PathBuf> = ["r/0.png", "r/1.png"].map(PathBuf::from).into();
+        assert_eq!(
+            pair_renders(&t, &r2).unwrap()[1].1,
+            PathBuf::from("r/1.png")
+        );
+        assert!(pair_renders(&t, &r2[..1]).is_err());
+    }
+
+    #[test]
+    fn epe_is_found_nested() {
+        let v: serde_json::Value =
+            serde_json::from_str(r#"{"metrics": {"flow": {"EPE_px_s": 3.5}}}"#).unwrap();
+        assert_eq!(find_epe(&v), Some(3.5));
+        assert_eq!(find_epe(&serde_json::json!({"x": 1})), None);
+    }
+}

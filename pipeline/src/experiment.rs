@@ -1,0 +1,368 @@
+//! Experiment files: a scene (a directory, or a synthetic preset with its settings)
+//! and the settings of each stage.
+//!
+//! ```toml
+//! name = "rigid-baseline"          # names runs/<name>/
+//!
+//! [scene]
+//! synth = "rigid"                  # a preset of `degs synth` …
+//! # dir = "../data/shapes"         # … or a scene directory (relative to this file)
+//!
+//! [scene.settings]                 # only with `synth`: overrides of the preset
+//! width = 64
+//! camera.sway_hz = 0.5
+//!
+//! [evflow]                         # handed to the stage as its settings.toml
+//! [gaussians]
+//! [assoc]
+//! [deform]
+//! ```
+//!
+//! Unknown keys are errors that name the key and the file. The stage tables are
+//! free-form: the stage binary validates them (and fills its own defaults).
+
+use crate::canon;
+use anyhow::{Context, Result, anyhow, bail};
+use scene::synth::{PRESETS, SynthConfig};
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use toml::{Table, Value};
+
+/// The stages that take settings from the experiment, in run order.
+pub const SETTINGS_STAGES: [&str; 4] = ["evflow", "gaussians", "assoc", "deform"];
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawExperiment {
+    name: String,
+    scene: RawScene,
+    #[serde(default)]
+    evflow: Table,
+    #[serde(default)]
+    gaussians: Table,
+    #[serde(default)]
+    assoc: Table,
+    #[serde(default)]
+    deform: Table,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawScene {
+    dir: Option<PathBuf>,
+    synth: Option<String>,
+    settings: Option<Table>,
+}
+
+/// Where the scene comes from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SceneSource {
+    /// An existing scene directory (DESIGN §3 layout).
+    Dir(PathBuf),
+    /// A synthetic scene, built by the `synth` stage.
+    Synth(Box<SynthConfig>),
+}
+
+/// A resolved experiment.
+#[derive(Clone, Debug)]
+pub struct Experiment {
+    pub name: String,
+    /// The file it was read from (None when built in code, e.g. by `degs demo`).
+    pub file: Option<PathBuf>,
+    pub scene: SceneSource,
+    /// Settings of each stage of [`SETTINGS_STAGES`] (empty table when not given).
+    pub stages: BTreeMap<String, Table>,
+}
+
+impl Experiment {
+    /// Read and resolve an experiment file.
+    pub fn load(path: &Path) -> Result<Experiment> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("{}: cannot read experiment file", path.display()))?;
+        Self::parse(&text, path)
+    }
+
+    /// Parse experiment text; `path` names it in errors and anchors relative `dir`s.
+    pub fn parse(text: &str, path: &Path) -> Result<Experiment> {
+        let raw: RawExperiment =
+            toml::from_str(text).map_err(|e| anyhow!("{}: {}", path.display(), one_line(&e)))?;
+        check_name(&raw.name).map_err(|e| anyhow!("{}: {e}", path.display()))?;
+        let scene = match (raw.scene.dir, raw.scene.synth, raw.scene.settings) {
+            (Some(dir), None, None) => {
+                let base = path.parent().unwrap_or(Path::new(""));
+                SceneSource::Dir(if dir.is_absolute() {
+                    dir
+                } else {
+                    base.join(dir)
+                })
+            }
+            (None, Some(preset), settings) => {
+                let cfg = synth_config(&preset, &settings.unwrap_or_default())
+                    .map_err(|e| anyhow!("{}: [scene.settings]: {e}", path.display()))?;
+                SceneSource::Synth(Box::new(cfg))
+            }
+            (Some(_), _, _) => bail!(
+                "{}: [scene] takes either `dir` or `synth` (with optional [scene.settings]), not both",
+                path.display()
+            ),
+            (None, None, _) => bail!(
+                "{}: [scene] needs `dir = \"path\"` or `synth = \"preset\"` (presets: {})",
+                path.display(),
+                PRESETS.join(", ")
+            ),
+        };
+        let mut stages = BTreeMap::new();
+        for (name, table) in [
+            ("evflow", raw.evflow),
+            ("gaussians", raw.gaussians),
+            ("assoc", raw.assoc),
+            ("deform", raw.deform),
+        ] {
+            stages.insert(name.to_string(), canon::canonical_table(&table));
+        }
+        Ok(Experiment {
+            name: raw.name,
+            file: Some(path.to_path_buf()),
+            scene,
+            stages,
+        })
+    }
+
+    /// An experiment on a synthetic scene with default stage settings.
+    pub fn synthetic(name: &str, cfg: SynthConfig) -> Experiment {
+        let stages = SETTINGS_STAGES
+            .iter()
+            .map(|s| (s.to_string(), Table::new()))
+            .collect();
+        Experiment {
+            name: name.to_string(),
+            file: None,
+            scene: SceneSource::Synth(Box::new(cfg)),
+            stages,
+        }
+    }
+
+    /// Settings of `stage` (empty when the experiment has none).
+    pub fn settings(&self, stage: &str) -> Table {
+        self.stages.get(stage).cloned().unwrap_or_default()
+    }
+
+    /// The resolved experiment as TOML, every synthetic-scene default written out.
+    pub fn to_toml(&self) -> String {
+        let mut out = format!("name = {}\n\n[scene]\n", Value::String(self.name.clone()));
+        match &self.scene {
+            SceneSource::Dir(d) => {
+                out += &format!("dir = {}\n", Value::String(d.display().to_string()));
+            }
+            SceneSource::Synth(cfg) => {
+                out += &format!("synth = {}\n\n", Value::String(cfg.preset.clone()));
+                let mut wrap = Table::new();
+                let mut scene = Table::new();
+                let cfg_value = Value::try_from(cfg.as_ref()).unwrap_or(Value::Table(Table::new()));
+                scene.insert("settings".into(), cfg_value);
+                wrap.insert("scene".into(), Value::Table(scene));
+                out += &toml::to_string(&wrap).unwrap_or_default();
+            }
+        }
+        for stage in SETTINGS_STAGES {
+            let table = self.settings(stage);
+            out += &format!(
+                "\n# {stage}: keys not set here take the defaults of the `{stage}` binary \
+                 (its resolved settings land in the cache entry's settings.toml)\n[{stage}]\n"
+            );
+            out += &canon::to_toml(&table);
+        }
+        out
+    }
+}
+
+fn check_name(name: &str) -> std::result::Result<(), String> {
+    let ok = !name.is_empty()
+        && name.len() <= 100
+        && !name.starts_with('.')
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'));
+    if ok {
+        Ok(())
+    } else {
+        Err(format!(
+            "name {name:?} must be 1-100 characters of A-Z a-z 0-9 - _ . (it names runs/<name>/)"
+        ))
+    }
+}
+
+/// toml errors span several lines (with a caret excerpt); keep the message readable
+/// on one line.
+fn one_line(e: &toml::de::Error) -> String {
+    let msg = e.message().trim().to_string();
+    match e.span() {
+        Some(span) => format!("{msg} (at byte {})", span.start),
+        None => msg,
+    }
+}
+
+/// The preset `preset` with `overrides` merged in (nested tables merge, other values
+/// replace). Unknown keys are errors that name the key.
+pub fn synth_config(preset: &str, overrides: &Table) -> std::result::Result<SynthConfig, String> {
+    let base = SynthConfig::preset(preset).ok_or_else(|| {
+        format!(
+            "unknown synthetic preset {preset:?} (presets: {})",
+            PRESETS.join(", ")
+        )
+    })?;
+    let mut value = Value::try_from(&base).map_err(|e| e.to_string())?;
+    if let Value::Table(t) = &mut value {
+        merge(t, overrides);
+    }
+    let cfg: SynthConfig = value
+        .try_into()
+        .map_err(|e: toml::de::Error| e.message().trim().to_string())?;
+    cfg.validate()?;
+    Ok(cfg)
+}
+
+/// Merge `over` into `base`: nested tables merge, other values replace.
+pub fn merge(base: &mut Table, over: &Table) {
+    for (k, v) in over {
+        match (base.get_mut(k), v) {
+            (Some(Value::Table(b)), Value::Table(o)) => merge(b, o),
+            _ => {
+                base.insert(k.clone(), v.clone());
+            }
+        }
+    }
+}
+
+/// Parse `--set key.path=value` into a nested table. The value is read as TOML
+/// (`3`, `0.5`, `true`, `[1, 2]`, `"text"`), else taken as a bare string.
+pub fn parse_set(assignments: &[String]) -> std::result::Result<Table, String> {
+    let mut out = Table::new();
+    for a in assignments {
+        let (key, raw) = a
+            .split_once('=')
+            .ok_or_else(|| format!("--set {a:?}: expected key=value"))?;
+        let key = key.trim();
+        if key.is_empty() || key.split('.').any(str::is_empty) {
+            return Err(format!("--set {a:?}: empty key"));
+        }
+        let value = format!("v = {}", raw.trim())
+            .parse::<Table>()
+            .ok()
+            .and_then(|mut t| t.remove("v"))
+            .unwrap_or_else(|| Value::String(raw.trim().to_string()));
+        let parts: Vec<&str> = key.split('.').collect();
+        let mut nested = value;
+        for p in parts[1..].iter().rev() {
+            let mut t = Table::new();
+            t.insert(p.to_string(), nested);
+            nested = Value::Table(t);
+        }
+        let mut one = Table::new();
+        one.insert(parts[0].to_string(), nested);
+        merge(&mut out, &one);
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<Experiment> {
+        Experiment::parse(text, Path::new("/exp/a.toml"))
+    }
+
+    #[test]
+    fn synthetic_scene_with_overrides() {
+        let e = parse(
+            "name = \"a\"\n[scene]\nsynth = \"rigid\"\n[scene.settings]\nwidth = 64\n\
+             [gaussians]\niters = 10\n",
+        )
+        .unwrap();
+        let SceneSource::Synth(cfg) = &e.scene else {
+            panic!("expected a synthetic scene")
+        };
+        assert_eq!((cfg.width, cfg.height), (64, 128));
+        assert_eq!(
+            e.settings("gaussians").get("iters"),
+            Some(&Value::Integer(10))
+        );
+        assert!(e.settings("evflow").is_empty());
+    }
+
+    #[test]
+    fn relative_dir_is_anchored_at_the_file() {
+        let e = parse("name = \"a\"\n[scene]\ndir = \"scenes/x\"\n").unwrap();
+        assert_eq!(e.scene, SceneSource::Dir(PathBuf::from("/exp/scenes/x")));
+    }
+
+    #[test]
+    fn unknown_keys_name_the_key_and_file() {
+        for (text, key) in [
+            (
+                "name = \"a\"\nbogus = 1\n[scene]\nsynth = \"rigid\"\n",
+                "bogus",
+            ),
+            ("name = \"a\"\n[scene]\nsynth = \"rigid\"\nwat = 2\n", "wat"),
+            (
+                "name = \"a\"\n[scene]\nsynth = \"rigid\"\n[scene.settings]\nwidht = 3\n",
+                "widht",
+            ),
+            (
+                "name = \"a\"\n[scene]\nsynth = \"rigid\"\n[deformm]\n",
+                "deformm",
+            ),
+        ] {
+            let msg = parse(text).unwrap_err().to_string();
+            assert!(msg.contains(key), "{msg}");
+            assert!(msg.contains("/exp/a.toml"), "{msg}");
+        }
+    }
+
+    #[test]
+    fn bad_scene_specs_are_errors() {
+        assert!(parse("name = \"a\"\n[scene]\n").is_err());
+        assert!(parse("name = \"a\"\n[scene]\ndir = \"x\"\nsynth = \"rigid\"\n").is_err());
+        let msg = parse("name = \"a\"\n[scene]\nsynth = \"nope\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(msg.contains("nope") && msg.contains("rigid"), "{msg}");
+        assert!(parse("name = \"../x\"\n[scene]\nsynth = \"rigid\"\n").is_err());
+        assert!(parse("").is_err());
+        assert!(parse("name = ").is_err());
+        assert!(parse("\u{0}\u{1}garbage").is_err());
+    }
+
+    #[test]
+    fn config_show_round_trips() {
+        let e = parse(
+            "name = \"a\"\n[scene]\nsynth = \"fast\"\n[scene.settings]\nseed = 7\n[deform]\nlr = 0.01\n",
+        )
+        .unwrap();
+        let again = parse(&e.to_toml()).unwrap();
+        assert_eq!(again.scene, e.scene);
+        assert_eq!(again.stages, e.stages);
+    }
+
+    #[test]
+    fn set_assignments_nest_and_type() {
+        let t = parse_set(&[
+            "width=64".into(),
+            "camera.sway_hz=0.5".into(),
+            "preset=x".into(),
+        ])
+        .unwrap();
+        assert_eq!(t.get("width"), Some(&Value::Integer(64)));
+        assert_eq!(
+            t["camera"].as_table().unwrap().get("sway_hz"),
+            Some(&Value::Float(0.5))
+        );
+        assert_eq!(t.get("preset"), Some(&Value::String("x".into())));
+        assert!(parse_set(&["novalue".into()]).is_err());
+        let cfg = synth_config("rigid", &t).unwrap();
+        assert_eq!(cfg.camera.sway_hz, 0.5);
+        assert!(synth_config("rigid", &parse_set(&["nosuch=1".into()]).unwrap()).is_err());
+    }
+}

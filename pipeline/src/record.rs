@@ -1,0 +1,110 @@
+//! `runs/<name>/run.json`: what a run did, stage by stage.
+
+use anyhow::{Context, Result};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// What happened to a stage in a run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Action {
+    /// Its entry was already in the cache: nothing ran.
+    Cached,
+    /// It ran and its entry was sealed.
+    Ran,
+    /// Its entry failed verification (tampered) and it ran again.
+    Rebuilt,
+    /// It ran and failed.
+    Failed,
+    /// Not run because an input failed or is unavailable.
+    Skipped,
+    /// No binary for it.
+    Unavailable,
+    /// Excluded by `--until`.
+    NotRequested,
+    /// The run was interrupted before this stage finished.
+    Pending,
+}
+
+impl Action {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Action::Cached => "cached",
+            Action::Ran => "ran",
+            Action::Rebuilt => "rebuilt",
+            Action::Failed => "failed",
+            Action::Skipped => "skipped",
+            Action::Unavailable => "unavailable",
+            Action::NotRequested => "not-requested",
+            Action::Pending => "pending",
+        }
+    }
+    /// The stage's output exists after the run.
+    pub fn has_output(self) -> bool {
+        matches!(self, Action::Cached | Action::Ran | Action::Rebuilt)
+    }
+}
+
+/// One stage of a run.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct StageRecord {
+    pub stage: String,
+    pub action: Action,
+    pub key: Option<String>,
+    pub binary: Option<PathBuf>,
+    pub binary_hash: Option<String>,
+    /// Canonical settings the key was computed from.
+    pub settings: serde_json::Value,
+    /// Input flag → key of the input.
+    pub inputs: BTreeMap<String, String>,
+    /// The cache entry (or scene directory) holding its outputs.
+    pub entry: Option<PathBuf>,
+    /// Wall time of this run's execution (0 when cached).
+    pub wall_s: f64,
+    /// Wall time of the run that built the entry.
+    pub built_wall_s: Option<f64>,
+    /// Peak resident memory of the stage process (KiB).
+    pub peak_rss_kib: Option<u64>,
+    pub exit_status: Option<i32>,
+    /// Last line of the stage's error output when it failed; why it was skipped.
+    pub error: Option<String>,
+    pub log: Option<PathBuf>,
+}
+
+/// A whole run.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct RunRecord {
+    pub experiment: String,
+    pub experiment_file: Option<PathBuf>,
+    pub cache_root: PathBuf,
+    /// "running", "ok" or "failed".
+    pub status: String,
+    pub started_unix: u64,
+    pub wall_s: f64,
+    pub jobs: usize,
+    pub stages: Vec<StageRecord>,
+}
+
+impl RunRecord {
+    pub fn read(path: &Path) -> Result<RunRecord> {
+        let bytes =
+            std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+        serde_json::from_slice(&bytes)
+            .with_context(|| format!("{}: not a degs run record", path.display()))
+    }
+    pub fn write(&self, path: &Path) -> Result<()> {
+        scene::atomic::write_json_atomic(path, self)?;
+        Ok(())
+    }
+    pub fn stage(&self, name: &str) -> Option<&StageRecord> {
+        self.stages.iter().find(|s| s.stage == name)
+    }
+}
+
+pub fn now_unix() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs())
+        .unwrap_or(0)
+}

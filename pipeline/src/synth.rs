@@ -1,0 +1,45 @@
+//! `degs synth`: write a synthetic scene directory (the built-in first stage).
+
+use crate::experiment::{merge, parse_set, synth_config};
+use anyhow::{Context, Result, anyhow};
+use scene::synth::SynthConfig;
+use std::path::Path;
+
+/// The config of `degs synth`: a full config file (TOML, as written by `degs run` /
+/// `degs plan`), or a preset, with `--set key=value` overrides either way.
+pub fn load_config(
+    config: Option<&Path>,
+    preset: Option<&str>,
+    set: &[String],
+) -> Result<SynthConfig> {
+    let overrides = parse_set(set).map_err(|e| anyhow!(e))?;
+    match config {
+        Some(path) => {
+            let text = std::fs::read_to_string(path).with_context(|| {
+                format!("{}: cannot read synthetic scene settings", path.display())
+            })?;
+            let mut table: toml::Table = text.parse().map_err(|e: toml::de::Error| {
+                anyhow!("{}: {}", path.display(), e.message().trim())
+            })?;
+            merge(&mut table, &overrides);
+            let cfg: SynthConfig =
+                toml::Value::Table(table)
+                    .try_into()
+                    .map_err(|e: toml::de::Error| {
+                        anyhow!("{}: {}", path.display(), e.message().trim())
+                    })?;
+            cfg.validate()
+                .map_err(|e| anyhow!("{}: {e}", path.display()))?;
+            Ok(cfg)
+        }
+        None => {
+            let preset = preset.unwrap_or("rigid");
+            synth_config(preset, &overrides).map_err(|e| anyhow!(e))
+        }
+    }
+}
+
+/// Write the scene of `cfg` to `out` (atomically; an existing directory is replaced).
+pub fn write_scene(cfg: &SynthConfig, out: &Path) -> Result<evflow::synthesize::Summary> {
+    Ok(evflow::synthesize::write_synthetic_scene(cfg, out)?)
+}

@@ -1,0 +1,191 @@
+//! Fake stage binaries and a scratch cache for runner tests.
+#![allow(dead_code)]
+
+use std::fs;
+use std::os::unix::fs::PermissionsExt;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// A shell script that behaves like a stage: checks its inputs, records its
+/// invocation in $DEGS_FAKE_LOG, honours `fail = true` and sleeps when
+/// $DEGS_FAKE_SLEEP names it, and writes a few output files.
+pub const FAKE_STAGE: &str = r#"#!/bin/sh
+stage=$(basename "$0")
+all="$*"
+out=; config=
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --out) out="$2"; shift 2 ;;
+    --config) config="$2"; shift 2 ;;
+    --scene|--model|--flows|--assoc)
+      [ -d "$2" ] || { echo "error: $1 $2: not a directory" >&2; exit 2; }
+      shift 2 ;;
+    *) echo "error: unknown argument $1" >&2; exit 2 ;;
+  esac
+done
+[ -n "$out" ] && [ -f "$config" ] || { echo "error: need --out and --config" >&2; exit 2; }
+echo "start $stage $(date +%s%N) $all" >> "$DEGS_FAKE_LOG"
+echo "$stage: reading $config" >&2
+if grep -q '^fail = true' "$config"; then
+  echo "progress line before the failure" >&2
+  echo "error: $config: fail = true was asked for" >&2
+  exit 3
+fi
+mkdir -p "$out/renders"
+if [ "$DEGS_FAKE_SLEEP" = "$stage" ]; then
+  echo partial > "$out/partial.txt"
+  sleep 30
+fi
+if [ -n "$DEGS_FAKE_PAUSE" ]; then sleep "$DEGS_FAKE_PAUSE"; fi
+cp "$config" "$out/settings.toml"
+echo "$stage output" > "$out/result.txt"
+printf '{"stage": "%s"}\n' "$stage" > "$out/report.json"
+echo "end $stage $(date +%s%N)" >> "$DEGS_FAKE_LOG"
+"#;
+
+pub struct Fixture {
+    pub dir: tempfile::TempDir,
+    pub stages: PathBuf,
+    pub cache: PathBuf,
+    pub scene: PathBuf,
+    pub log: PathBuf,
+}
+
+impl Fixture {
+    /// Fake binaries for every external stage and a scene directory.
+    pub fn new() -> Fixture {
+        let dir = tempfile::tempdir().unwrap();
+        let stages = dir.path().join("bin");
+        fs::create_dir_all(&stages).unwrap();
+        for s in ["evflow", "gaussians", "assoc", "deform"] {
+            let p = stages.join(s);
+            fs::write(&p, FAKE_STAGE).unwrap();
+            fs::set_permissions(&p, fs::Permissions::from_mode(0o755)).unwrap();
+        }
+        let scene = dir.path().join("scene");
+        fs::create_dir_all(&scene).unwrap();
+        fs::write(scene.join("transforms_train.json"), "{}").unwrap();
+        Fixture {
+            cache: dir.path().join("cache-root"),
+            log: dir.path().join("invocations.log"),
+            stages,
+            scene,
+            dir,
+        }
+    }
+
+    /// Write an experiment on the fixture's scene; `body` holds the stage tables.
+    pub fn experiment(&self, name: &str, body: &str) -> PathBuf {
+        let p = self.dir.path().join(format!("{name}.toml"));
+        let text = format!(
+            "name = \"{name}\"\n[scene]\ndir = \"{}\"\n{body}",
+            self.scene.display()
+        );
+        fs::write(&p, text).unwrap();
+        p
+    }
+
+    pub fn command(&self, args: &[&str]) -> Command {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_degs"));
+        c.args(args)
+            .arg("--cache")
+            .arg(&self.cache)
+            .arg("--stages")
+            .arg(&self.stages)
+            .env("DEGS_FAKE_LOG", &self.log)
+            .env_remove("DEGS_FAKE_SLEEP")
+            .env_remove("DEGS_FAKE_PAUSE");
+        c
+    }
+
+    pub fn degs(&self, args: &[&str]) -> Output {
+        self.command(args).output().unwrap()
+    }
+
+    /// `degs run EXP`, asserting success.
+    pub fn run_ok(&self, exp: &Path, extra: &[&str]) {
+        let mut args = vec!["run", exp.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        let out = self.degs(&args);
+        assert!(
+            out.status.success(),
+            "degs run failed: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+
+    pub fn record(&self, name: &str) -> serde_json::Value {
+        let p = self.cache.join("runs").join(name).join("run.json");
+        serde_json::from_slice(&fs::read(&p).unwrap()).unwrap()
+    }
+
+    /// (stage, action) of the last run of `name`.
+    pub fn actions(&self, name: &str) -> Vec<(String, String)> {
+        self.record(name)["stages"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|s| {
+                (
+                    s["stage"].as_str().unwrap().to_string(),
+                    s["action"].as_str().unwrap().to_string(),
+                )
+            })
+            .collect()
+    }
+
+    pub fn action(&self, name: &str, stage: &str) -> String {
+        self.actions(name)
+            .into_iter()
+            .find(|(s, _)| s == stage)
+            .map(|(_, a)| a)
+            .unwrap()
+    }
+
+    pub fn key(&self, name: &str, stage: &str) -> String {
+        let r = self.record(name);
+        let s = r["stages"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|s| s["stage"] == stage)
+            .unwrap();
+        s["key"].as_str().unwrap().to_string()
+    }
+
+    /// Stage names in the order they were started.
+    pub fn started(&self) -> Vec<String> {
+        fs::read_to_string(&self.log)
+            .unwrap_or_default()
+            .lines()
+            .filter(|l| l.starts_with("start "))
+            .map(|l| l.split(' ').nth(1).unwrap().to_string())
+            .collect()
+    }
+
+    /// Every path under the cache root whose name contains `.tmp-`.
+    pub fn temp_paths(&self) -> Vec<PathBuf> {
+        fn walk(d: &Path, out: &mut Vec<PathBuf>) {
+            for e in fs::read_dir(d).into_iter().flatten().flatten() {
+                let p = e.path();
+                if e.file_name().to_string_lossy().contains(".tmp-") {
+                    out.push(p.clone());
+                }
+                if p.is_dir() {
+                    walk(&p, out);
+                }
+            }
+        }
+        let mut out = Vec::new();
+        walk(&self.cache, &mut out);
+        out
+    }
+}
+
+pub fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).to_string()
+}
+
+pub fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).to_string()
+}

@@ -1,0 +1,357 @@
+//! The runner and its cache, driven through the `degs` binary with fake stages.
+
+mod common;
+use common::{Fixture, stderr, stdout};
+use std::fs;
+use std::time::{Duration, Instant};
+
+const ALL_RAN: [(&str, &str); 5] = [
+    ("scene", "cached"),
+    ("evflow", "ran"),
+    ("gaussians", "ran"),
+    ("assoc", "ran"),
+    ("deform", "ran"),
+];
+
+fn pairs(v: &[(&str, &str)]) -> Vec<(String, String)> {
+    v.iter()
+        .map(|(a, b)| (a.to_string(), b.to_string()))
+        .collect()
+}
+
+#[test]
+fn second_run_runs_no_stage() {
+    let f = Fixture::new();
+    let exp = f.experiment("a", "[gaussians]\niters = 10\n");
+    f.run_ok(&exp, &[]);
+    assert_eq!(f.actions("a"), pairs(&ALL_RAN));
+    assert_eq!(f.started(), ["evflow", "gaussians", "assoc", "deform"]);
+    let first = f.record("a");
+
+    f.run_ok(&exp, &[]);
+    let all_cached: Vec<_> = ALL_RAN.iter().map(|(s, _)| (*s, "cached")).collect();
+    assert_eq!(f.actions("a"), pairs(&all_cached));
+    assert_eq!(
+        f.started().len(),
+        4,
+        "no stage process started the second time"
+    );
+    let second = f.record("a");
+    for i in 0..5 {
+        assert_eq!(first["stages"][i]["key"], second["stages"][i]["key"]);
+    }
+    // the record carries what the entry cost when it was built
+    assert!(second["stages"][2]["built_wall_s"].as_f64().unwrap() > 0.0);
+    assert!(second["stages"][2]["peak_rss_kib"].as_u64().unwrap() > 0);
+    // the stage got the canonical settings and wrote into its entry
+    let entry = first["stages"][2]["entry"].as_str().unwrap();
+    let settings = fs::read_to_string(format!("{entry}/settings.toml")).unwrap();
+    assert_eq!(settings.trim(), "iters = 10");
+    assert!(fs::metadata(format!("{entry}/.degs-entry.json")).is_ok());
+    assert!(f.temp_paths().is_empty());
+}
+
+#[test]
+fn changing_a_gaussians_setting_reruns_it_and_its_dependents_only() {
+    let f = Fixture::new();
+    let exp = f.experiment("a", "[evflow]\nbins = 5\n[gaussians]\niters = 10\n");
+    f.run_ok(&exp, &[]);
+    let evflow_key = f.key("a", "evflow");
+    let gaussians_key = f.key("a", "gaussians");
+
+    let exp = f.experiment("a", "[evflow]\nbins = 5\n[gaussians]\niters = 20\n");
+    let st = stdout(&f.degs(&["status", exp.to_str().unwrap()]));
+    let line = |s: &str| st.lines().find(|l| l.starts_with(s)).unwrap().to_string();
+    assert!(line("evflow").contains("cached"), "{st}");
+    assert!(line("gaussians").contains("stale"), "{st}");
+    assert!(
+        line("gaussians").contains("setting iters changed 10 → 20"),
+        "{st}"
+    );
+    assert!(line("assoc").contains("input gaussians changed"), "{st}");
+    assert!(line("deform").contains("stale"), "{st}");
+
+    f.run_ok(&exp, &[]);
+    assert_eq!(
+        f.actions("a"),
+        pairs(&[
+            ("scene", "cached"),
+            ("evflow", "cached"),
+            ("gaussians", "ran"),
+            ("assoc", "ran"),
+            ("deform", "ran"),
+        ])
+    );
+    assert_eq!(f.key("a", "evflow"), evflow_key);
+    assert_ne!(f.key("a", "gaussians"), gaussians_key);
+    // key order and number spelling do not matter
+    let exp = f.experiment("a", "[gaussians]\niters = 20\n[evflow]\nbins = 5\n");
+    f.run_ok(&exp, &[]);
+    assert!(f.actions("a").iter().all(|(_, a)| a == "cached"));
+}
+
+#[test]
+fn experiments_with_the_same_flow_settings_share_one_evflow_entry() {
+    let f = Fixture::new();
+    let a = f.experiment("a", "[evflow]\nlr = 1e-4\n[gaussians]\niters = 10\n");
+    let b = f.experiment("b", "[evflow]\nlr = 0.0001\n[gaussians]\niters = 99\n");
+    f.run_ok(&a, &[]);
+    f.run_ok(&b, &[]);
+    assert_eq!(f.action("b", "evflow"), "cached");
+    assert_eq!(f.action("b", "gaussians"), "ran");
+    assert_eq!(f.key("a", "evflow"), f.key("b", "evflow"));
+    let evflow_entries = fs::read_dir(f.cache.join("cache/evflow")).unwrap().count();
+    assert_eq!(evflow_entries, 1);
+    assert_eq!(f.started().iter().filter(|s| *s == "evflow").count(), 1);
+}
+
+#[test]
+fn sigkill_during_a_stage_then_rerun_resumes_cleanly() {
+    let f = Fixture::new();
+    let exp = f.experiment("a", "");
+    let mut child = f
+        .command(&["run", exp.to_str().unwrap(), "--quiet"])
+        .env("DEGS_FAKE_SLEEP", "gaussians")
+        .spawn()
+        .unwrap();
+    let tmp_dir = f.cache.join("cache/gaussians");
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        let partial = fs::read_dir(&tmp_dir)
+            .into_iter()
+            .flatten()
+            .flatten()
+            .any(|e| e.path().join("partial.txt").exists());
+        if partial {
+            break;
+        }
+        assert!(Instant::now() < deadline, "gaussians never started");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.kill().unwrap(); // SIGKILL
+    child.wait().unwrap();
+    assert!(
+        !f.temp_paths().is_empty(),
+        "the interrupted stage left its temp dir"
+    );
+    assert_eq!(f.action("a", "gaussians"), "pending");
+
+    f.run_ok(&exp, &[]);
+    assert_eq!(
+        f.actions("a"),
+        pairs(&[
+            ("scene", "cached"),
+            ("evflow", "cached"),
+            ("gaussians", "ran"),
+            ("assoc", "ran"),
+            ("deform", "ran"),
+        ])
+    );
+    assert!(f.temp_paths().is_empty(), "{:?}", f.temp_paths());
+    let entry = f.record("a")["stages"][2]["entry"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    assert_eq!(
+        fs::read_to_string(format!("{entry}/result.txt")).unwrap(),
+        "gaussians output\n"
+    );
+}
+
+#[test]
+fn a_tampered_entry_is_detected_and_rebuilt() {
+    let f = Fixture::new();
+    let exp = f.experiment("a", "");
+    f.run_ok(&exp, &[]);
+    let entry = f.record("a")["stages"][2]["entry"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let file = format!("{entry}/result.txt");
+    fs::write(&file, "gaussians outpuT\n").unwrap();
+
+    let st = stdout(&f.degs(&["status", exp.to_str().unwrap()]));
+    let line = st.lines().find(|l| l.starts_with("gaussians")).unwrap();
+    assert!(
+        line.contains("tampered") && line.contains("result.txt"),
+        "{st}"
+    );
+    assert!(line.contains("blake3 mismatch"), "{st}");
+
+    f.run_ok(&exp, &[]);
+    assert_eq!(f.action("a", "gaussians"), "rebuilt");
+    assert_eq!(f.action("a", "assoc"), "cached");
+    assert_eq!(fs::read_to_string(&file).unwrap(), "gaussians output\n");
+    let st = stdout(&f.degs(&["status", exp.to_str().unwrap()]));
+    assert_eq!(
+        st.lines().filter(|l| l.contains(" cached ")).count(),
+        4,
+        "{st}"
+    );
+    assert!(f.temp_paths().is_empty());
+}
+
+#[test]
+fn a_failing_stage_leaves_its_error_in_the_log_and_in_status() {
+    let f = Fixture::new();
+    let exp = f.experiment("a", "[gaussians]\nfail = true\n");
+    let out = f.degs(&["run", exp.to_str().unwrap()]);
+    assert!(!out.status.success());
+    let err = stderr(&out);
+    let last = err.lines().last().unwrap();
+    assert!(last.starts_with("degs: stage gaussians failed"), "{err}");
+    assert!(last.contains("fail = true was asked for"), "{err}");
+    assert_eq!(
+        f.actions("a"),
+        pairs(&[
+            ("scene", "cached"),
+            ("evflow", "ran"),
+            ("gaussians", "failed"),
+            ("assoc", "skipped"),
+            ("deform", "skipped"),
+        ])
+    );
+    let rec = f.record("a");
+    assert_eq!(rec["status"], "failed");
+    assert_eq!(rec["stages"][2]["exit_status"], 3);
+    let log = fs::read_to_string(f.cache.join("runs/a/gaussians.log")).unwrap();
+    assert!(log.contains("exit status: 3"), "{log}");
+    assert!(log.contains("progress line before the failure"), "{log}");
+    assert!(log.contains("fail = true was asked for"), "{log}");
+    let st = stdout(&f.degs(&["status", exp.to_str().unwrap()]));
+    let line = st.lines().find(|l| l.starts_with("gaussians")).unwrap();
+    assert!(
+        line.contains("failed") && line.contains("fail = true was asked for"),
+        "{st}"
+    );
+    assert!(line.contains("gaussians.log"), "{st}");
+    assert!(f.temp_paths().is_empty());
+    assert!(
+        !f.cache
+            .join("cache/gaussians")
+            .read_dir()
+            .unwrap()
+            .any(|_| true)
+    );
+}
+
+#[test]
+fn unknown_experiment_key_is_an_error_naming_it() {
+    let f = Fixture::new();
+    let exp = f.experiment("a", "[gaussians]\niters = 1\n[deform_typo]\nx = 1\n");
+    let out = f.degs(&["run", exp.to_str().unwrap()]);
+    assert!(!out.status.success());
+    let err = stderr(&out);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(
+        err.contains("deform_typo") && err.contains("a.toml"),
+        "{err}"
+    );
+    assert!(!f.cache.join("runs").exists());
+}
+
+#[test]
+fn until_and_force_behave_like_make() {
+    let f = Fixture::new();
+    let exp = f.experiment("a", "");
+    f.run_ok(&exp, &["--until", "gaussians"]);
+    assert_eq!(
+        f.actions("a"),
+        pairs(&[
+            ("scene", "cached"),
+            ("evflow", "not-requested"),
+            ("gaussians", "ran"),
+            ("assoc", "not-requested"),
+            ("deform", "not-requested"),
+        ])
+    );
+    f.run_ok(&exp, &[]);
+    assert_eq!(f.action("a", "gaussians"), "cached");
+    f.run_ok(&exp, &["--force", "evflow"]);
+    assert_eq!(
+        f.actions("a"),
+        pairs(&[
+            ("scene", "cached"),
+            ("evflow", "ran"),
+            ("gaussians", "cached"),
+            ("assoc", "cached"),
+            ("deform", "ran"),
+        ])
+    );
+    let out = f.degs(&["run", exp.to_str().unwrap(), "--until", "nosuch"]);
+    assert!(stderr(&out).contains("unknown stage \"nosuch\""));
+}
+
+#[test]
+fn independent_stages_run_in_parallel_with_j2() {
+    let f = Fixture::new();
+    let exp = f.experiment("a", "");
+    let out = f
+        .command(&["run", exp.to_str().unwrap(), "-j", "2"])
+        .env("DEGS_FAKE_PAUSE", "1")
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    let log = fs::read_to_string(&f.log).unwrap();
+    let time = |kind: &str, stage: &str| -> u128 {
+        log.lines()
+            .find(|l| l.starts_with(&format!("{kind} {stage} ")))
+            .unwrap()
+            .split(' ')
+            .nth(2)
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    // evflow and gaussians overlap; assoc starts after gaussians ended
+    assert!(time("start", "evflow") < time("end", "gaussians"));
+    assert!(time("start", "gaussians") < time("end", "evflow"));
+    assert!(time("start", "assoc") >= time("end", "gaussians"));
+    assert!(time("start", "deform") >= time("end", "evflow"));
+}
+
+#[test]
+fn missing_stage_binaries_are_reported_not_fatal() {
+    let f = Fixture::new();
+    fs::remove_file(f.stages.join("assoc")).unwrap();
+    let exp = f.experiment("a", "");
+    f.run_ok(&exp, &[]);
+    assert_eq!(
+        f.actions("a"),
+        pairs(&[
+            ("scene", "cached"),
+            ("evflow", "ran"),
+            ("gaussians", "ran"),
+            ("assoc", "unavailable"),
+            ("deform", "skipped"),
+        ])
+    );
+    let st = stdout(&f.degs(&["status", exp.to_str().unwrap()]));
+    assert!(st.contains("not available yet"), "{st}");
+    assert!(
+        st.lines()
+            .any(|l| l.starts_with("deform") && l.contains("needs assoc")),
+        "{st}"
+    );
+}
+
+#[test]
+fn a_rebuilt_stage_binary_invalidates_exactly_its_stage_and_dependents() {
+    let f = Fixture::new();
+    let exp = f.experiment("a", "");
+    f.run_ok(&exp, &[]);
+    let p = f.stages.join("assoc");
+    let mut script = fs::read_to_string(&p).unwrap();
+    script.push_str("# v2\n");
+    fs::write(&p, script).unwrap();
+    let st = stdout(&f.degs(&["status", exp.to_str().unwrap()]));
+    assert!(st.contains("assoc binary changed"), "{st}");
+    f.run_ok(&exp, &[]);
+    let ran: Vec<String> = f
+        .actions("a")
+        .into_iter()
+        .filter(|(_, a)| a == "ran")
+        .map(|(s, _)| s)
+        .collect();
+    assert_eq!(ran, ["assoc", "deform"]);
+}

@@ -1,0 +1,536 @@
+//! Settings of a synthetic scene (serde, every field defaulted) and the presets.
+
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+
+/// Names accepted by [`SynthConfig::preset`].
+pub const PRESETS: &[&str] = &["static", "rigid", "nonrigid", "fast"];
+
+/// Everything that defines a synthetic recording: sensor, timing, event simulation,
+/// noise, the camera path and the objects.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SynthConfig {
+    /// Name of the preset this config started from (informative).
+    pub preset: String,
+    pub width: u32,
+    pub height: u32,
+    /// Horizontal field of view in degrees (square pixels, centred principal point).
+    pub fov_x_deg: f64,
+    /// Length of the recording in seconds; train frames at `k / train_fps` in `[0, duration]`.
+    pub duration: f64,
+    /// Rate of the sparse RGB (APS) training frames.
+    pub train_fps: f64,
+    /// Number of held-out test frames, at `(k + ½)·duration / test_frames`.
+    pub test_frames: usize,
+    /// Internal render rate for the event simulator, Hz.
+    pub render_rate_hz: f64,
+    /// Sub-frames averaged into each training frame (1 = sharp).
+    pub blur_subframes: usize,
+    /// Exposure time of a blurred training frame, seconds (centred on the frame time).
+    pub exposure_s: f64,
+    /// `n×n` samples per pixel for the colour (depth, flow and ids use the pixel centre).
+    pub supersample: u32,
+    /// Nominal contrast threshold C (both polarities), log units.
+    pub contrast_threshold: f64,
+    /// Per-pixel threshold mismatch σ.
+    pub threshold_sigma: f64,
+    /// Refractory period of the simulated pixels, seconds.
+    pub refractory_s: f64,
+    /// Shot-noise rate per pixel, Hz.
+    pub shot_noise_hz: f64,
+    /// Fraction of hot pixels.
+    pub hot_pixel_fraction: f64,
+    /// Rate of a hot pixel, Hz.
+    pub hot_pixel_hz: f64,
+    /// Seed of the event simulator (noise, threshold mismatch).
+    pub seed: u64,
+    /// Linear RGB of rays that hit nothing.
+    pub background: [f64; 3],
+    pub camera: CameraPath,
+    /// Objects; object id `k + 1` is `objects[k]` (0 is the background).
+    pub objects: Vec<ObjectSpec>,
+}
+
+/// A smooth camera path. Position `eye + sway ⊙ sin(2π·sway_hz·t + φ)` with phases
+/// `φ = (0, π/2, π/4)`; orientation `R_y(ψ(t))·R_x(θ(t))·R₀` where `R₀` looks from
+/// `eye` at `target`, `ψ = yaw·sin(2π·turn_hz·t)`, `θ = pitch·sin(2π·turn_hz·t + π/3)`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CameraPath {
+    pub eye: DVec3,
+    pub target: DVec3,
+    pub sway: DVec3,
+    pub sway_hz: f64,
+    pub yaw_deg: f64,
+    pub pitch_deg: f64,
+    pub turn_hz: f64,
+}
+
+impl Default for CameraPath {
+    fn default() -> Self {
+        CameraPath {
+            eye: DVec3::new(0.0, 0.6, 3.2),
+            target: DVec3::new(0.0, 0.1, 0.0),
+            sway: DVec3::new(0.4, 0.1, 0.2),
+            sway_hz: 0.5,
+            yaw_deg: 4.0,
+            pitch_deg: 2.0,
+            turn_hz: 0.7,
+        }
+    }
+}
+
+/// The surface of an object in its material (local, undeformed) coordinates `q`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Shape {
+    /// The plane `q.z = 0`, facing `+z`; a rectangle `|q.x| ≤ half_size[0]`,
+    /// `|q.y| ≤ half_size[1]`, infinite where a half size is ≤ 0.
+    Plane { half_size: [f64; 2] },
+    /// An axis-aligned box `|q_i| ≤ half_size_i`.
+    Cuboid { half_size: DVec3 },
+    /// `Σ (q_i / radii_i)² = 1` (a sphere when the radii are equal).
+    Ellipsoid { radii: DVec3 },
+}
+
+/// Procedural texture patterns; all have sharp edges between `colour_a` and `colour_b`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Pattern {
+    /// 3-D checkerboard of cubes of side `cell`.
+    Checker,
+    /// Oblique stripes of width `cell` (so both flow components show).
+    Stripes,
+    /// Thresholded 3-D value noise with feature size `cell`.
+    Blobs,
+}
+
+/// A solid texture evaluated at the material point, so it moves and deforms with the
+/// surface.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Texture {
+    pub pattern: Pattern,
+    /// Feature size in scene units.
+    pub cell: f64,
+    pub colour_a: [f64; 3],
+    pub colour_b: [f64; 3],
+    /// Amplitude of a smooth multiplicative value-noise detail (0 = flat colours).
+    pub detail: f64,
+    pub seed: u32,
+}
+
+impl Default for Texture {
+    fn default() -> Self {
+        Texture {
+            pattern: Pattern::Checker,
+            cell: 0.2,
+            colour_a: [0.8, 0.8, 0.75],
+            colour_b: [0.1, 0.15, 0.3],
+            detail: 0.2,
+            seed: 1,
+        }
+    }
+}
+
+/// Rigid motion `X = c(t) + R(t)·(S(t)·q)`:
+/// `c(t) = position + velocity·t + oscillation ⊙ sin(2π·oscillation_hz·t)`,
+/// `R(t) = rot(spin_axis, spin_deg_per_s·t)·R₀`, `R₀` from `rotation_deg` (XYZ Euler).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Motion {
+    pub position: DVec3,
+    pub rotation_deg: DVec3,
+    pub velocity: DVec3,
+    pub oscillation: DVec3,
+    pub oscillation_hz: f64,
+    pub spin_axis: DVec3,
+    pub spin_deg_per_s: f64,
+}
+
+impl Default for Motion {
+    fn default() -> Self {
+        Motion {
+            position: DVec3::ZERO,
+            rotation_deg: DVec3::ZERO,
+            velocity: DVec3::ZERO,
+            oscillation: DVec3::ZERO,
+            oscillation_hz: 0.0,
+            spin_axis: DVec3::Y,
+            spin_deg_per_s: 0.0,
+        }
+    }
+}
+
+/// Non-rigid deformations (zero = rigid):
+/// - non-uniform pulsing scale `S(t) = diag(1 + a_i·sin(2π·hz·t + 2πi/3))` applied in
+///   material coordinates, so the surface and its texture stretch differently along
+///   each axis (any shape);
+/// - a travelling wave along the normal of a plane (a waving flag): the material point
+///   `(x, y, 0)` moves to `(x, y, h)` with
+///   `h(x, y, t) = wave_amplitude·sin(2π(x/wave_length − wave_hz·t))·cos(π·y/wave_length)`
+///   (planes only).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Deform {
+    pub scale_amplitude: DVec3,
+    pub hz: f64,
+    pub wave_amplitude: f64,
+    pub wave_length: f64,
+    pub wave_hz: f64,
+}
+
+/// One object of the scene.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ObjectSpec {
+    pub name: String,
+    pub shape: Shape,
+    #[serde(default)]
+    pub texture: Texture,
+    #[serde(default)]
+    pub motion: Motion,
+    #[serde(default)]
+    pub deform: Deform,
+}
+
+impl Default for SynthConfig {
+    fn default() -> Self {
+        Self::preset("rigid").expect("the rigid preset exists")
+    }
+}
+
+fn rgb(r: f64, g: f64, b: f64) -> [f64; 3] {
+    [r, g, b]
+}
+
+/// The room every preset shares: a checkered floor and a blob-textured back wall.
+fn room() -> Vec<ObjectSpec> {
+    vec![
+        ObjectSpec {
+            name: "floor".into(),
+            shape: Shape::Plane {
+                half_size: [6.0, 6.0],
+            },
+            texture: Texture {
+                pattern: Pattern::Checker,
+                cell: 0.3,
+                colour_a: rgb(0.85, 0.82, 0.75),
+                colour_b: rgb(0.12, 0.16, 0.25),
+                detail: 0.15,
+                seed: 11,
+            },
+            motion: Motion {
+                position: DVec3::new(0.0, -0.6, 0.0),
+                rotation_deg: DVec3::new(-90.0, 0.0, 0.0),
+                ..Motion::default()
+            },
+            deform: Deform::default(),
+        },
+        ObjectSpec {
+            name: "wall".into(),
+            shape: Shape::Plane {
+                half_size: [0.0, 0.0],
+            },
+            texture: Texture {
+                pattern: Pattern::Blobs,
+                cell: 0.35,
+                colour_a: rgb(0.9, 0.55, 0.25),
+                colour_b: rgb(0.08, 0.12, 0.3),
+                detail: 0.25,
+                seed: 12,
+            },
+            motion: Motion {
+                position: DVec3::new(0.0, 0.0, -3.0),
+                ..Motion::default()
+            },
+            deform: Deform::default(),
+        },
+    ]
+}
+
+/// The foreground objects (box, ball, blob, flag); `moving` scales their motion (0 = still).
+fn props(moving: f64, nonrigid: bool) -> Vec<ObjectSpec> {
+    vec![
+        ObjectSpec {
+            name: "box".into(),
+            shape: Shape::Cuboid {
+                half_size: DVec3::new(0.3, 0.3, 0.3),
+            },
+            texture: Texture {
+                pattern: Pattern::Stripes,
+                cell: 0.1,
+                colour_a: rgb(0.95, 0.9, 0.2),
+                colour_b: rgb(0.05, 0.3, 0.1),
+                detail: 0.1,
+                seed: 21,
+            },
+            motion: Motion {
+                position: DVec3::new(-0.75, -0.25, 0.2),
+                rotation_deg: DVec3::new(10.0, 30.0, 0.0),
+                oscillation: DVec3::new(0.3, 0.1, 0.0) * moving,
+                oscillation_hz: 0.5,
+                spin_axis: DVec3::new(0.3, 1.0, 0.2),
+                spin_deg_per_s: 60.0 * moving,
+                ..Motion::default()
+            },
+            deform: Deform::default(),
+        },
+        ObjectSpec {
+            name: "ball".into(),
+            shape: Shape::Ellipsoid {
+                radii: DVec3::splat(0.35),
+            },
+            texture: Texture {
+                pattern: Pattern::Checker,
+                cell: 0.12,
+                colour_a: rgb(0.9, 0.2, 0.15),
+                colour_b: rgb(0.95, 0.95, 0.9),
+                detail: 0.1,
+                seed: 31,
+            },
+            motion: Motion {
+                position: DVec3::new(0.75, -0.1, -0.2),
+                velocity: DVec3::new(-0.25, 0.0, 0.3) * moving,
+                spin_axis: DVec3::new(0.0, 1.0, 0.3),
+                spin_deg_per_s: 90.0 * moving,
+                ..Motion::default()
+            },
+            deform: Deform::default(),
+        },
+        ObjectSpec {
+            name: "blob".into(),
+            shape: Shape::Ellipsoid {
+                radii: DVec3::new(0.3, 0.25, 0.3),
+            },
+            texture: Texture {
+                pattern: Pattern::Blobs,
+                cell: 0.12,
+                colour_a: rgb(0.2, 0.6, 0.95),
+                colour_b: rgb(0.05, 0.05, 0.1),
+                detail: 0.1,
+                seed: 41,
+            },
+            motion: Motion {
+                position: DVec3::new(0.0, 0.15, -1.0),
+                oscillation: DVec3::new(0.0, 0.15, 0.0) * moving,
+                oscillation_hz: 0.8,
+                spin_axis: DVec3::new(1.0, 0.2, 0.0),
+                spin_deg_per_s: 40.0 * moving,
+                ..Motion::default()
+            },
+            deform: Deform {
+                scale_amplitude: if nonrigid {
+                    DVec3::new(0.3, 0.25, 0.3)
+                } else {
+                    DVec3::ZERO
+                },
+                hz: 1.2,
+                ..Deform::default()
+            },
+        },
+        ObjectSpec {
+            name: "flag".into(),
+            shape: Shape::Plane {
+                half_size: [0.5, 0.3],
+            },
+            texture: Texture {
+                pattern: Pattern::Stripes,
+                cell: 0.08,
+                colour_a: rgb(0.95, 0.95, 0.95),
+                colour_b: rgb(0.6, 0.05, 0.3),
+                detail: 0.1,
+                seed: 51,
+            },
+            motion: Motion {
+                position: DVec3::new(0.35, 0.75, -1.8),
+                rotation_deg: DVec3::new(0.0, -15.0, 0.0),
+                ..Motion::default()
+            },
+            deform: Deform {
+                wave_amplitude: if nonrigid { 0.08 } else { 0.0 },
+                wave_length: 0.5,
+                wave_hz: 1.0,
+                ..Deform::default()
+            },
+        },
+    ]
+}
+
+impl SynthConfig {
+    /// A named preset (see [`PRESETS`]): `static` (still objects, moving camera),
+    /// `rigid` (rigidly moving objects), `nonrigid` (adds a non-uniformly pulsing
+    /// ellipsoid and a waving flag), `fast` (nonrigid with 3× faster motion). `None` for
+    /// other names. Every preset has the same objects (floor, wall, box, ball, blob,
+    /// flag: ids 1–6); only their motion differs.
+    pub fn preset(name: &str) -> Option<SynthConfig> {
+        let (moving, nonrigid, speed) = match name {
+            "static" => (0.0, false, 1.0),
+            "rigid" => (1.0, false, 1.0),
+            "nonrigid" => (1.0, true, 1.0),
+            "fast" => (1.0, true, 3.0),
+            _ => return None,
+        };
+        let mut objects = room();
+        objects.extend(props(moving, nonrigid));
+        let mut camera = CameraPath::default();
+        if speed != 1.0 {
+            camera.sway_hz *= speed;
+            camera.turn_hz *= speed;
+            for o in &mut objects {
+                let m = &mut o.motion;
+                m.velocity *= speed;
+                m.oscillation_hz *= speed;
+                m.spin_deg_per_s *= speed;
+                o.deform.hz *= speed;
+                o.deform.wave_hz *= speed;
+            }
+        }
+        Some(SynthConfig {
+            preset: name.to_string(),
+            width: 128,
+            height: 128,
+            fov_x_deg: 60.0,
+            duration: 1.0,
+            train_fps: 8.0,
+            test_frames: 8,
+            render_rate_hz: 1000.0,
+            blur_subframes: 1,
+            exposure_s: 0.01,
+            supersample: 2,
+            contrast_threshold: 0.1,
+            threshold_sigma: 0.0,
+            refractory_s: 0.0,
+            shot_noise_hz: 0.0,
+            hot_pixel_fraction: 0.0,
+            hot_pixel_hz: 0.0,
+            seed: 0,
+            background: [0.2, 0.2, 0.2],
+            camera,
+            objects,
+        })
+    }
+
+    /// `Err` with a sentence when a setting is out of range.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.width == 0 || self.height == 0 || self.width > 8192 || self.height > 8192 {
+            return Err(format!(
+                "image size {}x{} must be within 1..=8192",
+                self.width, self.height
+            ));
+        }
+        let positive = [
+            ("fov_x_deg", self.fov_x_deg),
+            ("duration", self.duration),
+            ("train_fps", self.train_fps),
+            ("render_rate_hz", self.render_rate_hz),
+            ("contrast_threshold", self.contrast_threshold),
+        ];
+        for (name, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!("{name} = {v} must be finite and > 0"));
+            }
+        }
+        if self.fov_x_deg >= 179.0 {
+            return Err(format!("fov_x_deg = {} must be < 179", self.fov_x_deg));
+        }
+        let non_negative = [
+            ("exposure_s", self.exposure_s),
+            ("threshold_sigma", self.threshold_sigma),
+            ("refractory_s", self.refractory_s),
+            ("shot_noise_hz", self.shot_noise_hz),
+            ("hot_pixel_hz", self.hot_pixel_hz),
+        ];
+        for (name, v) in non_negative {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!("{name} = {v} must be finite and ≥ 0"));
+            }
+        }
+        if !(0.0..=1.0).contains(&self.hot_pixel_fraction) {
+            return Err("hot_pixel_fraction must be in [0, 1]".into());
+        }
+        if self.blur_subframes == 0 || self.supersample == 0 || self.supersample > 8 {
+            return Err("blur_subframes must be ≥ 1 and supersample in 1..=8".into());
+        }
+        if self.render_rate_hz * self.duration > 1e6 {
+            return Err("render_rate_hz × duration exceeds 10⁶ internal frames".into());
+        }
+        if self.objects.len() >= u16::MAX as usize {
+            return Err("too many objects".into());
+        }
+        for o in &self.objects {
+            let ok = match &o.shape {
+                Shape::Plane { half_size } => half_size.iter().all(|h| h.is_finite()),
+                Shape::Cuboid { half_size } => {
+                    half_size.is_finite() && half_size.min_element() > 0.0
+                }
+                Shape::Ellipsoid { radii } => radii.is_finite() && radii.min_element() > 0.0,
+            };
+            if !ok {
+                return Err(format!(
+                    "object '{}': shape sizes must be finite and > 0",
+                    o.name
+                ));
+            }
+            if !(o.texture.cell.is_finite() && o.texture.cell > 0.0) {
+                return Err(format!("object '{}': texture cell must be > 0", o.name));
+            }
+            let d = &o.deform;
+            let wave_ok = d.wave_amplitude.is_finite()
+                && d.wave_hz.is_finite()
+                && (d.wave_amplitude == 0.0 || (d.wave_length.is_finite() && d.wave_length > 0.0));
+            if !wave_ok {
+                return Err(format!(
+                    "object '{}': wave needs finite amplitude and hz and wave_length > 0",
+                    o.name
+                ));
+            }
+            if d.wave_amplitude != 0.0 && !matches!(o.shape, Shape::Plane { .. }) {
+                return Err(format!("object '{}': a wave deforms planes only", o.name));
+            }
+            if o.deform.scale_amplitude.abs().max_element() >= 0.9 {
+                return Err(format!(
+                    "object '{}': deform scale_amplitude must be < 0.9 (scale stays positive)",
+                    o.name
+                ));
+            }
+            let m = &o.motion;
+            let finite = m.position.is_finite()
+                && m.rotation_deg.is_finite()
+                && m.velocity.is_finite()
+                && m.oscillation.is_finite()
+                && m.oscillation_hz.is_finite()
+                && m.spin_axis.is_finite()
+                && m.spin_deg_per_s.is_finite()
+                && o.deform.hz.is_finite();
+            if !finite {
+                return Err(format!("object '{}': motion has non-finite values", o.name));
+            }
+        }
+        Ok(())
+    }
+
+    /// Times of the training frames: `k / train_fps` for `k = 0 …` up to `duration`.
+    pub fn train_times(&self) -> Vec<f64> {
+        let n = (self.duration * self.train_fps + 1e-9).floor() as usize;
+        (0..=n).map(|k| k as f64 / self.train_fps).collect()
+    }
+
+    /// Times of the test frames: `(k + ½)·duration / test_frames`.
+    pub fn test_times(&self) -> Vec<f64> {
+        let n = self.test_frames;
+        (0..n)
+            .map(|k| (k as f64 + 0.5) * self.duration / n as f64)
+            .collect()
+    }
+
+    /// Times of the internal renders fed to the event simulator: `k / render_rate_hz`
+    /// up to `duration` (the last one exactly at `duration`).
+    pub fn render_times(&self) -> Vec<f64> {
+        let n = (self.duration * self.render_rate_hz - 1e-9).ceil().max(1.0) as usize;
+        (0..=n)
+            .map(|k| (k as f64 / self.render_rate_hz).min(self.duration))
+            .collect()
+    }
+}

@@ -1,0 +1,325 @@
+//! AEDAT4: the real DAVIS346 sample, synthetic files in every compression, and
+//! truncated / corrupt / hostile input.
+
+use scene::events::EventStream;
+use scene::formats::{ReadOptions, read_events};
+use std::io::Write;
+use std::path::Path;
+
+const SAMPLE: &str = "/work/shared/data/aedat4_sample/sample.aedat4";
+
+fn err_text<T: std::fmt::Debug>(r: scene::Result<T>) -> String {
+    r.expect_err("expected an error").to_string()
+}
+
+#[test]
+fn reads_the_real_davis346_sample() {
+    let ev = read_events(SAMPLE, &ReadOptions::default()).unwrap();
+    // Figures from an independent Python decoder (LZ4 frame + FlatBuffers by hand):
+    // 17 EVTS packets, 6,676 events, 3,563 ON, sensor 346x260.
+    assert_eq!((ev.width, ev.height), (346, 260));
+    assert_eq!(ev.len(), 6_676);
+    assert_eq!(ev.p.iter().filter(|&&p| p == 1).count(), 3_563);
+    assert_eq!(ev.t[0], 1589163147368868.0 / 1e6);
+    assert_eq!((ev.x[0], ev.y[0], ev.p[0]), (215, 164, 1));
+    let n = ev.len() - 1;
+    assert_eq!(ev.t[n], 1589163147538809.0 / 1e6);
+    assert_eq!((ev.x[n], ev.y[n], ev.p[n]), (96, 229, 1));
+    assert_eq!(*ev.x.iter().max().unwrap(), 334);
+    assert_eq!(*ev.y.iter().max().unwrap(), 245);
+    assert_eq!(*ev.x.iter().min().unwrap(), 14);
+    assert_eq!(*ev.y.iter().min().unwrap(), 8);
+    assert!((ev.t[n] - ev.t[0] - 0.169941).abs() < 1e-6);
+    // A conflicting expected sensor size is reported.
+    let o = ReadOptions {
+        sensor: Some((240, 180)),
+        coord_scale: None,
+    };
+    let e = err_text(read_events(SAMPLE, &o));
+    assert!(e.contains("sample.aedat4") && e.contains("346x260"), "{e}");
+}
+
+// ---- a minimal AEDAT4 writer for tests -------------------------------------------
+
+fn io_header(compression: i32, data_table: i64, xml: &str) -> Vec<u8> {
+    // [root u32][IOHE][vtable: 10 bytes + 2 pad][table at 20: soffset, compression,
+    //  data_table i64, string offset][string]
+    let mut b = Vec::new();
+    b.extend(20u32.to_le_bytes()); // root table at 20
+    b.extend(b"IOHE");
+    b.extend(10u16.to_le_bytes()); // vtable at 8
+    b.extend(24u16.to_le_bytes());
+    b.extend(4u16.to_le_bytes()); // compression at table+4
+    b.extend(8u16.to_le_bytes()); // data table at table+8
+    b.extend(16u16.to_le_bytes()); // string offset at table+16
+    b.extend([0u8; 2]);
+    assert_eq!(b.len(), 20);
+    b.extend(12i32.to_le_bytes()); // table − vtable
+    b.extend(compression.to_le_bytes());
+    b.extend(data_table.to_le_bytes());
+    b.extend(4u32.to_le_bytes()); // string right after this field (at 40)
+    b.extend((xml.len() as u32).to_le_bytes());
+    b.extend(xml.as_bytes());
+    b.push(0);
+    b
+}
+
+/// A size-prefixed packet FlatBuffer with identifier `id` and a vector of 16-byte
+/// event structs.
+fn event_packet(id: &[u8; 4], events: &[(i64, i16, i16, bool)]) -> Vec<u8> {
+    let mut fb = Vec::new();
+    fb.extend(16u32.to_le_bytes());
+    fb.extend(id);
+    fb.extend(6u16.to_le_bytes()); // vtable at 8
+    fb.extend(8u16.to_le_bytes());
+    fb.extend(4u16.to_le_bytes());
+    fb.extend([0u8; 2]);
+    fb.extend(8i32.to_le_bytes()); // table at 16
+    fb.extend(8u32.to_le_bytes()); // vector at 28
+    fb.extend([0u8; 4]);
+    fb.extend((events.len() as u32).to_le_bytes());
+    for &(t, x, y, on) in events {
+        fb.extend(t.to_le_bytes());
+        fb.extend(x.to_le_bytes());
+        fb.extend(y.to_le_bytes());
+        fb.push(on as u8);
+        fb.extend([0u8; 3]);
+    }
+    let mut b = (fb.len() as u32).to_le_bytes().to_vec();
+    b.extend(fb);
+    b
+}
+
+fn compress(kind: i32, raw: &[u8]) -> Vec<u8> {
+    match kind {
+        0 => raw.to_vec(),
+        1 | 2 => {
+            let mut enc = lz4_flex::frame::FrameEncoder::new(Vec::new());
+            enc.write_all(raw).unwrap();
+            enc.finish().unwrap()
+        }
+        _ => ruzstd::encoding::compress_to_vec(raw, ruzstd::encoding::CompressionLevel::Fastest),
+    }
+}
+
+const XML: &str = r#"<dv version="2.0"><node name="outInfo" path="/r/outInfo/">
+<node name="0" path="/r/outInfo/0/"><attr key="typeIdentifier" type="string">EVTS</attr>
+<node name="info" path="/r/outInfo/0/info/"><attr key="sizeX" type="int">64</attr>
+<attr key="sizeY" type="int">48</attr></node></node>
+<node name="1" path="/r/outInfo/1/"><attr key="typeIdentifier" type="string">IMUS</attr>
+</node></node></dv>"#;
+
+/// A file of `packets` (stream id, uncompressed body); with a trailing fake data table.
+fn aedat4(compression: i32, xml: &str, packets: &[(i32, Vec<u8>)]) -> Vec<u8> {
+    let mut body = Vec::new();
+    for (id, raw) in packets {
+        let c = compress(compression, raw);
+        body.extend(id.to_le_bytes());
+        body.extend((c.len() as i32).to_le_bytes());
+        body.extend(c);
+    }
+    let probe = io_header(compression, 0, xml);
+    let table_at = 14 + 4 + probe.len() + body.len();
+    let header = io_header(compression, table_at as i64, xml);
+    let mut f = b"#!AER-DAT4.0\r\n".to_vec();
+    f.extend((header.len() as i32).to_le_bytes());
+    f.extend(header);
+    f.extend(body);
+    f.extend(b"data table: not a packet");
+    f
+}
+
+fn events(n: usize, t0: i64, seed: u64) -> Vec<(i64, i16, i16, bool)> {
+    let mut s = seed;
+    let mut t = t0;
+    (0..n)
+        .map(|_| {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            t += (s >> 60) as i64; // 0..15 µs steps, ties included
+            (
+                t,
+                ((s >> 20) % 64) as i16,
+                ((s >> 30) % 48) as i16,
+                (s >> 40) & 1 == 1,
+            )
+        })
+        .collect()
+}
+
+fn expected(evs: &[(i64, i16, i16, bool)], w: u32, h: u32) -> EventStream {
+    let mut e = EventStream::new(w, h);
+    for &(t, x, y, on) in evs {
+        e.push(t as f64 / 1e6, x as u16, y as u16, if on { 1 } else { -1 });
+    }
+    e
+}
+
+fn write(dir: &Path, name: &str, bytes: &[u8]) -> std::path::PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, bytes).unwrap();
+    p
+}
+
+#[test]
+fn synthetic_files_in_every_compression_read_exactly() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = events(500, 1_700_000_000_000_000, 1);
+    let b = events(300, a.last().unwrap().0, 2);
+    let c = events(1, b.last().unwrap().0 + 3, 3);
+    let imu = event_packet(b"IMUS", &[(5, 1, 1, true)]);
+    for compression in 0..=4 {
+        let f = aedat4(
+            compression,
+            XML,
+            &[
+                (0, event_packet(b"EVTS", &a)),
+                (1, imu.clone()),
+                (0, event_packet(b"EVTS", &[])),
+                (0, event_packet(b"EVTS", &b)),
+                (0, event_packet(b"EVTS", &c)),
+            ],
+        );
+        let p = write(dir.path(), &format!("c{compression}.aedat4"), &f);
+        let ev = read_events(&p, &ReadOptions::default()).unwrap();
+        let want = expected(&[a.clone(), b.clone(), c.clone()].concat(), 64, 48);
+        assert_eq!(ev, want, "compression {compression}");
+        assert_eq!(
+            ev.t.iter().map(|t| t.to_bits()).collect::<Vec<_>>(),
+            want.t.iter().map(|t| t.to_bits()).collect::<Vec<_>>()
+        );
+    }
+}
+
+#[test]
+fn sensor_size_falls_back_to_the_options() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = events(20, 1000, 4);
+    let f = aedat4(1, "", &[(0, event_packet(b"EVTS", &a))]);
+    let p = write(dir.path(), "noxml.aedat4", &f);
+    let e = err_text(read_events(&p, &ReadOptions::default()));
+    assert!(
+        e.contains("noxml.aedat4") && e.contains("sensor size"),
+        "{e}"
+    );
+    let o = ReadOptions {
+        sensor: Some((64, 48)),
+        coord_scale: None,
+    };
+    assert_eq!(read_events(&p, &o).unwrap(), expected(&a, 64, 48));
+}
+
+#[test]
+fn hostile_and_corrupt_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = events(50, 1000, 5);
+    let good = aedat4(1, XML, &[(0, event_packet(b"EVTS", &a))]);
+    let mut unsorted = a.clone();
+    unsorted.swap(10, 30);
+    let mut outside = a.clone();
+    outside[7].1 = 64;
+    let mut negative = a.clone();
+    negative[3].2 = -1;
+    let mut bad_lz4 = good.clone();
+    let hl = i32::from_le_bytes(good[14..18].try_into().unwrap()) as usize;
+    bad_lz4[18 + hl + 8] ^= 0xff; // the LZ4 frame magic of packet 0
+    let mut bad_hlen = good.clone();
+    bad_hlen[14..18].copy_from_slice(&i32::MAX.to_le_bytes());
+    let mut neg_size = aedat4(0, XML, &[(0, event_packet(b"EVTS", &a))]);
+    neg_size[18 + hl + 4..18 + hl + 8].copy_from_slice(&(-5i32).to_le_bytes());
+    let mut short_prefix = event_packet(b"EVTS", &a);
+    short_prefix[0..4].copy_from_slice(&100_000u32.to_le_bytes());
+    let cases: Vec<(&str, Vec<u8>, &str)> = vec![
+        ("empty.aedat4", vec![], "file is empty"),
+        (
+            "magic.aedat4",
+            b"#!AER-DAT3.1\r\nxxxxxxxx".to_vec(),
+            "not an AEDAT 4.0",
+        ),
+        ("hdr.aedat4", good[..16].to_vec(), "header length"),
+        ("hlen.aedat4", bad_hlen, "runs past the end"),
+        (
+            "cut.aedat4",
+            good[..good.len() - 60].to_vec(),
+            "dataTablePosition",
+        ),
+        ("neg.aedat4", neg_size, "size -5"),
+        ("lz4.aedat4", bad_lz4, "packet 0"),
+        (
+            "comp.aedat4",
+            aedat4(0, XML, &[(0, event_packet(b"EVTS", &a))])
+                .iter()
+                .enumerate()
+                .map(|(i, &b)| if i == 18 + 24 { 7 } else { b })
+                .collect(),
+            "unknown compression type 7",
+        ),
+        (
+            "unsorted.aedat4",
+            aedat4(3, XML, &[(0, event_packet(b"EVTS", &unsorted))]),
+            "not sorted",
+        ),
+        (
+            "outside.aedat4",
+            aedat4(0, XML, &[(0, event_packet(b"EVTS", &outside))]),
+            "event 7: pixel (64,",
+        ),
+        (
+            "negative.aedat4",
+            aedat4(0, XML, &[(0, event_packet(b"EVTS", &negative))]),
+            "negative pixel",
+        ),
+        (
+            "prefix.aedat4",
+            aedat4(0, XML, &[(0, short_prefix)]),
+            "size prefix",
+        ),
+    ];
+    for (name, bytes, want) in cases {
+        let p = write(dir.path(), name, &bytes);
+        let e = err_text(read_events(&p, &ReadOptions::default()));
+        assert!(e.contains(name) && e.contains(want), "{name}: {e}");
+    }
+    // Without a data table position, a file cut inside a packet is truncated.
+    let mut no_table = aedat4(0, XML, &[(0, event_packet(b"EVTS", &a))]);
+    no_table[18 + 28..18 + 36].copy_from_slice(&(-1i64).to_le_bytes());
+    let len = no_table.len() - "data table: not a packet".len();
+    let p = write(dir.path(), "cut2.aedat4", &no_table[..len - 10]);
+    let e = err_text(read_events(&p, &ReadOptions::default()));
+    assert!(e.contains("cut2.aedat4") && e.contains("truncated"), "{e}");
+    let p = write(dir.path(), "whole.aedat4", &no_table[..len]);
+    assert_eq!(read_events(&p, &ReadOptions::default()).unwrap().len(), 50);
+}
+
+#[test]
+fn every_truncation_and_many_bit_flips_of_the_sample_fail_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let bytes = std::fs::read(SAMPLE).unwrap();
+    let p = dir.path().join("mangled.aedat4");
+    for cut in (0..bytes.len()).step_by(1999) {
+        std::fs::write(&p, &bytes[..cut]).unwrap();
+        let e = err_text(read_events(&p, &ReadOptions::default()));
+        assert!(e.contains("mangled.aedat4"), "cut {cut}: {e}");
+    }
+    // Flipped bytes: either a clean error or a valid stream, never a panic.
+    let mut s = 99u64;
+    let mut errors = 0;
+    for _ in 0..300 {
+        s = s
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        let mut b = bytes.clone();
+        let at = (s >> 16) as usize % b.len();
+        b[at] ^= 1 << ((s >> 8) % 8);
+        std::fs::write(&p, &b).unwrap();
+        match read_events(&p, &ReadOptions::default()) {
+            Ok(ev) => assert!(ev.validate().is_ok()),
+            Err(e) => {
+                errors += 1;
+                assert!(e.to_string().contains("mangled.aedat4"), "{e}")
+            }
+        }
+    }
+    assert!(errors > 0);
+}
