@@ -7,10 +7,13 @@
 
 pub mod bind;
 pub mod file;
+pub mod frame;
+// pub mod stage;
 pub mod unproject;
 
 pub use bind::{Bindings, bind_nearest, footprint_radii};
 pub use file::{FrameBindings, read_assoc, write_assoc};
+pub use frame::{FrameError, FrameStats, associate_frame};
 pub use unproject::{LiftedEvents, lift_events};
 
 use serde::{Deserialize, Serialize};

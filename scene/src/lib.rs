@@ -13,6 +13,7 @@ pub use events::{EventSlice, EventStream};
 pub mod formats;
 pub mod image_io;
 pub mod manifest;
+pub mod report;
 pub mod synth;
 pub use formats::{ReadOptions, read_events, write_evs};
 pub use image_io::Image;
