@@ -75,26 +75,18 @@ pub fn bind_nearest(
     let n = centres.len();
     let mut offsets = Vec::with_capacity(n + 1);
     offsets.push(0u32);
-    let Some(k_nz) = NonZeroUsize::new(k) else {
-        offsets.resize(n + 1, 0);
-        return (
-            Bindings {
+    let k_nz = match NonZeroUsize::new(k) {
+        Some(k_nz) if !points.is_empty() => k_nz,
+        _ => {
+            // k = 0 or nothing to bind to: every Gaussian binds to none.
+            offsets.resize(n + 1, 0);
+            let none = Bindings {
                 offsets,
                 ..Default::default()
-            },
-            Vec::new(),
-        );
+            };
+            return (none, Vec::new());
+        }
     };
-    if points.is_empty() {
-        offsets.resize(n + 1, 0);
-        return (
-            Bindings {
-                offsets,
-                ..Default::default()
-            },
-            Vec::new(),
-        );
-    }
     let tree: ImmutableKdTree<f32, 3> =
         ImmutableKdTree::new_from_slice(points).expect("finite points build a tree");
     // One query per Gaussian (radii differ), in parallel chunks; results kept in order.

@@ -104,10 +104,10 @@ pub fn associate_frame(
     // Distance in pixel footprints: radius_px · d / r_g is the distance over the
     // world size of one pixel at the Gaussian's depth.
     let mut px: Vec<f64> = Vec::with_capacity(distances.len());
-    for g in 0..bindings.gaussians() {
+    for (g, &radius) in radii.iter().enumerate().take(bindings.gaussians()) {
         let r = bindings.offsets[g] as usize..bindings.offsets[g + 1] as usize;
         for &d in &distances[r] {
-            px.push(d as f64 * settings.radius_px / radii[g] as f64);
+            px.push(d as f64 * settings.radius_px / radius as f64);
         }
     }
     px.sort_by(f64::total_cmp);

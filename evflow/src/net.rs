@@ -357,9 +357,12 @@ pub fn write_safetensors(path: &Path, tensors: &[NamedF32]) -> Result<()> {
     scene::atomic::write_bytes_atomic(path, &out)
 }
 
+/// Tensors by name: (shape, values as f32).
+pub type TensorMap = HashMap<String, (Vec<usize>, Vec<f32>)>;
+
 /// Read every tensor of a safetensors file as f32 (F32 or F64 stored), checking
 /// finiteness.
-pub fn read_safetensors(path: &Path) -> Result<HashMap<String, (Vec<usize>, Vec<f32>)>> {
+pub fn read_safetensors(path: &Path) -> Result<TensorMap> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     let st = safetensors::SafeTensors::deserialize(&bytes)
         .map_err(|e| Error::invalid(path, format!("not a safetensors file: {e}")))?;
@@ -461,7 +464,11 @@ impl FlowNet {
                 )
             })?,
         };
-        if config.base == 0 || config.bins == 0 || !(config.max_flow > 0.0) {
+        if config.base == 0
+            || config.bins == 0
+            || config.max_flow.is_nan()
+            || config.max_flow <= 0.0
+        {
             return Err(Error::invalid(
                 path,
                 format!("invalid network settings {config:?}"),

@@ -118,7 +118,7 @@ fn lifted_events_lie_on_true_surfaces_and_bind_to_their_own_object() {
     .unwrap();
     assert!(stats.gaussians_bound > 100, "{stats:?}");
     let (mut same, mut total) = (0usize, 0usize);
-    for g in 0..bindings.gaussians() {
+    for (g, &id) in ids.iter().enumerate().take(bindings.gaussians()) {
         let (evs, w) = bindings.of(g);
         let sum: f32 = w.iter().sum();
         assert!(evs.is_empty() || (sum - 1.0).abs() < 1e-5);
@@ -128,7 +128,7 @@ fn lifted_events_lie_on_true_surfaces_and_bind_to_their_own_object() {
                 continue;
             }
             total += 1;
-            same += usize::from(object == ids[g]);
+            same += usize::from(object == id);
         }
     }
     let fraction = same as f64 / total as f64;
