@@ -6,7 +6,10 @@ use scene::formats::{ReadOptions, read_events};
 use std::io::Write;
 use std::path::Path;
 
-const SAMPLE: &str = "/work/shared/data/aedat4_sample/sample.aedat4";
+const SAMPLE: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../../shared/data/aedat4_sample/sample.aedat4"
+);
 
 fn err_text<T: std::fmt::Debug>(r: scene::Result<T>) -> String {
     r.expect_err("expected an error").to_string()

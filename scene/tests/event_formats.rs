@@ -6,7 +6,10 @@ use scene::formats::*;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-const ECD: &str = "/work/shared/data/ecd_shapes_rotation/events.txt";
+const ECD: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../../shared/data/ecd_shapes_rotation/events.txt"
+);
 
 /// A sorted pseudo-random stream with awkward timestamps (full f64 mantissas, ties).
 fn stream(n: usize, w: u32, h: u32, seed: u64) -> EventStream {
