@@ -8,7 +8,7 @@
 pub mod bind;
 pub mod file;
 pub mod frame;
-// pub mod stage;
+pub mod stage;
 pub mod unproject;
 
 pub use bind::{Bindings, bind_nearest, footprint_radii};

@@ -2,6 +2,7 @@
 pub mod densify;
 pub mod field;
 pub mod metrics;
+pub mod model;
 pub mod optim;
 pub mod ply;
 pub mod raster;
