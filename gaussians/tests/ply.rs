@@ -222,10 +222,12 @@ fn write_refuses_non_finite_and_leaves_the_old_file() {
 }
 
 /// An independent reader (Python `plyfile`) opens our file with the exact 3DGS property
-/// list and values. Skipped (with a note) where python3 + plyfile are not installed.
+/// list and values. The interpreter is `$DEGS_PYTHON` (`.ci/run` makes a venv with
+/// plyfile) or `python3`; skipped (with a note) where neither has plyfile.
 #[test]
 fn plyfile_reads_our_output() {
-    let ok = std::process::Command::new("python3")
+    let python = std::env::var("DEGS_PYTHON").unwrap_or_else(|_| "python3".into());
+    let ok = std::process::Command::new(&python)
         .args(["-c", "import plyfile"])
         .output()
         .is_ok_and(|o| o.status.success());
@@ -261,7 +263,7 @@ assert list(v['opacity']) == [0.0, -1.0, -2.0, -3.0]
 assert v['f_rest_16'][2] == 101.0 and v['f_rest_44'][0] == 214.0
 print('ok')
 "#;
-    let out = std::process::Command::new("python3")
+    let out = std::process::Command::new(&python)
         .args(["-c", script, p.to_str().unwrap()])
         .output()
         .unwrap();
