@@ -6,4 +6,5 @@ pub mod model;
 pub mod optim;
 pub mod ply;
 pub mod raster;
+pub mod stage;
 pub mod train;

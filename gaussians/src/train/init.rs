@@ -80,3 +80,55 @@ pub fn random_splats(n: usize, centre: DVec3, half: f64, seed: u64) -> Splats {
     }
     s
 }
+
+/// `n` random Gaussians inside the train cameras' viewing frusta: a random camera, a
+/// random pixel ray, a depth uniform in `[near, far]` (`near`/`far` = `near_frac`/
+/// `far_frac` × the camera's distance to the [`camera_bounds`] centre). Covers what the
+/// cameras see (walls and floors beyond the box included) with no geometry known.
+/// Scale: expected nearest-neighbour spacing of `n` points in one frustum.
+pub fn frustum_splats(
+    cams: &[Camera],
+    n: usize,
+    near_frac: f64,
+    far_frac: f64,
+    seed: u64,
+) -> Splats {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let (centre, _) = camera_bounds(cams);
+    let opacity = (0.1f32 / 0.9).ln();
+    let mut s = Splats::default();
+    if cams.is_empty() {
+        return s;
+    }
+    let c0 = &cams[0];
+    let d0 = (c0.cam_to_world.centre() - centre).length().max(1e-3);
+    let (near0, far0) = (near_frac * d0, far_frac * d0);
+    let i0 = &c0.intrinsics;
+    let (tx, ty) = (
+        i0.width as f64 / (2.0 * i0.fx),
+        i0.height as f64 / (2.0 * i0.fy),
+    );
+    let volume = 4.0 * tx * ty * (far0.powi(3) - near0.powi(3)) / 3.0;
+    let ls = ((0.55 * (volume / n.max(1) as f64).cbrt()) as f32).ln();
+    for _ in 0..n {
+        let cam = &cams[rng.random_range(0..cams.len())];
+        let d = (cam.cam_to_world.centre() - centre).length().max(1e-3);
+        let i = &cam.intrinsics;
+        let px = glam::DVec2::new(
+            rng.random_range(0.0..i.width as f64),
+            rng.random_range(0.0..i.height as f64),
+        );
+        let depth = rng.random_range(near_frac * d..far_frac * d);
+        let p = cam.unproject_world(px, depth);
+        s.means.push([p.x as f32, p.y as f32, p.z as f32]);
+        s.log_scales.push([ls; 3]);
+        s.rotations.push([1.0, 0.0, 0.0, 0.0]);
+        s.opacity_logits.push(opacity);
+        s.sh_dc.push(std::array::from_fn(|_| {
+            (rng.random_range(0.0f32..1.0) - 0.5) / SH_C0
+        }));
+        s.sh_rest.push([0.0; 45]);
+        s.dynamic.push(true);
+    }
+    s
+}

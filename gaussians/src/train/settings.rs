@@ -37,6 +37,14 @@ pub struct TrainSettings {
     pub densify: DensifySettings,
     /// Random initial Gaussians (when no point cloud is given).
     pub init_points: usize,
+    /// Place them in the cameras' frusta (else in the box the cameras look at).
+    pub init_frustum: bool,
+    /// Frustum depth range, × each camera's distance to the point the cameras look at.
+    pub init_near: f64,
+    pub init_far: f64,
+    /// Scene extent for learning rates and densification (0 = auto: the larger of the
+    /// 3DGS camera extent and the half-size of the box the cameras look at).
+    pub scene_extent: f32,
     pub background: [f32; 3],
     pub seed: u64,
     /// Evaluate PSNR on a test view every this many iterations (0 = never).
@@ -55,15 +63,27 @@ impl Default for TrainSettings {
             field_lr_final: 1.6e-6,
             position_lr_init: 1.6e-4 * 5.0,
             position_lr_final: 1.6e-6 * 5.0,
-            feature_lr: 0.0025,
+            feature_lr: 0.005,
             opacity_lr: 0.05,
-            scaling_lr: 0.005,
+            scaling_lr: 0.01,
             rotation_lr: 0.001,
             dssim_weight: 0.2,
             sh_degree: 3,
             sh_interval: 1000,
-            densify: DensifySettings::default(),
+            // 3DGS densifies until 15k of 30k iterations and resets opacity every 3k;
+            // in a 3500-iteration warm-up a reset costs more than it gains (measured,
+            // BENCHMARKS.md), so densify until 2500 and never reset.
+            densify: DensifySettings {
+                until_iter: 2500,
+                opacity_reset_interval: 0,
+                max_gaussians: 100_000,
+                ..DensifySettings::default()
+            },
             init_points: 20_000,
+            init_frustum: true,
+            init_near: 0.3,
+            init_far: 2.5,
+            scene_extent: 0.0,
             background: [0.0; 3],
             seed: 0,
             eval_interval: 0,
@@ -92,6 +112,12 @@ impl TrainSettings {
         }
         if self.densify.max_gaussians == 0 || self.init_points == 0 {
             return Err("max_gaussians and init_points must be positive".into());
+        }
+        if !(self.init_near > 0.0 && self.init_far > self.init_near) {
+            return Err("0 < init_near < init_far required".into());
+        }
+        if self.scene_extent.is_nan() || self.scene_extent < 0.0 {
+            return Err("scene_extent must be ≥ 0".into());
         }
         if self.field.width == 0 || self.field.depth > 16 || self.field.width > 1024 {
             return Err("field depth ≤ 16 and 0 < width ≤ 1024 required".into());

@@ -1,0 +1,155 @@
+//! `gaussians`: the RGB warm-up of a dynamic 3DGS (`train`) and rendering of a saved
+//! model (`render`). Logic lives in [`gaussians::stage`].
+
+use clap::{Parser, Subcommand};
+use gaussians::stage::{self, Progress, Split, TrainArgs};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Parser)]
+#[command(name = "gaussians", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    verb: Verb,
+}
+
+#[derive(Subcommand)]
+enum Verb {
+    /// Train canonical Gaussians + deformation field on a scene's RGB frames.
+    Train {
+        #[arg(long)]
+        scene: PathBuf,
+        #[arg(long)]
+        out: PathBuf,
+        /// settings.toml (flags override it)
+        #[arg(long)]
+        config: Option<PathBuf>,
+        #[arg(long)]
+        iterations: Option<u32>,
+        #[arg(long)]
+        seed: Option<u64>,
+        /// Initial Gaussians from a 3DGS PLY instead of random points
+        #[arg(long)]
+        init_ply: Option<PathBuf>,
+        #[arg(long)]
+        field_width: Option<usize>,
+        #[arg(long)]
+        field_depth: Option<usize>,
+        /// Static 3DGS: no deformation field
+        #[arg(long)]
+        no_deform: bool,
+    },
+    /// Render a saved model at the frames of a scene split, with PSNR/SSIM.
+    Render {
+        #[arg(long)]
+        model: PathBuf,
+        #[arg(long)]
+        scene: PathBuf,
+        #[arg(long)]
+        out: PathBuf,
+        #[arg(long, value_enum, default_value_t = Split::Test)]
+        split: Split,
+    },
+    /// Write an RGB-only synthetic scene (no events), for tests and benchmarks.
+    #[command(hide = true)]
+    SynthRgb {
+        #[arg(long, default_value = "static")]
+        preset: String,
+        #[arg(long)]
+        out: PathBuf,
+        /// Image width and height
+        #[arg(long)]
+        size: Option<u32>,
+    },
+}
+
+fn main() -> ExitCode {
+    match Cli::parse().verb {
+        Verb::Train {
+            scene,
+            out,
+            config,
+            iterations,
+            seed,
+            init_ply,
+            field_width,
+            field_depth,
+            no_deform,
+        } => {
+            let args = TrainArgs {
+                scene,
+                out,
+                config,
+                iterations,
+                seed,
+                init_ply,
+                field_width,
+                field_depth,
+                no_deform,
+            };
+            let total = match stage::resolve_settings(&args) {
+                Ok(s) => s.iterations,
+                Err(e) => return fail(e),
+            };
+            let stop = stage::sigint_flag();
+            let mut progress = Progress::new(total);
+            let result = stage::train(&args, stop, |s| progress.step(s));
+            progress.finish();
+            match result {
+                Ok(o) => {
+                    let r = &o.report;
+                    eprintln!(
+                        "{}: {} iterations, {} Gaussians, test PSNR {:.2} dB, SSIM {:.4}{}",
+                        o.out.display(),
+                        r.iterations,
+                        r.gaussians,
+                        r.test.psnr_mean,
+                        r.test.ssim_mean,
+                        if r.interrupted { " (interrupted)" } else { "" }
+                    );
+                    if r.interrupted {
+                        ExitCode::from(130)
+                    } else {
+                        ExitCode::SUCCESS
+                    }
+                }
+                Err(e) => fail(e),
+            }
+        }
+        Verb::Render {
+            model,
+            scene,
+            out,
+            split,
+        } => match stage::render(&model, &scene, &out, split) {
+            Ok(r) => {
+                eprintln!(
+                    "{}: {} frames, PSNR {:.2} dB, SSIM {:.4}",
+                    out.display(),
+                    r.evaluation.frames,
+                    r.evaluation.psnr_mean,
+                    r.evaluation.ssim_mean
+                );
+                ExitCode::SUCCESS
+            }
+            Err(e) => fail(e),
+        },
+        Verb::SynthRgb { preset, out, size } => {
+            let Some(mut cfg) = scene::synth::SynthConfig::preset(&preset) else {
+                return fail(format!("unknown preset {preset}"));
+            };
+            if let Some(n) = size {
+                (cfg.width, cfg.height) = (n, n);
+            }
+            match stage::write_rgb_synthetic_scene(&cfg, &out) {
+                Ok(()) => ExitCode::SUCCESS,
+                Err(e) => fail(e),
+            }
+        }
+    }
+}
+
+fn fail(e: impl std::fmt::Display) -> ExitCode {
+    eprintln!("error: {e}");
+    ExitCode::from(1)
+}

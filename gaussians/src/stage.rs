@@ -1,0 +1,569 @@
+//! The `gaussians` stage (DESIGN §4): `train` (the RGB warm-up, or the RGB-only baseline
+//! with more iterations) and `render` (a saved model at the frames of a scene split).
+//!
+//! Outputs are written into a temp directory renamed at the end ([`AtomicDir`]):
+//! the model ([`Model::save`]), `depth/NNNN.exr` (alpha-normalised depth at every train
+//! frame, 0 where alpha < 0.5; NNNN = train frame index), `renders/NNNN.png` (every
+//! test frame), `settings.toml` (resolved settings) and `report.json`.
+
+use crate::metrics;
+use crate::model::Model;
+use crate::raster::TileRasterizer;
+use crate::train::{Frame, StepInfo, TrainSettings, Trainer, View, init};
+use scene::atomic::{AtomicDir, write_bytes_atomic, write_json_atomic};
+use scene::error::{Error, Result};
+use scene::image_io::{Image, read_image, write_exr_depth, write_png};
+use scene::manifest::{Manifest, Scene};
+use scene::report::{Phases, peak_rss_mib};
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// Options of `gaussians train` (flags override the config file).
+#[derive(Clone, Debug, Default)]
+pub struct TrainArgs {
+    pub scene: PathBuf,
+    pub out: PathBuf,
+    pub config: Option<PathBuf>,
+    pub iterations: Option<u32>,
+    pub seed: Option<u64>,
+    pub init_ply: Option<PathBuf>,
+    pub field_width: Option<usize>,
+    pub field_depth: Option<usize>,
+    pub no_deform: bool,
+}
+
+/// Settings from the config file (if any) with the flags applied, validated.
+pub fn resolve_settings(args: &TrainArgs) -> Result<TrainSettings> {
+    let mut s = match &args.config {
+        Some(p) => {
+            let text = std::fs::read_to_string(p).map_err(|e| Error::io(p, e))?;
+            TrainSettings::from_toml(&text).map_err(|e| Error::invalid(p, e.trim()))?
+        }
+        None => TrainSettings::default(),
+    };
+    if let Some(n) = args.iterations {
+        s.iterations = n;
+    }
+    if let Some(seed) = args.seed {
+        s.seed = seed;
+        s.field.seed = seed;
+    }
+    if let Some(w) = args.field_width {
+        s.field.width = w;
+    }
+    if let Some(d) = args.field_depth {
+        s.field.depth = d;
+    }
+    if args.no_deform {
+        s.deform = false;
+    }
+    let origin = args
+        .config
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("command line"));
+    s.validate().map_err(|e| Error::invalid(origin, e))?;
+    Ok(s)
+}
+
+/// PSNR / SSIM of renders against the frames of a split.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Evaluation {
+    pub split: String,
+    pub frames: usize,
+    pub psnr_mean: f64,
+    pub ssim_mean: f64,
+    pub psnr: Vec<f64>,
+    pub ssim: Vec<f64>,
+    /// PSNR of the mean colour of each target (a trivial baseline).
+    pub mean_colour_psnr_mean: f64,
+}
+
+/// Hash of an input file (blake3, hex).
+#[derive(Clone, Debug, Serialize)]
+pub struct InputHash {
+    pub path: PathBuf,
+    pub blake3: String,
+}
+
+/// `report.json` of `gaussians train`.
+#[derive(Clone, Debug, Serialize)]
+pub struct TrainReport {
+    pub stage: &'static str,
+    pub version: &'static str,
+    pub settings: TrainSettings,
+    pub scene: PathBuf,
+    pub inputs: Vec<InputHash>,
+    pub phases: Phases,
+    pub wall_seconds: f64,
+    pub peak_memory_mib: Option<f64>,
+    pub iterations: u32,
+    pub interrupted: bool,
+    pub seconds_per_iteration: f64,
+    pub static_seconds: f64,
+    pub deform_seconds: f64,
+    pub final_loss: f64,
+    pub gaussians: usize,
+    pub field_parameters: usize,
+    pub train_frames: usize,
+    pub test: Evaluation,
+}
+
+/// Planar RGB of a frame's image, checked against the camera size.
+fn load_rgb(
+    scene: &Scene,
+    frame: &scene::manifest::Frame,
+    cam: &scene::Camera,
+) -> Result<Vec<f32>> {
+    let path = scene.image_path(frame);
+    let img = read_image(&path)?;
+    let (w, h) = (cam.intrinsics.width, cam.intrinsics.height);
+    if (img.width, img.height) != (w, h) {
+        return Err(Error::invalid(
+            &path,
+            format!(
+                "image is {}x{} but the camera is {w}x{h}",
+                img.width, img.height
+            ),
+        ));
+    }
+    Ok(metrics::interleaved_to_planar(
+        &img.data, w as usize, h as usize, 3,
+    ))
+}
+
+/// Views (camera, time, planar RGB) of a manifest's frames.
+fn load_views(scene: &Scene, m: &Manifest) -> Result<Vec<View>> {
+    m.frames
+        .iter()
+        .map(|f| {
+            let camera = scene::Camera {
+                intrinsics: m.camera,
+                cam_to_world: f.cam_to_world,
+            };
+            let rgb = load_rgb(scene, f, &camera)?;
+            Ok(View {
+                camera,
+                time: f.time as f32,
+                rgb,
+            })
+        })
+        .collect()
+}
+
+fn hash_file(path: &Path) -> Result<InputHash> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    Ok(InputHash {
+        path: path.to_path_buf(),
+        blake3: blake3::hash(&bytes).to_hex().to_string(),
+    })
+}
+
+/// Hashes of the manifests, every image and the initial point cloud.
+fn input_hashes(scene: &Scene, init_ply: Option<&Path>) -> Result<Vec<InputHash>> {
+    let mut out = Vec::new();
+    for name in [scene::manifest::TRAIN_FILE, scene::manifest::TEST_FILE] {
+        let p = scene.root.join(name);
+        if p.is_file() {
+            out.push(hash_file(&p)?);
+        }
+    }
+    for f in scene.train.frames.iter().chain(&scene.test.frames) {
+        out.push(hash_file(&scene.image_path(f))?);
+    }
+    if let Some(p) = init_ply {
+        out.push(hash_file(p)?);
+    }
+    Ok(out)
+}
+
+/// Interleaved 8-bit-ready image of a planar frame.
+pub fn frame_image(f: &Frame) -> Image {
+    let n = f.width * f.height;
+    let mut data = Vec::with_capacity(3 * n);
+    for p in 0..n {
+        for c in 0..3 {
+            data.push(f.rgb[c * n + p].clamp(0.0, 1.0));
+        }
+    }
+    Image {
+        width: f.width as u32,
+        height: f.height as u32,
+        channels: 3,
+        data,
+    }
+}
+
+/// Alpha-normalised depth (`depth / alpha`; 0 where alpha < 0.5).
+pub fn normalised_depth(f: &Frame) -> Vec<f32> {
+    f.depth
+        .iter()
+        .zip(&f.alpha)
+        .map(|(&d, &a)| if a >= 0.5 { d / a } else { 0.0 })
+        .collect()
+}
+
+/// Render `model` at every view, write `renders/NNNN.png` (when `renders` is set) and
+/// return PSNR/SSIM against the views' images.
+fn evaluate(
+    model: &Model,
+    views: &[View],
+    split: &str,
+    renders: Option<&Path>,
+) -> Result<Evaluation> {
+    let mut ev = Evaluation {
+        split: split.to_string(),
+        frames: views.len(),
+        ..Evaluation::default()
+    };
+    let mut base = Vec::new();
+    for (i, v) in views.iter().enumerate() {
+        let f = model.render(&v.camera, v.time);
+        if let Some(dir) = renders {
+            write_png(dir.join(format!("{i:04}.png")), &frame_image(&f))?;
+        }
+        ev.psnr.push(metrics::psnr_u8(&f.rgb, &v.rgb));
+        ev.ssim
+            .push(metrics::ssim_u8(&f.rgb, &v.rgb, f.width, f.height));
+        base.push(metrics::psnr_u8(&mean_colour(&v.rgb), &v.rgb));
+    }
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+    ev.psnr_mean = mean(&ev.psnr);
+    ev.ssim_mean = mean(&ev.ssim);
+    ev.mean_colour_psnr_mean = mean(&base);
+    Ok(ev)
+}
+
+/// A planar image filled with each channel's mean.
+fn mean_colour(rgb: &[f32]) -> Vec<f32> {
+    let n = rgb.len() / 3;
+    let mut out = Vec::with_capacity(rgb.len());
+    for c in rgb.chunks(n.max(1)) {
+        let m = c.iter().map(|&v| v as f64).sum::<f64>() / n.max(1) as f64;
+        out.extend(std::iter::repeat_n(m as f32, c.len()));
+    }
+    out
+}
+
+/// Write `depth/NNNN.exr` for every view.
+fn write_depths(model: &Model, views: &[View], dir: &Path) -> Result<()> {
+    for (i, v) in views.iter().enumerate() {
+        let f = model.render(&v.camera, v.time);
+        write_exr_depth(
+            dir.join(format!("{i:04}.exr")),
+            f.width as u32,
+            f.height as u32,
+            &normalised_depth(&f),
+        )?;
+    }
+    Ok(())
+}
+
+/// Initial Gaussians: the PLY if given (all flagged dynamic), else random points in the
+/// box the train cameras look at.
+fn initial_splats(
+    settings: &TrainSettings,
+    views: &[View],
+    ply: Option<&Path>,
+) -> Result<crate::train::Splats> {
+    match ply {
+        Some(p) => {
+            let (mut s, _) = crate::ply::read(p)?;
+            if s.is_empty() {
+                return Err(Error::invalid(p, "the point cloud has no Gaussians"));
+            }
+            s.dynamic = vec![true; s.len()];
+            Ok(s)
+        }
+        None => {
+            let cams: Vec<_> = views.iter().map(|v| v.camera).collect();
+            let n = settings.init_points;
+            Ok(if settings.init_frustum {
+                init::frustum_splats(
+                    &cams,
+                    n,
+                    settings.init_near,
+                    settings.init_far,
+                    settings.seed,
+                )
+            } else {
+                let (centre, half) = init::camera_bounds(&cams);
+                init::random_splats(n, centre, half, settings.seed)
+            })
+        }
+    }
+}
+
+/// The extent that scales learning rates and densification: the setting, or the larger
+/// of the 3DGS camera extent and the half-size of the box the cameras look at (cameras
+/// close together, as along one trajectory, would otherwise give a tiny extent).
+pub fn scene_extent(settings: &TrainSettings, cams: &[scene::Camera]) -> f32 {
+    if settings.scene_extent > 0.0 {
+        return settings.scene_extent;
+    }
+    let (_, half) = init::camera_bounds(cams);
+    init::camera_extent(cams).max(half as f32)
+}
+
+/// What a finished (or interrupted) training run produced.
+#[derive(Debug)]
+pub struct TrainOutcome {
+    pub out: PathBuf,
+    pub report: TrainReport,
+    pub model: Model,
+}
+
+/// `gaussians train`: load the scene, train until done or until `stop` is set, write
+/// every output. `on_step` sees each step's figures (progress display).
+pub fn train(
+    args: &TrainArgs,
+    stop: &AtomicBool,
+    on_step: impl FnMut(&StepInfo),
+) -> Result<TrainOutcome> {
+    let start = std::time::Instant::now();
+    let mut phases = Phases::new();
+    phases.start("load");
+    let settings = resolve_settings(args)?;
+    let scene = Scene::open(&args.scene)?;
+    let views = load_views(&scene, &scene.train)?;
+    let test_views = load_views(&scene, &scene.test)?;
+    let inputs = input_hashes(&scene, args.init_ply.as_deref())?;
+    let splats = initial_splats(&settings, &views, args.init_ply.as_deref())?;
+    let cams: Vec<_> = views.iter().map(|v| v.camera).collect();
+    let extent = scene_extent(&settings, &cams);
+    let out = AtomicDir::new(&args.out)?;
+
+    phases.start("train");
+    let mut trainer = Trainer::new(settings.clone(), splats, extent);
+    let summary = trainer.run(&TileRasterizer, &views, stop, on_step);
+
+    phases.start("save");
+    let model = Model::from_trainer(&trainer);
+    drop(trainer);
+    model.save(out.path())?;
+    write_bytes_atomic(
+        &out.path().join("settings.toml"),
+        settings.to_toml().as_bytes(),
+    )?;
+    phases.start("depth");
+    write_depths(&model, &views, &out.path().join("depth"))?;
+    phases.start("evaluate");
+    let test = evaluate(
+        &model,
+        &test_views,
+        "test",
+        Some(&out.path().join("renders")),
+    )?;
+    phases.stop();
+    let report = TrainReport {
+        stage: "gaussians train",
+        version: env!("CARGO_PKG_VERSION"),
+        scene: args.scene.clone(),
+        inputs,
+        phases,
+        wall_seconds: start.elapsed().as_secs_f64(),
+        peak_memory_mib: peak_rss_mib(),
+        iterations: summary.iterations,
+        interrupted: summary.interrupted,
+        seconds_per_iteration: (summary.static_seconds + summary.deform_seconds)
+            / summary.iterations.max(1) as f64,
+        static_seconds: summary.static_seconds,
+        deform_seconds: summary.deform_seconds,
+        final_loss: summary.final_loss,
+        gaussians: model.splats.len(),
+        field_parameters: model.field.as_ref().map_or(0, |f| f.params.len()),
+        train_frames: views.len(),
+        test,
+        settings,
+    };
+    write_json_atomic(&out.path().join("report.json"), &report)?;
+    let out = out.commit()?;
+    Ok(TrainOutcome { out, report, model })
+}
+
+/// Which frames `gaussians render` uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Split {
+    #[default]
+    Test,
+    Train,
+}
+
+/// `report.json` of `gaussians render`.
+#[derive(Clone, Debug, Serialize)]
+pub struct RenderReport {
+    pub stage: &'static str,
+    pub version: &'static str,
+    pub model: PathBuf,
+    pub scene: PathBuf,
+    pub split: Split,
+    pub gaussians: usize,
+    pub phases: Phases,
+    pub peak_memory_mib: Option<f64>,
+    pub evaluation: Evaluation,
+}
+
+/// `gaussians render`: `renders/NNNN.png` and `depth/NNNN.exr` of a saved model at every
+/// frame of a split, with PSNR/SSIM against the split's images in `report.json`.
+pub fn render(
+    model_dir: &Path,
+    scene_dir: &Path,
+    out_dir: &Path,
+    split: Split,
+) -> Result<RenderReport> {
+    let mut phases = Phases::new();
+    phases.start("load");
+    let model = Model::load(model_dir)?;
+    let scene = Scene::open(scene_dir)?;
+    let (m, name) = match split {
+        Split::Test => (&scene.test, "test"),
+        Split::Train => (&scene.train, "train"),
+    };
+    let views = load_views(&scene, m)?;
+    let out = AtomicDir::new(out_dir)?;
+    phases.start("render");
+    let evaluation = evaluate(&model, &views, name, Some(&out.path().join("renders")))?;
+    write_depths(&model, &views, &out.path().join("depth"))?;
+    phases.stop();
+    let report = RenderReport {
+        stage: "gaussians render",
+        version: env!("CARGO_PKG_VERSION"),
+        model: model_dir.to_path_buf(),
+        scene: scene_dir.to_path_buf(),
+        split,
+        gaussians: model.splats.len(),
+        phases,
+        peak_memory_mib: peak_rss_mib(),
+        evaluation,
+    };
+    write_json_atomic(&out.path().join("report.json"), &report)?;
+    out.commit()?;
+    Ok(report)
+}
+
+static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+
+extern "C" fn on_sigint(_: libc::c_int) {
+    INTERRUPTED.store(true, Ordering::SeqCst);
+}
+
+/// Install a SIGINT handler that sets the returned flag (training stops at the next
+/// step boundary and still saves its outputs).
+pub fn sigint_flag() -> &'static AtomicBool {
+    // SAFETY: the handler only stores to an atomic, which is async-signal-safe.
+    unsafe {
+        libc::signal(
+            libc::SIGINT,
+            on_sigint as extern "C" fn(libc::c_int) as libc::sighandler_t,
+        );
+    }
+    &INTERRUPTED
+}
+
+/// Progress display on stderr: an indicatif bar on a terminal, a plain line every
+/// `every` iterations otherwise.
+pub struct Progress {
+    bar: Option<indicatif::ProgressBar>,
+    total: u32,
+    every: u32,
+    start: std::time::Instant,
+}
+
+impl Progress {
+    pub fn new(total: u32) -> Self {
+        use std::io::IsTerminal;
+        let bar = std::io::stderr().is_terminal().then(|| {
+            let b = indicatif::ProgressBar::new(total as u64);
+            b.set_style(
+                indicatif::ProgressStyle::with_template(
+                    "{elapsed_precise} [{bar:30}] {pos}/{len} ({eta}) {msg}",
+                )
+                .expect("template")
+                .progress_chars("=> "),
+            );
+            b
+        });
+        Progress {
+            bar,
+            total,
+            every: (total / 20).clamp(1, 250),
+            start: std::time::Instant::now(),
+        }
+    }
+
+    pub fn step(&mut self, s: &StepInfo) {
+        let msg = format!(
+            "loss {:.4}  PSNR {:.2} dB  {} Gaussians{}",
+            s.loss,
+            s.psnr,
+            s.gaussians,
+            if s.field_on { "  field on" } else { "" }
+        );
+        match &self.bar {
+            Some(b) => {
+                b.set_position(s.iteration as u64);
+                if s.iteration.is_multiple_of(10) || s.iteration == self.total {
+                    b.set_message(msg);
+                }
+            }
+            None => {
+                if s.iteration.is_multiple_of(self.every) || s.iteration == self.total {
+                    eprintln!(
+                        "[{:7.1} s] iteration {}/{}: {msg}",
+                        self.start.elapsed().as_secs_f64(),
+                        s.iteration,
+                        self.total
+                    );
+                }
+            }
+        }
+    }
+
+    pub fn finish(&self) {
+        if let Some(b) = &self.bar {
+            b.finish();
+        }
+    }
+}
+
+/// Write an RGB-only scene directory (manifests + PNGs, no events) of a synthetic
+/// configuration: for tests and benchmarks of the warm-up without the event simulator.
+/// Frame layout and times as the full synthetic writer (`images/{split}_NNNN.png`,
+/// `time = t / duration`).
+pub fn write_rgb_synthetic_scene(cfg: &scene::synth::SynthConfig, out: &Path) -> Result<()> {
+    let world = scene::synth::SynthWorld::new(cfg)
+        .map_err(|e| Error::Other(format!("synthetic scene settings: {e}")))?;
+    let dir = AtomicDir::new(out)?;
+    for (split, times, file) in [
+        ("train", cfg.train_times(), scene::manifest::TRAIN_FILE),
+        ("test", cfg.test_times(), scene::manifest::TEST_FILE),
+    ] {
+        let mut frames = Vec::new();
+        for (k, &t) in times.iter().enumerate() {
+            let r = world.render(t);
+            let file_path = format!("images/{split}_{k:04}.png");
+            let img = Image {
+                width: r.width,
+                height: r.height,
+                channels: 3,
+                data: r.rgb,
+            };
+            write_png(dir.path().join(&file_path), &img)?;
+            frames.push(scene::manifest::Frame {
+                file_path,
+                timestamp: t,
+                time: (t / cfg.duration).clamp(0.0, 1.0),
+                cam_to_world: world.camera_at(t).cam_to_world,
+            });
+        }
+        Manifest {
+            camera: world.intrinsics(),
+            frames,
+            events: None,
+        }
+        .write(dir.path().join(file))?;
+    }
+    dir.commit()?;
+    Ok(())
+}

@@ -1,0 +1,182 @@
+//! The train / render stage end to end on a tiny synthetic scene.
+
+use gaussians::model::Model;
+use gaussians::stage::{self, Split, TrainArgs};
+use gaussians::train::TrainSettings;
+use scene::synth::SynthConfig;
+use std::path::Path;
+use std::sync::atomic::AtomicBool;
+
+/// The static preset at 40×40 with few frames and coarse textures (features a few
+/// pixels wide at this size).
+fn tiny_scene(dir: &Path) {
+    let mut cfg = SynthConfig::preset("static").unwrap();
+    for o in &mut cfg.objects {
+        o.texture.cell *= 4.0;
+        o.texture.detail = 0.0;
+    }
+    cfg.width = 40;
+    cfg.height = 40;
+    cfg.train_fps = 5.0;
+    cfg.test_frames = 3;
+    cfg.supersample = 1;
+    stage::write_rgb_synthetic_scene(&cfg, dir).unwrap();
+}
+
+fn tiny_settings(dir: &Path) -> std::path::PathBuf {
+    let mut s = TrainSettings {
+        iterations: 400,
+        static_iterations: 250,
+        init_points: 2000,
+        sh_degree: 1,
+        sh_interval: 100,
+        ..TrainSettings::default()
+    };
+    s.field.width = 16;
+    s.field.depth = 2;
+    s.densify.from_iter = 100;
+    s.densify.interval = 50;
+    s.densify.until_iter = 250;
+    let p = dir.join("settings.toml");
+    std::fs::write(&p, s.to_toml()).unwrap();
+    p
+}
+
+#[test]
+fn trains_writes_every_output_and_reloads_identically() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene_dir = tmp.path().join("scene");
+    tiny_scene(&scene_dir);
+    let out = tmp.path().join("out");
+    let args = TrainArgs {
+        scene: scene_dir.clone(),
+        out: out.clone(),
+        config: Some(tiny_settings(tmp.path())),
+        seed: Some(1),
+        ..TrainArgs::default()
+    };
+    let mut steps = 0;
+    let o = stage::train(&args, &AtomicBool::new(false), |_| steps += 1).unwrap();
+    assert_eq!(steps, 400);
+    let r = &o.report;
+    assert!(!r.interrupted);
+    assert_eq!(r.test.frames, 3);
+    eprintln!(
+        "tiny scene: test PSNR {:.2} dB (mean colour {:.2} dB), {} Gaussians",
+        r.test.psnr_mean, r.test.mean_colour_psnr_mean, r.gaussians
+    );
+    assert!(
+        r.test.psnr_mean > r.test.mean_colour_psnr_mean + 2.5,
+        "PSNR {} vs mean-colour {}",
+        r.test.psnr_mean,
+        r.test.mean_colour_psnr_mean
+    );
+    assert!(o.model.field.is_some());
+
+    // depth at every train frame, right size, finite, mostly covered
+    let sc = scene::Scene::open(&scene_dir).unwrap();
+    assert_eq!(r.train_frames, sc.train.frames.len());
+    for i in 0..sc.train.frames.len() {
+        let (w, h, d) =
+            scene::image_io::read_exr_depth(out.join("depth").join(format!("{i:04}.exr"))).unwrap();
+        assert_eq!((w, h), (40, 40));
+        assert!(d.iter().all(|v| v.is_finite() && *v >= 0.0));
+        assert!(d.iter().filter(|&&v| v > 0.0).count() > 800);
+    }
+    for i in 0..3 {
+        assert!(out.join("renders").join(format!("{i:04}.png")).is_file());
+    }
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["iterations"], 400);
+    assert!(report["test"]["psnr"].as_array().unwrap().len() == 3);
+    let settings = std::fs::read_to_string(out.join("settings.toml")).unwrap();
+    assert_eq!(TrainSettings::from_toml(&settings).unwrap(), r.settings);
+
+    // the saved model renders exactly as the trained one
+    let back = Model::load(&out).unwrap();
+    assert_eq!(back.splats, o.model.splats);
+    for f in &sc.test.frames {
+        let cam = sc.camera(f);
+        let a = o.model.render(&cam, f.time as f32);
+        let b = back.render(&cam, f.time as f32);
+        assert_eq!(a.rgb, b.rgb);
+        assert_eq!(a.depth, b.depth);
+    }
+
+    // `render` reproduces the reported test PSNR
+    let rendered = tmp.path().join("rendered");
+    let rr = stage::render(&out, &scene_dir, &rendered, Split::Test).unwrap();
+    assert_eq!(rr.evaluation.psnr, r.test.psnr);
+    assert!(rendered.join("renders/0002.png").is_file());
+}
+
+#[test]
+fn interrupted_run_still_saves_a_usable_model() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene_dir = tmp.path().join("scene");
+    tiny_scene(&scene_dir);
+    let out = tmp.path().join("out");
+    let args = TrainArgs {
+        scene: scene_dir,
+        out: out.clone(),
+        config: Some(tiny_settings(tmp.path())),
+        ..TrainArgs::default()
+    };
+    let stop = AtomicBool::new(false);
+    let o = stage::train(&args, &stop, |s| {
+        if s.iteration == 20 {
+            stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        }
+    })
+    .unwrap();
+    assert!(o.report.interrupted);
+    assert_eq!(o.report.iterations, 20);
+    let m = Model::load(&out).unwrap();
+    assert!(m.field.is_none());
+    assert_eq!(m.info.iterations, 20);
+}
+
+#[test]
+fn missing_image_is_an_error_naming_it_and_leaves_no_output() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene_dir = tmp.path().join("scene");
+    tiny_scene(&scene_dir);
+    std::fs::remove_file(scene_dir.join("images/train_0002.png")).unwrap();
+    let out = tmp.path().join("out");
+    let args = TrainArgs {
+        scene: scene_dir,
+        out: out.clone(),
+        iterations: Some(5),
+        ..TrainArgs::default()
+    };
+    let e = stage::train(&args, &AtomicBool::new(false), |_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("train_0002.png"), "{e}");
+    assert!(!out.exists());
+    let leftovers: Vec<_> = std::fs::read_dir(tmp.path())
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name())
+        .collect();
+    assert_eq!(leftovers.len(), 1, "{leftovers:?}"); // the scene only
+}
+
+#[test]
+fn bad_config_and_flags_are_errors_naming_the_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cfg = tmp.path().join("bad.toml");
+    std::fs::write(&cfg, "iteratons = 3\n").unwrap();
+    let args = TrainArgs {
+        config: Some(cfg.clone()),
+        ..TrainArgs::default()
+    };
+    let e = stage::resolve_settings(&args).unwrap_err().to_string();
+    assert!(e.contains("bad.toml") && e.contains("iteratons"), "{e}");
+    let args = TrainArgs {
+        iterations: Some(0),
+        ..TrainArgs::default()
+    };
+    assert!(stage::resolve_settings(&args).is_err());
+}
