@@ -55,8 +55,8 @@ pub fn footprint_radii(camera: &Camera, centres: &[[f32; 3]], radius_px: f64) ->
 }
 
 /// Weight floor on distances so an event exactly at a centre does not get infinite
-/// weight (world units).
-const MIN_DISTANCE: f32 = 1e-6;
+/// weight (world units): weights are `w_i = (1/max(d_i, MIN_DISTANCE)) / Σ_j (…)`.
+pub const MIN_DISTANCE: f32 = 1e-6;
 
 /// Binds every centre to its `k` nearest `points` within its own `radii[g]`
 /// (inclusive), weights ∝ 1/distance normalised to sum 1. `point_ids[i]` is what is

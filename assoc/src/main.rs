@@ -95,7 +95,9 @@ fn main() {
         Ok(())
     });
     if let Err(e) = result {
-        eprintln!("assoc: error: {e:#}");
+        // `{e}`, not `{e:#}`: scene errors already print their source after the file
+        // name, and the alternate form would repeat it ("…: No such file …: No such file …").
+        eprintln!("assoc: error: {e}");
         std::process::exit(1);
     }
 }

@@ -1,5 +1,6 @@
 //! kNN binding against brute force; weights; radius; degenerate inputs.
 
+use assoc::bind::MIN_DISTANCE;
 use assoc::bind_nearest;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -140,4 +141,76 @@ fn zero_radius_nan_centre_and_k_zero_bind_nothing() {
     assert_eq!((b.bound(), b.gaussians(), d.len()), (0, 1, 0));
     let (b, _) = bind_nearest(&[], &[], &[[0.0, 0.0, 0.0]], &[1.0], 3);
     assert_eq!(b.offsets, vec![0, 0]);
+}
+
+/// The weights are exactly the normalised inverse distances
+/// `w_i = (1/d_i) / Σ_j (1/d_j)`, with `d` floored at [`MIN_DISTANCE`] (documented in
+/// `assoc::bind`), recomputed here in f64 from the brute-force distances.
+#[test]
+fn weights_are_normalised_inverse_distances() {
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let points: Vec<[f32; 3]> = (0..400)
+        .map(|_| [rng.random(), rng.random(), rng.random()])
+        .collect();
+    let centres: Vec<[f32; 3]> = (0..200)
+        .map(|_| [rng.random(), rng.random(), rng.random()])
+        .collect();
+    let radii = vec![0.15f32; centres.len()];
+    let ids: Vec<u64> = (0..points.len() as u64).collect();
+    let (b, dist) = bind_nearest(&points, &ids, &centres, &radii, 3);
+    let mut checked = 0;
+    for (g, c) in centres.iter().enumerate() {
+        let (ev, w) = b.of(g);
+        let d: Vec<f64> = ev
+            .iter()
+            .map(|&i| {
+                let p = points[i as usize];
+                (0..3)
+                    .map(|a| (p[a] as f64 - c[a] as f64).powi(2))
+                    .sum::<f64>()
+                    .sqrt()
+            })
+            .collect();
+        let inv: Vec<f64> = d
+            .iter()
+            .map(|&d| 1.0 / d.max(MIN_DISTANCE as f64))
+            .collect();
+        let sum: f64 = inv.iter().sum();
+        let range = b.offsets[g] as usize..b.offsets[g + 1] as usize;
+        for (j, (&wj, &dj)) in w.iter().zip(&dist[range]).enumerate() {
+            assert!((dj as f64 - d[j]).abs() < 1e-6, "Gaussian {g}: distance");
+            let want = inv[j] / sum;
+            assert!(
+                (wj as f64 - want).abs() < 2e-6,
+                "Gaussian {g} slot {j}: weight {wj} vs {want}"
+            );
+            checked += 1;
+        }
+    }
+    // Most Gaussians bind to the full k = 3 at this density (≈ 5.6 points in reach).
+    assert!(checked > 400, "{checked} weights checked");
+    assert!(b.bound() > 150, "{} bound", b.bound());
+
+    // Distances 0, 1, 2 from the centre: d = 0 counts as MIN_DISTANCE.
+    let pts = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 2.0, 0.0]];
+    let (b, d) = bind_nearest(&pts, &[7, 8, 9], &[[0.0; 3]], &[5.0], 3);
+    assert_eq!(b.events, vec![7, 8, 9]);
+    assert_eq!(d, vec![0.0, 1.0, 2.0]);
+    let inv = [1.0 / MIN_DISTANCE as f64, 1.0, 0.5];
+    let sum: f64 = inv.iter().sum();
+    for (j, &w) in b.weights.iter().enumerate() {
+        let want = inv[j] / sum;
+        assert!(
+            (w as f64 - want).abs() <= 1e-6 * want,
+            "slot {j}: {w} vs {want}"
+        );
+    }
+    // Exactly: w = (1e6, 1, 0.5) / 1000001.5.
+    assert!((b.weights[1] as f64 - 1.0 / 1_000_001.5).abs() < 1e-12);
+    // Two events at the centre share the weight equally; a third at 1 gets ~1e-6.
+    let pts = [[0.0f32, 0.0, 0.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]];
+    let (b, _) = bind_nearest(&pts, &[1, 2, 3], &[[0.0; 3]], &[5.0], 3);
+    assert_eq!(b.weights[0], b.weights[1]);
+    assert!((b.weights[0] as f64 - 1e6 / 2_000_001.0).abs() < 1e-7);
+    assert!((b.weights[2] as f64 - 1.0 / 2_000_001.0).abs() < 1e-12);
 }

@@ -98,3 +98,46 @@ fn mismatched_inputs_are_errors() {
     let e = associate_frame(&cam, &depth, &alpha, &ev.as_slice(), &c, 0.0, &bad).unwrap_err();
     assert!(e.to_string().contains("k = 0"), "{e}");
 }
+
+#[test]
+fn default_radius_is_the_pixel_footprint_at_the_gaussians_depth() {
+    use assoc::{bind_nearest, footprint_radii};
+    use glam::DQuat;
+    use scene::Pose;
+    // Identity rotation: camera-space depth is exactly translation.z − world z.
+    let cam = Camera {
+        intrinsics: Intrinsics::from_fov_x(40, 30, 1.0),
+        cam_to_world: Pose {
+            rotation: DQuat::IDENTITY,
+            translation: DVec3::new(0.5, -0.25, 1.0),
+        },
+    };
+    let fx = cam.intrinsics.fx;
+    let radius_px = 2.0;
+    let centres = [
+        [0.5f32, -0.25, -1.0], // on the axis, depth 2
+        [0.5, -0.25, -4.0],    // on the axis, depth 5
+        [2.0, 0.5, -4.0],      // off the axis, depth 5 (range is larger)
+        [0.5, -0.25, 4.0],     // behind the camera, depth −3
+        [0.5, -0.25, 1.0],     // in the camera's plane, depth 0
+    ];
+    let r = footprint_radii(&cam, &centres, radius_px);
+    assert_eq!(r.len(), 5);
+    assert_eq!(r[0], (radius_px * 2.0 / fx) as f32);
+    assert_eq!(r[1], (radius_px * 5.0 / fx) as f32);
+    // fx = 20 / tan(0.5) ≈ 36.61: 2 px at depth 2 is ≈ 0.10926 world units.
+    assert!((r[0] - 0.109_26).abs() < 2e-6, "{}", r[0]);
+    // r ∝ depth (not range): 5/2, and the off-axis Gaussian at depth 5 gets r[1].
+    assert!((r[1] / r[0] - 2.5).abs() < 1e-6, "{} / {}", r[1], r[0]);
+    assert_eq!(r[2], r[1]);
+    // Scaling radius_px scales r linearly.
+    let r4 = footprint_radii(&cam, &centres, 2.0 * radius_px);
+    assert!((r4[1] / r[1] - 2.0).abs() < 1e-6);
+    assert_eq!((r[3], r[4], r4[3], r4[4]), (0.0, 0.0, 0.0, 0.0));
+
+    // Radius 0 binds nothing, even to a point exactly at the centre; the others bind.
+    let (b, d) = bind_nearest(&centres, &[10, 11, 12, 13, 14], &centres, &r, 3);
+    assert_eq!(b.offsets, vec![0, 1, 2, 3, 3, 3]);
+    assert_eq!(b.events, vec![10, 11, 12]);
+    assert_eq!(d, vec![0.0; 3]);
+}

@@ -3,8 +3,15 @@
 
 pub mod cm;
 pub mod cm_grad;
+pub mod eval;
+pub mod finetune;
+pub mod flowfile;
 pub mod lora;
 pub mod net;
+pub mod predict;
+pub mod pretrain;
 pub mod sim;
+pub mod source;
+pub mod stage;
 pub mod synthesize;
 pub mod voxel;

@@ -1,5 +1,6 @@
-//! `degs demo`: synthesise the default scene, run every available stage on it, and
-//! end with a summary table, an event preview image and summary.json.
+//! `degs demo`: synthesise the default scene, write a small experiment file for it,
+//! run every stage that is built through the runner, and end with a summary table
+//! (stage, time, cached?, key figures), an event preview and summary.json.
 
 use crate::experiment::Experiment;
 use crate::graph::Context;
@@ -12,18 +13,44 @@ use scene::image_io::{Image, write_png};
 use scene::manifest::Scene;
 use scene::synth::SynthConfig;
 use serde::Serialize;
+use serde_json::Value;
 use std::path::{Path, PathBuf};
+
+/// Side of the demo's square scene when the user sets no size (small enough that the
+/// whole demo runs in minutes on two cores).
+pub const DEMO_SIZE: u32 = 96;
+/// Warm-up iterations of the demo (the stage default is the paper's 3500).
+pub const DEMO_GAUSSIANS_ITERATIONS: u32 = 1500;
+/// LoCM epochs of the demo (the stage default is 3).
+pub const DEMO_EVFLOW_EPOCHS: usize = 1;
+
+/// What the demo runs.
+#[derive(Clone, Debug)]
+pub struct DemoOptions {
+    pub scene: SynthConfig,
+    /// `[gaussians] iterations`; None leaves the stage default.
+    pub gaussians_iterations: Option<u32>,
+    /// `[evflow] epochs`; None leaves the stage default.
+    pub evflow_epochs: Option<usize>,
+    pub jobs: usize,
+}
 
 /// What the demo produced.
 #[derive(Clone, Debug, Serialize)]
 pub struct DemoSummary {
     pub out: PathBuf,
+    pub experiment_file: PathBuf,
     pub scene: Option<PathBuf>,
     pub events: Option<usize>,
     pub preview: Option<PathBuf>,
     pub stages: Vec<DemoStage>,
+    /// Test-frame PSNR/SSIM of the final renders (`degs eval`).
     pub psnr: Option<f64>,
     pub ssim: Option<f64>,
+    /// Per-event flow EPE against the scene's ground truth (`degs eval`), px/s.
+    pub flow_epe: Option<f64>,
+    pub renders: Option<PathBuf>,
+    pub metrics: Option<PathBuf>,
     pub wall_s: f64,
 }
 
@@ -31,31 +58,71 @@ pub struct DemoSummary {
 pub struct DemoStage {
     pub stage: String,
     pub action: String,
+    pub cached: bool,
     /// Seconds it took (when it was built, if cached now).
     pub seconds: Option<f64>,
     pub peak_rss_kib: Option<u64>,
     pub output: Option<PathBuf>,
-    /// A few figures from its report.json (counts, metrics).
-    pub figures: Vec<(String, f64)>,
+    /// Key figures from its report.json: (label, value, unit).
+    pub figures: Vec<(String, f64, String)>,
     pub note: Option<String>,
 }
 
+/// The demo's experiment: the scene and the reduced stage settings.
+pub fn demo_experiment(opts: &DemoOptions) -> Experiment {
+    let mut exp = Experiment::synthetic("demo", opts.scene.clone());
+    if let Some(n) = opts.gaussians_iterations {
+        let t = exp.stages.entry("gaussians".into()).or_default();
+        t.insert("iterations".into(), toml::Value::Integer(n.into()));
+    }
+    if let Some(n) = opts.evflow_epochs {
+        let t = exp.stages.entry("evflow".into()).or_default();
+        t.insert("epochs".into(), toml::Value::Integer(n as i64));
+    }
+    exp
+}
+
+/// One line saying what the demo runs and what it reduced for speed.
+pub fn describe(opts: &DemoOptions, experiment_file: &Path) -> String {
+    let c = &opts.scene;
+    let mut reduced = Vec::new();
+    if let Some(n) = opts.gaussians_iterations {
+        reduced.push(format!("gaussians iterations = {n} (default 3500)"));
+    }
+    if let Some(n) = opts.evflow_epochs {
+        reduced.push(format!("evflow epochs = {n} (default 3)"));
+    }
+    format!(
+        "degs demo: synthetic `{}` scene {}x{}, {} s, train frames at {} fps, {} test frames; {}; \
+         experiment file {} (run it with full settings: `degs demo --full`)",
+        c.preset,
+        c.width,
+        c.height,
+        c.duration,
+        c.train_fps,
+        c.test_frames,
+        if reduced.is_empty() {
+            "stage defaults".to_string()
+        } else {
+            format!("reduced for speed: {}", reduced.join(", "))
+        },
+        experiment_file.display()
+    )
+}
+
 /// Run the demo into `ctx.cache.root`.
-pub fn demo(
-    cfg: SynthConfig,
-    ctx: &Context,
-    jobs: usize,
-    progress: &Progress,
-) -> Result<DemoSummary> {
+pub fn demo(opts: &DemoOptions, ctx: &Context, progress: &Progress) -> Result<DemoSummary> {
     let out = ctx.cache.root.clone();
     std::fs::create_dir_all(&out).with_context(|| format!("{}: cannot create", out.display()))?;
-    let exp = Experiment::synthetic("demo", cfg);
-    scene::atomic::write_bytes_atomic(&out.join("demo.toml"), exp.to_toml().as_bytes())?;
-    let opts = RunOptions {
-        jobs,
+    let file = out.join("demo.toml");
+    scene::atomic::write_bytes_atomic(&file, demo_experiment(opts).to_toml().as_bytes())?;
+    let exp = Experiment::load(&file)?;
+    eprintln!("{}", describe(opts, &file));
+    let run_opts = RunOptions {
+        jobs: opts.jobs,
         ..Default::default()
     };
-    let record = runner::run(&exp, ctx, &opts, progress)?;
+    let record = runner::run(&exp, ctx, &run_opts, progress)?;
     let scene_dir = record
         .stages
         .first()
@@ -70,15 +137,28 @@ pub fn demo(
         write_png(&path, &event_preview(&ev))?;
         preview = Some(path);
     }
-    let metrics = crate::eval::eval_run(&ctx.cache.run_dir("demo")).ok();
+    let run_dir = ctx.cache.run_dir("demo");
+    let metrics = crate::eval::eval_run(&run_dir).ok();
+    let renders = ["deform", "gaussians"].iter().find_map(|s| {
+        record
+            .stage(s)
+            .filter(|r| r.action.has_output())
+            .and_then(|r| r.entry.as_ref())
+            .map(|e| e.join("renders"))
+            .filter(|r| r.is_dir())
+    });
     let summary = DemoSummary {
         out: out.clone(),
+        experiment_file: file,
         scene: scene_dir,
         events,
         preview,
         stages: stage_rows(&record),
         psnr: metrics.as_ref().and_then(|m| m.psnr_mean),
         ssim: metrics.as_ref().and_then(|m| m.ssim_mean),
+        flow_epe: metrics.as_ref().and_then(|m| m.flow_epe),
+        renders,
+        metrics: metrics.map(|_| run_dir.join("metrics.json")),
         wall_s: record.wall_s,
     };
     scene::atomic::write_json_atomic(&out.join("summary.json"), &summary)?;
@@ -89,57 +169,76 @@ fn stage_rows(record: &RunRecord) -> Vec<DemoStage> {
     record
         .stages
         .iter()
-        .map(|s| DemoStage {
-            stage: s.stage.clone(),
-            action: s.action.as_str().to_string(),
-            seconds: s
-                .action
-                .has_output()
-                .then(|| s.built_wall_s.unwrap_or(s.wall_s)),
-            peak_rss_kib: s.peak_rss_kib,
-            output: s.entry.clone().filter(|_| s.action.has_output()),
-            figures: s
-                .entry
-                .as_deref()
-                .filter(|_| s.action.has_output())
-                .map(report_figures)
-                .unwrap_or_default(),
-            note: match s.action {
-                Action::Unavailable => Some("not available yet".into()),
-                _ => s.error.clone(),
-            },
+        .map(|s| {
+            let entry = s.entry.as_deref().filter(|_| s.action.has_output());
+            DemoStage {
+                stage: s.stage.clone(),
+                action: s.action.as_str().to_string(),
+                cached: s.action == Action::Cached,
+                seconds: s
+                    .action
+                    .has_output()
+                    .then(|| s.built_wall_s.unwrap_or(s.wall_s)),
+                peak_rss_kib: s.peak_rss_kib,
+                output: entry.map(Path::to_path_buf),
+                figures: entry
+                    .map(|e| report_figures(&s.stage, e))
+                    .unwrap_or_default(),
+                note: s.error.clone(),
+            }
         })
         .collect()
 }
 
-/// Up to four numeric top-level fields of `dir/report.json` that are counts or metrics.
-fn report_figures(dir: &Path) -> Vec<(String, f64)> {
+/// A number at a `/`-separated path of a JSON value.
+fn at(v: &Value, path: &str) -> Option<f64> {
+    path.split('/')
+        .try_fold(v, |v, k| v.get(k))
+        .and_then(Value::as_f64)
+        .filter(|x| x.is_finite())
+}
+
+/// The key figures of a stage's `report.json` (label, value, unit).
+pub fn report_figures(stage: &str, dir: &Path) -> Vec<(String, f64, String)> {
     let Some(v) = std::fs::read(dir.join("report.json"))
         .ok()
-        .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
+        .and_then(|b| serde_json::from_slice::<Value>(&b).ok())
     else {
         return vec![];
     };
-    let Some(obj) = v.as_object() else {
-        return vec![];
+    let wanted: &[(&str, &str, f64, &str)] = match stage {
+        "synth" => &[
+            ("train_frames", "train frames", 1.0, ""),
+            ("test_frames", "test frames", 1.0, ""),
+            ("events", "events", 1.0, ""),
+        ],
+        "evflow" => &[
+            ("flow_epe_px_s", "EPE", 1.0, "px/s"),
+            ("flow_err_px", "EPE", 1.0, "px"),
+            ("flow_outliers", "outliers", 100.0, "%"),
+            ("warp_gain", "warp gain", 1.0, ""),
+        ],
+        "gaussians" => &[
+            ("test/psnr_mean", "test PSNR", 1.0, "dB"),
+            ("test/ssim_mean", "SSIM", 1.0, ""),
+            ("gaussians", "Gaussians", 1.0, ""),
+        ],
+        "assoc" => &[
+            ("bound_fraction_mean", "bound", 100.0, "%"),
+            ("gaussians", "of Gaussians", 1.0, ""),
+        ],
+        _ => &[
+            ("test/psnr_mean", "test PSNR", 1.0, "dB"),
+            ("test/ssim_mean", "SSIM", 1.0, ""),
+            ("psnr", "PSNR", 1.0, "dB"),
+            ("ssim", "SSIM", 1.0, ""),
+        ],
     };
-    let wanted = [
-        "events",
-        "frames",
-        "gaussians",
-        "count",
-        "psnr",
-        "ssim",
-        "epe",
-        "bound",
-    ];
-    obj.iter()
-        .filter(|(k, _)| {
-            let k = k.to_ascii_lowercase();
-            wanted.iter().any(|w| k.contains(w)) && !k.ends_with("_s")
+    wanted
+        .iter()
+        .filter_map(|(path, label, scale, unit)| {
+            at(&v, path).map(|x| (label.to_string(), x * scale, unit.to_string()))
         })
-        .filter_map(|(k, x)| x.as_f64().map(|x| (k.clone(), x)))
-        .take(4)
         .collect()
 }
 
@@ -171,66 +270,89 @@ pub fn event_preview(ev: &EventStream) -> Image {
     img
 }
 
+fn fmt_figure((label, v, unit): &(String, f64, String)) -> String {
+    // counts print as integers; percentages and measurements keep their decimals
+    let num = if unit.is_empty() && v.fract() == 0.0 && v.abs() < 1e15 {
+        format!("{}", *v as i64)
+    } else if v.abs() >= 100.0 {
+        format!("{v:.1}")
+    } else if v.abs() >= 1.0 {
+        format!("{v:.2}")
+    } else {
+        format!("{v:.4}")
+    };
+    match unit.as_str() {
+        "" => format!("{label} {num}"),
+        "%" => format!("{label} {num}%"),
+        u => format!("{label} {num} {u}"),
+    }
+}
+
 /// The summary table printed at the end of the demo.
 pub fn format_summary(s: &DemoSummary) -> String {
     let mut t = format!(
-        "\n{:<10} {:<12} {:>8} {:>10}  {}\n",
-        "stage", "status", "time s", "peak mem", "figures / output"
+        "\n{:<10} {:<12} {:>8} {:>7} {:>10}  {}\n",
+        "stage", "status", "time s", "cached", "peak mem", "key figures"
     );
     for r in &s.stages {
-        let figs = r
+        let mut text = r
             .figures
             .iter()
-            .map(|(k, v)| format!("{k}={}", fmt_num(*v)))
+            .map(fmt_figure)
             .collect::<Vec<_>>()
-            .join(" ");
+            .join(", ");
+        if let Some(note) = &r.note {
+            if !text.is_empty() {
+                text += "; ";
+            }
+            text += note;
+        }
         t += &format!(
-            "{:<10} {:<12} {:>8} {:>10}  {}\n",
+            "{:<10} {:<12} {:>8} {:>7} {:>10}  {}\n",
             r.stage,
             r.action,
             r.seconds.map_or("-".into(), |x| format!("{x:.2}")),
+            if r.cached { "yes" } else { "no" },
             fmt_kib(r.peak_rss_kib),
-            [figs, r.note.clone().unwrap_or_default()].join(" ").trim()
+            text
         );
     }
     t += "\n";
+    let mut line = |label: &str, value: String| t += &format!("{label:<16}{value}\n");
+    line("experiment:", s.experiment_file.display().to_string());
     if let Some(scene) = &s.scene {
-        t += &format!("scene:          {}\n", scene.display());
+        line("scene:", scene.display().to_string());
     }
     if let Some(n) = s.events {
-        t += &format!("events:         {n}\n");
+        line("events:", n.to_string());
     }
     if let Some(p) = &s.preview {
-        t += &format!("event preview:  {}\n", p.display());
+        line("event preview:", p.display().to_string());
     }
-    for r in s
-        .stages
-        .iter()
-        .filter(|r| r.output.is_some() && r.stage != "synth")
-    {
-        t += &format!(
-            "{:<15} {}\n",
-            format!("{}:", r.stage),
-            r.output.as_ref().unwrap().display()
-        );
+    for r in s.stages.iter().filter(|r| r.stage != "synth") {
+        if let Some(o) = &r.output {
+            line(&format!("{}:", r.stage), o.display().to_string());
+        }
+    }
+    if let Some(r) = &s.renders {
+        line("renders:", format!("{} (test frames)", r.display()));
     }
     if let (Some(p), Some(q)) = (s.psnr, s.ssim) {
-        t += &format!("test PSNR/SSIM: {p:.2} dB / {q:.4}\n");
+        line("test PSNR/SSIM:", format!("{p:.2} dB / {q:.4}"));
     }
-    t += &format!(
-        "summary:        {}\nrun record:     {}\n",
-        s.out.join("summary.json").display(),
-        s.out.join("runs/demo/run.json").display()
+    if let Some(e) = s.flow_epe {
+        line("flow EPE:", format!("{e:.3} px/s (per event, vs gt)"));
+    }
+    if let Some(m) = &s.metrics {
+        line("metrics:", m.display().to_string());
+    }
+    line("summary:", s.out.join("summary.json").display().to_string());
+    line(
+        "run record:",
+        s.out.join("runs/demo/run.json").display().to_string(),
     );
+    line("wall time:", format!("{:.2} s", s.wall_s));
     t
-}
-
-fn fmt_num(v: f64) -> String {
-    if v.fract() == 0.0 && v.abs() < 1e15 {
-        format!("{}", v as i64)
-    } else {
-        format!("{v:.3}")
-    }
 }
 
 #[cfg(test)]
@@ -267,5 +389,26 @@ mod tests {
             p: vec![],
         };
         assert!(event_preview(&ev).data.iter().all(|&v| v == 1.0));
+    }
+
+    #[test]
+    fn key_figures_come_from_each_stage_report() {
+        let d = tempfile::tempdir().unwrap();
+        let write = |s: &str| std::fs::write(d.path().join("report.json"), s).unwrap();
+        write(r#"{"test": {"psnr_mean": 27.5, "ssim_mean": 0.91}, "gaussians": 4200}"#);
+        let g = report_figures("gaussians", d.path());
+        assert_eq!(
+            g.iter().map(fmt_figure).collect::<Vec<_>>(),
+            ["test PSNR 27.50 dB", "SSIM 0.9100", "Gaussians 4200"]
+        );
+        write(r#"{"bound_fraction_mean": 0.625, "gaussians": 800}"#);
+        let a = report_figures("assoc", d.path());
+        assert_eq!(fmt_figure(&a[0]), "bound 62.50%");
+        write(r#"{"flow_epe_px_s": 12.25, "flow_err_px": null, "warp_gain": 1.5}"#);
+        let e = report_figures("evflow", d.path());
+        assert_eq!(e.len(), 2);
+        assert_eq!(fmt_figure(&e[0]), "EPE 12.25 px/s");
+        write("not json");
+        assert!(report_figures("evflow", d.path()).is_empty());
     }
 }

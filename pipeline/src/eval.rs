@@ -18,9 +18,18 @@ pub struct Metrics {
     pub frames: Vec<FrameMetrics>,
     pub psnr_mean: Option<f64>,
     pub ssim_mean: Option<f64>,
-    /// Mean end-point error of the flow (px/s) as reported by the evflow stage against
-    /// the scene's ground truth, when it has one.
+    /// Mean end-point error (px/s) of the per-event flow against the scene's ground
+    /// truth (`gt/event_flow.bin`), over every non-noise event of every window; when
+    /// the flow files cannot be read, the figure the evflow stage reported.
     pub flow_epe: Option<f64>,
+    /// The same error in pixels over each event's window, and the fraction of events
+    /// above 3 px.
+    pub flow_err_px: Option<f64>,
+    pub flow_outliers: Option<f64>,
+    /// Events the flow figures are computed over.
+    pub flow_events: usize,
+    /// Where the flow figures come from: "gt/event_flow.bin" or "evflow report".
+    pub flow_source: Option<String>,
     /// Total wall time of the stages that built this run's entries, seconds.
     pub total_stage_s: f64,
     pub stage_s: Vec<(String, f64)>,
@@ -210,6 +219,69 @@ fn find_epe(v: &serde_json::Value) -> Option<f64> {
     }
 }
 
+/// Per-event flow error of a directory of `.evflow` files against ground truth.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FlowError {
+    /// Mean end-point error, px/s.
+    pub epe_px_s: f64,
+    /// Mean error in pixels over each event's window.
+    pub err_px: Option<f64>,
+    /// Fraction of events whose error over the window exceeds 3 px.
+    pub outliers: Option<f64>,
+    pub events: usize,
+}
+
+/// Compare every `flow_dir/*.evflow` with `gt_path` (`gt/event_flow.bin`), matching
+/// events by their index into the scene's stream; noise events (ground-truth object
+/// [`NOISE_ID`](scene::synth::gt::NOISE_ID)) are left out. None when no event matches.
+pub fn flow_error(flow_dir: &Path, gt_path: &Path) -> Result<Option<FlowError>> {
+    let gt = scene::synth::gt::read_event_flow_gt(gt_path)?;
+    let mut files: Vec<PathBuf> = std::fs::read_dir(flow_dir)
+        .with_context(|| format!("{}: cannot list", flow_dir.display()))?
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|e| e == "evflow"))
+        .collect();
+    files.sort();
+    let (mut sum, mut sum_px, mut out, mut n) = (0.0f64, 0.0f64, 0usize, 0usize);
+    for f in &files {
+        let flow = evflow::flowfile::read_evflow(f)?;
+        if (flow.width, flow.height) != (gt.width, gt.height) {
+            bail!(
+                "{}: flow is {}x{} but the ground truth {} is {}x{}",
+                f.display(),
+                flow.width,
+                flow.height,
+                gt_path.display(),
+                gt.width,
+                gt.height
+            );
+        }
+        let span = flow.t_b - flow.t_a;
+        for (k, idx) in flow.index.iter().enumerate() {
+            let Ok(j) = gt.index.binary_search(idx) else {
+                continue;
+            };
+            if gt.object[j] == scene::synth::gt::NOISE_ID {
+                continue;
+            }
+            let du = flow.u[k] as f64 - gt.u[j] as f64;
+            let dv = flow.v[k] as f64 - gt.v[j] as f64;
+            let err = du.hypot(dv);
+            sum += err;
+            sum_px += err * span;
+            out += usize::from(err * span > 3.0);
+            n += 1;
+        }
+    }
+    Ok((n > 0).then(|| FlowError {
+        epe_px_s: sum / n as f64,
+        err_px: Some(sum_px / n as f64),
+        outliers: Some(out as f64 / n as f64),
+        events: n,
+    }))
+}
+
 /// Evaluate the run in `run_dir` (a `runs/<name>/` directory) and write its metrics.json.
 pub fn eval_run(run_dir: &Path) -> Result<Metrics> {
     let record = RunRecord::read(&run_dir.join("run.json"))?;
@@ -263,14 +335,30 @@ pub fn eval_run(run_dir: &Path) -> Result<Metrics> {
     let mean = |f: &dyn Fn(&FrameMetrics) -> f64| {
         (!frames.is_empty()).then(|| frames.iter().map(f).sum::<f64>() / frames.len() as f64)
     };
-    let flow_epe = if scene_dir.join("gt").is_dir() {
-        entry_of("evflow")
-            .and_then(|e| std::fs::read(e.join("report.json")).ok())
-            .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
-            .and_then(|v| find_epe(&v))
-    } else {
-        None
-    };
+    let mut flow = None;
+    let mut flow_source = None;
+    let gt_path = scene_dir.join("gt").join("event_flow.bin");
+    if let Some(entry) = entry_of("evflow").filter(|_| gt_path.is_file()) {
+        match flow_error(&entry.join("flow"), &gt_path) {
+            Ok(Some(f)) => {
+                flow = Some(f);
+                flow_source = Some("gt/event_flow.bin".to_string());
+            }
+            _ => {
+                let reported = std::fs::read(entry.join("report.json"))
+                    .ok()
+                    .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
+                    .and_then(|v| find_epe(&v));
+                if let Some(epe) = reported {
+                    flow = Some(FlowError {
+                        epe_px_s: epe,
+                        ..FlowError::default()
+                    });
+                    flow_source = Some("evflow report".to_string());
+                }
+            }
+        }
+    }
     let stage_s: Vec<(String, f64)> = record
         .stages
         .iter()
@@ -283,7 +371,11 @@ pub fn eval_run(run_dir: &Path) -> Result<Metrics> {
         psnr_mean: mean(&|f| f.psnr),
         ssim_mean: mean(&|f| f.ssim),
         frames,
-        flow_epe,
+        flow_epe: flow.as_ref().map(|f| f.epe_px_s),
+        flow_err_px: flow.as_ref().and_then(|f| f.err_px),
+        flow_outliers: flow.as_ref().and_then(|f| f.outliers),
+        flow_events: flow.as_ref().map_or(0, |f| f.events),
+        flow_source,
         total_stage_s: stage_s.iter().map(|(_, t)| t).sum(),
         stage_s,
     };
@@ -295,16 +387,20 @@ pub fn eval_run(run_dir: &Path) -> Result<Metrics> {
 pub fn compare_table(runs: &[(String, Metrics)]) -> String {
     let f = |v: Option<f64>, p: usize| v.map_or("-".to_string(), |x| format!("{x:.p$}"));
     let mut s = format!(
-        "{:<24} {:>8} {:>7} {:>9} {:>10} {:>8}\n",
-        "run", "PSNR dB", "SSIM", "flow EPE", "renders", "time s"
+        "{:<24} {:>8} {:>7} {:>7} {:>11} {:>8} {:>9} {:>10} {:>8}\n",
+        "run", "PSNR dB", "SSIM", "frames", "EPE px/s", "EPE px", "outliers", "renders", "time s"
     );
     for (name, m) in runs {
         s += &format!(
-            "{:<24} {:>8} {:>7} {:>9} {:>10} {:>8.1}\n",
+            "{:<24} {:>8} {:>7} {:>7} {:>11} {:>8} {:>9} {:>10} {:>8.1}\n",
             name,
             f(m.psnr_mean, 2),
             f(m.ssim_mean, 4),
+            m.frames.len(),
             f(m.flow_epe, 3),
+            f(m.flow_err_px, 3),
+            m.flow_outliers
+                .map_or("-".to_string(), |x| format!("{:.1}%", 100.0 * x)),
             m.render_stage.as_deref().unwrap_or("-"),
             m.total_stage_s
         );

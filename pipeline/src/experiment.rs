@@ -148,8 +148,22 @@ impl Experiment {
         self.stages.get(stage).cloned().unwrap_or_default()
     }
 
-    /// The resolved experiment as TOML, every synthetic-scene default written out.
+    /// The resolved experiment as TOML, every synthetic-scene default written out
+    /// (`degs config show` adds each stage's defaults as comments).
     pub fn to_toml(&self) -> String {
+        let mut out = self.scene_toml();
+        for stage in SETTINGS_STAGES {
+            out += &format!(
+                "\n# {stage}: keys not set here take the defaults of the `{stage}` binary \
+                 (its resolved settings land in the cache entry's settings.toml)\n"
+            );
+            out += &crate::defaults::stage_section(stage, &self.settings(stage));
+        }
+        out
+    }
+
+    /// `name` and the `[scene]` part of [`Experiment::to_toml`].
+    pub fn scene_toml(&self) -> String {
         let mut out = format!("name = {}\n\n[scene]\n", Value::String(self.name.clone()));
         match &self.scene {
             SceneSource::Dir(d) => {
@@ -164,14 +178,6 @@ impl Experiment {
                 wrap.insert("scene".into(), Value::Table(scene));
                 out += &toml::to_string(&wrap).unwrap_or_default();
             }
-        }
-        for stage in SETTINGS_STAGES {
-            let table = self.settings(stage);
-            out += &format!(
-                "\n# {stage}: keys not set here take the defaults of the `{stage}` binary \
-                 (its resolved settings land in the cache entry's settings.toml)\n[{stage}]\n"
-            );
-            out += &canon::to_toml(&table);
         }
         out
     }
@@ -343,6 +349,14 @@ mod tests {
         .unwrap();
         let again = parse(&e.to_toml()).unwrap();
         assert_eq!(again.scene, e.scene);
+        assert_eq!(again.stages, e.stages);
+        // nested stage tables stay under their stage
+        let e = parse(
+            "name = \"a\"\n[scene]\nsynth = \"rigid\"\n[gaussians]\niterations = 5\n\
+             [gaussians.field]\nwidth = 32\n",
+        )
+        .unwrap();
+        let again = parse(&e.to_toml()).unwrap();
         assert_eq!(again.stages, e.stages);
     }
 

@@ -15,28 +15,41 @@ use anyhow::Result;
 use std::path::{Path, PathBuf};
 use toml::Table;
 
-/// One stage: its name and the inputs it needs as (node name, command-line flag).
+/// One stage: its name, the verb its binary takes (`evflow finetune`, `gaussians
+/// train`; none for `assoc`) and the inputs it needs as (node name, command-line flag).
 pub struct StageDef {
     pub name: &'static str,
+    pub verb: Option<&'static str>,
     pub needs: &'static [(&'static str, &'static str)],
+    /// The cargo package that builds the binary (for "how to build it" messages).
+    pub package: &'static str,
 }
 
 /// The external stages in run order (node 0 is the scene: `synth` or a directory).
 pub const STAGES: [StageDef; 4] = [
     StageDef {
         name: "evflow",
+        verb: Some("finetune"),
+        package: "evflow",
         needs: &[("scene", "--scene")],
     },
     StageDef {
         name: "gaussians",
+        verb: Some("train"),
+        package: "gaussians",
         needs: &[("scene", "--scene")],
     },
     StageDef {
         name: "assoc",
+        verb: None,
+        package: "assoc",
         needs: &[("scene", "--scene"), ("gaussians", "--model")],
     },
     StageDef {
         name: "deform",
+        // Not written yet: set its verb here when the crate lands.
+        verb: None,
+        package: "deform",
         needs: &[
             ("scene", "--scene"),
             ("gaussians", "--model"),
@@ -73,6 +86,8 @@ pub struct Node {
     /// "scene" for a directory, else the stage name.
     pub stage: String,
     pub kind: NodeKind,
+    /// The sub-command given before the flags (`synth`, `finetune`, `train`).
+    pub verb: Option<&'static str>,
     pub binary: Option<PathBuf>,
     pub binary_hash: Option<String>,
     /// Canonical settings (for synth: the whole SynthConfig).
@@ -155,6 +170,7 @@ pub fn resolve(exp: &Experiment, ctx: &Context, hashes: &mut BinaryHashes) -> Re
         SceneSource::Dir(dir) => Node {
             stage: "scene".into(),
             kind: NodeKind::SceneDir(dir.clone()),
+            verb: None,
             binary: None,
             binary_hash: None,
             settings: Table::new(),
@@ -172,6 +188,7 @@ pub fn resolve(exp: &Experiment, ctx: &Context, hashes: &mut BinaryHashes) -> Re
             Node {
                 stage: "synth".into(),
                 kind: NodeKind::Synth,
+                verb: Some("synth"),
                 binary: Some(ctx.degs.clone()),
                 binary_hash: Some(binary_hash),
                 settings,
@@ -199,24 +216,26 @@ pub fn resolve(exp: &Experiment, ctx: &Context, hashes: &mut BinaryHashes) -> Re
         let blocked = inputs
             .iter()
             .find(|i| nodes[i.node].key.is_none())
-            .map(|i| format!("needs {} (not available yet)", nodes[i.node].stage));
+            .map(|i| format!("needs {}, which is not built yet", nodes[i.node].stage));
         let unavailable = match (&binary, blocked) {
-            (None, _) => Some(format!(
-                "not available yet (no `{}` binary {})",
-                def.name,
-                match &ctx.stage_dir {
-                    Some(d) => format!("in {}", d.display()),
-                    None => "next to degs or on PATH".into(),
-                }
-            )),
+            (None, _) => Some(not_built_message(def, ctx.stage_dir.as_deref())),
             (Some(_), b) => b,
         };
         let key = match (&binary_hash, &unavailable) {
             (Some(bh), None) => {
-                let in_keys: Vec<(&str, &str)> = inputs
+                let mut in_keys: Vec<(&str, &str)> = inputs
                     .iter()
                     .map(|i| (i.flag, nodes[i.node].key.as_deref().unwrap_or("")))
                     .collect();
+                // The flow network's base weights are an input like any other: replacing
+                // the shipped file (or pointing `weights` elsewhere) re-runs evflow.
+                let weights = match def.name {
+                    "evflow" => base_weights_hash(&settings, hashes)?,
+                    _ => None,
+                };
+                if let Some(w) = &weights {
+                    in_keys.push(("weights", w));
+                }
                 Some(key_of(def.name, bh, &settings, &in_keys))
             }
             _ => None,
@@ -224,6 +243,7 @@ pub fn resolve(exp: &Experiment, ctx: &Context, hashes: &mut BinaryHashes) -> Re
         nodes.push(Node {
             stage: def.name.into(),
             kind: NodeKind::External,
+            verb: def.verb,
             binary,
             binary_hash,
             settings,
@@ -233,6 +253,37 @@ pub fn resolve(exp: &Experiment, ctx: &Context, hashes: &mut BinaryHashes) -> Re
         });
     }
     Ok(nodes)
+}
+
+/// Content hash of the evflow base weights these settings resolve to (`weights = FILE`,
+/// else `$EVFLOW_WEIGHTS`, else the shipped file); `None` when none can be found (the
+/// stage then fails with its own message).
+fn base_weights_hash(settings: &Table, hashes: &mut BinaryHashes) -> Result<Option<String>> {
+    let explicit = settings
+        .get("weights")
+        .and_then(|v| v.as_str())
+        .map(std::path::PathBuf::from);
+    match evflow::finetune::resolve_weights(explicit.as_deref()) {
+        Ok(path) if path.is_file() => Ok(Some(hashes.hash(&path)?)),
+        _ => Ok(None),
+    }
+}
+
+/// Why a stage cannot run when its binary is missing, and how to build it.
+pub fn not_built_message(def: &StageDef, stage_dir: Option<&Path>) -> String {
+    let place = match stage_dir {
+        Some(d) => format!("in {}", d.display()),
+        None => "next to degs or on PATH".into(),
+    };
+    format!(
+        "not built yet: no `{}` binary {place} (build it with `cargo build --release -p {}`)",
+        def.name, def.package
+    )
+}
+
+/// The definition of an external stage by name.
+pub fn stage_def(name: &str) -> Option<&'static StageDef> {
+    STAGES.iter().find(|d| d.name == name)
 }
 
 /// Index of a node by name ("scene" and "synth" are node 0).
@@ -302,8 +353,8 @@ pub fn command(nodes: &[Node], i: usize, cache: &Cache, out: &Path, config: &Pat
         .map(|b| b.display().to_string())
         .unwrap_or_else(|| n.stage.clone());
     let mut args = vec![bin];
-    if matches!(n.kind, NodeKind::Synth) {
-        args.push("synth".into());
+    if let Some(verb) = n.verb {
+        args.push(verb.into());
     }
     for input in &n.inputs {
         args.push(input.flag.into());

@@ -6,6 +6,7 @@
 
 pub mod cache;
 pub mod canon;
+pub mod defaults;
 pub mod demo;
 pub mod eval;
 pub mod experiment;

@@ -126,10 +126,13 @@ enum Command {
         #[command(subcommand)]
         command: EventsCommand,
     },
-    /// Synthesise the default scene (preset rigid, 128x128) and run every stage that
-    /// exists on it; ends with a summary table, events_preview.png and summary.json.
+    /// Synthesise the default scene (preset rigid at 96x96), write an experiment file
+    /// for it (OUT/demo.toml: 1500 warm-up iterations and 1 LoCM epoch so it runs in
+    /// minutes on two cores) and run every stage that is built; ends with a summary
+    /// table (time, cached?, key figures), where the renders are, summary.json and
+    /// events_preview.png. Running it again reuses every cached stage.
     Demo {
-        /// Where everything goes (cache, runs, summary)
+        /// Where everything goes (cache, runs, demo.toml, summary)
         #[arg(long, default_value = "degs-demo")]
         out: PathBuf,
         /// Look for stage binaries only in DIR [env: DEGS_STAGE_DIR]
@@ -138,9 +141,18 @@ enum Command {
         /// Synthetic preset: static, rigid, nonrigid, fast
         #[arg(long, default_value = "rigid")]
         preset: String,
-        /// Override a scene setting, e.g. --set width=64
+        /// Override a scene setting, e.g. --set width=128 --set height=128
         #[arg(long = "set", value_name = "KEY=VALUE")]
         set: Vec<String>,
+        /// Warm-up iterations of the gaussians stage
+        #[arg(long, default_value_t = pipeline::demo::DEMO_GAUSSIANS_ITERATIONS)]
+        iterations: u32,
+        /// LoCM fine-tuning epochs of the evflow stage
+        #[arg(long, default_value_t = pipeline::demo::DEMO_EVFLOW_EPOCHS)]
+        epochs: usize,
+        /// Use every stage's default settings (3500 iterations, 3 epochs) instead
+        #[arg(long, conflicts_with_all = ["iterations", "epochs"])]
+        full: bool,
         /// Stages to run at the same time
         #[arg(short = 'j', long, default_value_t = 2)]
         jobs: usize,
@@ -186,21 +198,29 @@ impl Where {
 enum EventsCommand {
     /// Convert an event file between formats, chosen by extension: .txt (ECD `t x y p`),
     /// .npz (x, y, t in µs, p), .evs (degs columnar binary), .aedat4 (read only).
+    /// The output is written atomically; a bad input gives one line naming the file.
     Convert {
         input: PathBuf,
         output: PathBuf,
         /// Sensor size WxH for formats that do not store it (text, npz)
         #[arg(long, value_name = "WxH")]
         sensor: Option<String>,
-        /// Multiply coordinates by this factor (e.g. 32 for HS-ERGB's subpixel ints)
-        #[arg(long)]
+        /// .npz input only: the stored x, y are pixel coordinates times this factor;
+        /// they are divided by it and rounded to the nearest pixel
+        #[arg(long, value_name = "FACTOR")]
         coord_scale: Option<f64>,
+        /// .npz input from HS-ERGB, which stores x and y multiplied by 32: the same as
+        /// --coord-scale 32
+        #[arg(long, conflicts_with = "coord_scale")]
+        hsergb: bool,
     },
 }
 
 #[derive(Subcommand)]
 enum ConfigCommand {
-    /// Print the resolved experiment with every synthetic-scene default written out.
+    /// Print the resolved experiment: every synthetic-scene setting, each stage's own
+    /// keys and, commented out under them, every default of that stage. Unknown stage
+    /// keys are errors naming the key.
     Show { experiment: PathBuf },
 }
 
@@ -222,7 +242,7 @@ fn real_main() -> Result<()> {
             verify,
             quiet,
         } => {
-            let exp = Experiment::load(&experiment)?;
+            let exp = load_checked(&experiment)?;
             let ctx = place.context()?;
             let opts = RunOptions {
                 until: until.as_deref().map(graph::parse_stage).transpose()?,
@@ -254,7 +274,10 @@ fn real_main() -> Result<()> {
         Command::Config {
             command: ConfigCommand::Show { experiment },
         } => {
-            print!("{}", Experiment::load(&experiment)?.to_toml());
+            print!(
+                "{}",
+                pipeline::defaults::show(&Experiment::load(&experiment)?)?
+            );
             Ok(())
         }
         Command::Synth {
@@ -283,7 +306,7 @@ fn real_main() -> Result<()> {
             place,
             verify,
         } => {
-            let exp = Experiment::load(&experiment)?;
+            let exp = load_checked(&experiment)?;
             let rows = pipeline::status::status(&exp, &place.context()?, verify)?;
             print!("{}", pipeline::status::format_status(&rows));
             Ok(())
@@ -293,7 +316,7 @@ fn real_main() -> Result<()> {
             place,
             all,
         } => {
-            let exp = Experiment::load(&experiment)?;
+            let exp = load_checked(&experiment)?;
             print!("{}", pipeline::status::plan(&exp, &place.context()?, all)?);
             Ok(())
         }
@@ -322,8 +345,10 @@ fn real_main() -> Result<()> {
                     output,
                     sensor,
                     coord_scale,
+                    hsergb,
                 },
         } => {
+            let coord_scale = if hsergb { Some(32.0) } else { coord_scale };
             let sensor = sensor
                 .map(|s| {
                     s.split_once(['x', 'X'])
@@ -354,15 +379,27 @@ fn real_main() -> Result<()> {
             stages,
             preset,
             set,
+            iterations,
+            epochs,
+            full,
             jobs,
         } => {
-            let cfg = pipeline::synth::load_config(None, Some(&preset), &set)?;
+            let size = pipeline::demo::DEMO_SIZE;
+            let mut all = vec![format!("width={size}"), format!("height={size}")];
+            all.extend(set);
+            let cfg = pipeline::synth::load_config(None, Some(&preset), &all)?;
+            let opts = pipeline::demo::DemoOptions {
+                scene: cfg,
+                gaussians_iterations: (!full).then_some(iterations),
+                evflow_epochs: (!full).then_some(epochs),
+                jobs,
+            };
             let place = Where {
                 cache: Some(out),
                 stages,
             };
             let ctx = place.context()?;
-            let summary = pipeline::demo::demo(cfg, &ctx, jobs, &Progress::new(false))?;
+            let summary = pipeline::demo::demo(&opts, &ctx, &Progress::new(false))?;
             print!("{}", pipeline::demo::format_summary(&summary));
             Ok(())
         }
@@ -386,4 +423,12 @@ fn real_main() -> Result<()> {
             Ok(())
         }
     }
+}
+
+/// Load an experiment and check every stage table against its stage's settings, so a
+/// typo in `[gaussians]` is an error naming the key before any stage runs.
+fn load_checked(path: &std::path::Path) -> Result<Experiment> {
+    let exp = Experiment::load(path)?;
+    pipeline::defaults::check_experiment(&exp)?;
+    Ok(exp)
 }

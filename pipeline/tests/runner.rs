@@ -22,7 +22,7 @@ fn pairs(v: &[(&str, &str)]) -> Vec<(String, String)> {
 #[test]
 fn second_run_runs_no_stage() {
     let f = Fixture::new();
-    let exp = f.experiment("a", "[gaussians]\niters = 10\n");
+    let exp = f.experiment("a", "[gaussians]\niterations = 10\n");
     f.run_ok(&exp, &[]);
     assert_eq!(f.actions("a"), pairs(&ALL_RAN));
     assert_eq!(f.started(), ["evflow", "gaussians", "assoc", "deform"]);
@@ -46,26 +46,71 @@ fn second_run_runs_no_stage() {
     // the stage got the canonical settings and wrote into its entry
     let entry = first["stages"][2]["entry"].as_str().unwrap();
     let settings = fs::read_to_string(format!("{entry}/settings.toml")).unwrap();
-    assert_eq!(settings.trim(), "iters = 10");
+    assert_eq!(settings.trim(), "iterations = 10");
     assert!(fs::metadata(format!("{entry}/.degs-entry.json")).is_ok());
     assert!(f.temp_paths().is_empty());
 }
 
 #[test]
+fn stages_get_their_verbs_inputs_and_settings_file() {
+    let f = Fixture::new();
+    let exp = f.experiment(
+        "a",
+        "[evflow]\nepochs = 1\n[gaussians]\niterations = 1500\n[assoc]\nk = 3\n",
+    );
+    f.run_ok(&exp, &[]);
+    let log = fs::read_to_string(&f.log).unwrap();
+    let args = |stage: &str| -> Vec<String> {
+        let line = log
+            .lines()
+            .find(|l| l.starts_with(&format!("start {stage} ")))
+            .unwrap();
+        line.split(' ').skip(3).map(str::to_string).collect()
+    };
+    let rec = f.record("a");
+    let entry = |i: usize| rec["stages"][i]["entry"].as_str().unwrap().to_string();
+    let scene = f.scene.display().to_string();
+    let settings = |s: &str| {
+        f.cache
+            .join(format!("runs/a/{s}.settings.toml"))
+            .display()
+            .to_string()
+    };
+    let ev = args("evflow");
+    assert_eq!(ev[..3], ["finetune", "--scene", scene.as_str()]);
+    assert_eq!(ev[5..], ["--config", settings("evflow").as_str()]);
+    let gs = args("gaussians");
+    assert_eq!(gs[..3], ["train", "--scene", scene.as_str()]);
+    let asc = args("assoc");
+    assert_eq!(
+        asc[..4],
+        ["--scene", scene.as_str(), "--model", entry(2).as_str()]
+    );
+    assert_eq!(asc[6..], ["--config", settings("assoc").as_str()]);
+    assert_eq!(args("deform")[0], "--scene");
+    // each stage's settings file holds exactly its experiment table
+    let read = |s: &str| fs::read_to_string(settings(s)).unwrap();
+    assert_eq!(read("evflow").trim(), "epochs = 1");
+    assert_eq!(read("gaussians").trim(), "iterations = 1500");
+    assert_eq!(read("assoc").trim(), "k = 3");
+    assert_eq!(read("deform").trim(), "");
+}
+
+#[test]
 fn changing_a_gaussians_setting_reruns_it_and_its_dependents_only() {
     let f = Fixture::new();
-    let exp = f.experiment("a", "[evflow]\nbins = 5\n[gaussians]\niters = 10\n");
+    let exp = f.experiment("a", "[evflow]\nepochs = 5\n[gaussians]\niterations = 10\n");
     f.run_ok(&exp, &[]);
     let evflow_key = f.key("a", "evflow");
     let gaussians_key = f.key("a", "gaussians");
 
-    let exp = f.experiment("a", "[evflow]\nbins = 5\n[gaussians]\niters = 20\n");
+    let exp = f.experiment("a", "[evflow]\nepochs = 5\n[gaussians]\niterations = 20\n");
     let st = stdout(&f.degs(&["status", exp.to_str().unwrap()]));
     let line = |s: &str| st.lines().find(|l| l.starts_with(s)).unwrap().to_string();
     assert!(line("evflow").contains("cached"), "{st}");
     assert!(line("gaussians").contains("stale"), "{st}");
     assert!(
-        line("gaussians").contains("setting iters changed 10 → 20"),
+        line("gaussians").contains("setting iterations changed 10 → 20"),
         "{st}"
     );
     assert!(line("assoc").contains("input gaussians changed"), "{st}");
@@ -85,16 +130,41 @@ fn changing_a_gaussians_setting_reruns_it_and_its_dependents_only() {
     assert_eq!(f.key("a", "evflow"), evflow_key);
     assert_ne!(f.key("a", "gaussians"), gaussians_key);
     // key order and number spelling do not matter
-    let exp = f.experiment("a", "[gaussians]\niters = 20\n[evflow]\nbins = 5\n");
+    let exp = f.experiment("a", "[gaussians]\niterations = 20\n[evflow]\nepochs = 5\n");
     f.run_ok(&exp, &[]);
     assert!(f.actions("a").iter().all(|(_, a)| a == "cached"));
 }
 
 #[test]
+fn replacing_the_flow_weights_reruns_evflow_and_its_dependents() {
+    let f = Fixture::new();
+    let w = f.dir.path().join("w.safetensors");
+    fs::write(&w, b"weights one").unwrap();
+    let body = format!("[evflow]\nweights = \"{}\"\n", w.display());
+    let exp = f.experiment("a", &body);
+    f.run_ok(&exp, &[]);
+    let before = f.key("a", "evflow");
+    let gaussians = f.key("a", "gaussians");
+    // same path, same size, new content
+    fs::write(&w, b"weights two").unwrap();
+    f.run_ok(&exp, &[]);
+    assert_eq!(f.action("a", "evflow"), "ran");
+    assert_eq!(f.action("a", "gaussians"), "cached");
+    assert_ne!(f.key("a", "evflow"), before);
+    assert_eq!(f.key("a", "gaussians"), gaussians);
+}
+
+#[test]
 fn experiments_with_the_same_flow_settings_share_one_evflow_entry() {
     let f = Fixture::new();
-    let a = f.experiment("a", "[evflow]\nlr = 1e-4\n[gaussians]\niters = 10\n");
-    let b = f.experiment("b", "[evflow]\nlr = 0.0001\n[gaussians]\niters = 99\n");
+    let a = f.experiment(
+        "a",
+        "[evflow]\nlr_end = 1e-4\n[gaussians]\niterations = 10\n",
+    );
+    let b = f.experiment(
+        "b",
+        "[evflow]\nlr_end = 0.0001\n[gaussians]\niterations = 99\n",
+    );
     f.run_ok(&a, &[]);
     f.run_ok(&b, &[]);
     assert_eq!(f.action("b", "evflow"), "cached");
@@ -194,13 +264,13 @@ fn a_tampered_entry_is_detected_and_rebuilt() {
 #[test]
 fn a_failing_stage_leaves_its_error_in_the_log_and_in_status() {
     let f = Fixture::new();
-    let exp = f.experiment("a", "[gaussians]\nfail = true\n");
+    let exp = f.experiment("a", "[gaussians]\nseed = 666\n");
     let out = f.degs(&["run", exp.to_str().unwrap()]);
     assert!(!out.status.success());
     let err = stderr(&out);
     let last = err.lines().last().unwrap();
     assert!(last.starts_with("degs: stage gaussians failed"), "{err}");
-    assert!(last.contains("fail = true was asked for"), "{err}");
+    assert!(last.contains("seed = 666 asks for a failure"), "{err}");
     assert_eq!(
         f.actions("a"),
         pairs(&[
@@ -217,11 +287,11 @@ fn a_failing_stage_leaves_its_error_in_the_log_and_in_status() {
     let log = fs::read_to_string(f.cache.join("runs/a/gaussians.log")).unwrap();
     assert!(log.contains("exit status: 3"), "{log}");
     assert!(log.contains("progress line before the failure"), "{log}");
-    assert!(log.contains("fail = true was asked for"), "{log}");
+    assert!(log.contains("seed = 666 asks for a failure"), "{log}");
     let st = stdout(&f.degs(&["status", exp.to_str().unwrap()]));
     let line = st.lines().find(|l| l.starts_with("gaussians")).unwrap();
     assert!(
-        line.contains("failed") && line.contains("fail = true was asked for"),
+        line.contains("failed") && line.contains("seed = 666 asks for a failure"),
         "{st}"
     );
     assert!(line.contains("gaussians.log"), "{st}");
@@ -238,7 +308,7 @@ fn a_failing_stage_leaves_its_error_in_the_log_and_in_status() {
 #[test]
 fn unknown_experiment_key_is_an_error_naming_it() {
     let f = Fixture::new();
-    let exp = f.experiment("a", "[gaussians]\niters = 1\n[deform_typo]\nx = 1\n");
+    let exp = f.experiment("a", "[gaussians]\niterations = 1\n[deform_typo]\nx = 1\n");
     let out = f.degs(&["run", exp.to_str().unwrap()]);
     assert!(!out.status.success());
     let err = stderr(&out);
@@ -248,6 +318,19 @@ fn unknown_experiment_key_is_an_error_naming_it() {
         "{err}"
     );
     assert!(!f.cache.join("runs").exists());
+
+    // a typo inside a stage table is caught before any stage starts
+    let exp = f.experiment("b", "[evflow]\nepochs = 1\n[gaussians]\niteratons = 10\n");
+    for verb in ["run", "status", "plan"] {
+        let out = f.degs(&[verb, exp.to_str().unwrap()]);
+        assert!(!out.status.success(), "{verb}");
+        let err = stderr(&out);
+        assert!(
+            err.contains("[gaussians]") && err.contains("iteratons") && err.contains("b.toml"),
+            "{verb}: {err}"
+        );
+    }
+    assert!(f.started().is_empty(), "no stage ran");
 }
 
 #[test]
@@ -327,7 +410,8 @@ fn missing_stage_binaries_are_reported_not_fatal() {
         ])
     );
     let st = stdout(&f.degs(&["status", exp.to_str().unwrap()]));
-    assert!(st.contains("not available yet"), "{st}");
+    assert!(st.contains("not built yet"), "{st}");
+    assert!(st.contains("cargo build --release -p assoc"), "{st}");
     assert!(
         st.lines()
             .any(|l| l.starts_with("deform") && l.contains("needs assoc")),

@@ -161,5 +161,12 @@ fn stage_writes_the_library_bindings_for_every_frame_and_rejects_bad_depth() {
     let err = assoc::stage::run(&scene_dir, &empty_dir, &out2, &settings, |_, _| {})
         .unwrap_err()
         .to_string();
-    assert!(err.contains("empty"), "{err}");
+    // The message itself, naming the model's PLY (the directory's name alone would not
+    // do): `Model::load` refuses before the stage's own "no Gaussians" check.
+    let ply = empty_dir.join(gaussians::model::PLY_FILE);
+    assert_eq!(
+        err,
+        format!("{}: the PLY holds zero Gaussians", ply.display())
+    );
+    assert!(!out2.exists());
 }

@@ -6,12 +6,17 @@ use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-/// A shell script that behaves like a stage: checks its inputs, records its
-/// invocation in $DEGS_FAKE_LOG, honours `fail = true` and sleeps when
+/// A shell script that behaves like a stage: takes an optional verb (`finetune`,
+/// `train`), checks its inputs, records its invocation in $DEGS_FAKE_LOG, writes
+/// $DEGS_FAKE_REPORTS/<stage>.json as its report when that exists (as `gaussians`, copies
+/// the scene's test images as its renders), fails when its settings say `seed = 666` and sleeps when
 /// $DEGS_FAKE_SLEEP names it, and writes a few output files.
 pub const FAKE_STAGE: &str = r#"#!/bin/sh
 stage=$(basename "$0")
 all="$*"
+scene=
+verb=
+case "$1" in --*|"") ;; *) verb="$1"; shift ;; esac
 out=; config=
 while [ $# -gt 0 ]; do
   case "$1" in
@@ -19,6 +24,7 @@ while [ $# -gt 0 ]; do
     --config) config="$2"; shift 2 ;;
     --scene|--model|--flows|--assoc)
       [ -d "$2" ] || { echo "error: $1 $2: not a directory" >&2; exit 2; }
+      [ "$1" = "--scene" ] && scene="$2"
       shift 2 ;;
     *) echo "error: unknown argument $1" >&2; exit 2 ;;
   esac
@@ -26,9 +32,9 @@ done
 [ -n "$out" ] && [ -f "$config" ] || { echo "error: need --out and --config" >&2; exit 2; }
 echo "start $stage $(date +%s%N) $all" >> "$DEGS_FAKE_LOG"
 echo "$stage: reading $config" >&2
-if grep -q '^fail = true' "$config"; then
+if grep -q '^seed = 666' "$config"; then
   echo "progress line before the failure" >&2
-  echo "error: $config: fail = true was asked for" >&2
+  echo "error: $config: seed = 666 asks for a failure" >&2
   exit 3
 fi
 mkdir -p "$out/renders"
@@ -39,7 +45,17 @@ fi
 if [ -n "$DEGS_FAKE_PAUSE" ]; then sleep "$DEGS_FAKE_PAUSE"; fi
 cp "$config" "$out/settings.toml"
 echo "$stage output" > "$out/result.txt"
-printf '{"stage": "%s"}\n' "$stage" > "$out/report.json"
+if [ -n "$DEGS_FAKE_REPORTS" ] && [ -f "$DEGS_FAKE_REPORTS/$stage.json" ]; then
+  cp "$DEGS_FAKE_REPORTS/$stage.json" "$out/report.json"
+else
+  printf '{"stage": "%s"}\n' "$stage" > "$out/report.json"
+fi
+if [ "$stage" = gaussians ] && [ -d "$scene/images" ]; then
+  i=0
+  for f in "$scene"/images/test_*.png; do
+    cp "$f" "$out/renders/$(printf %04d $i).png"; i=$((i+1))
+  done
+fi
 echo "end $stage $(date +%s%N)" >> "$DEGS_FAKE_LOG"
 "#;
 

@@ -1,0 +1,404 @@
+//! LoCM fine-tuning (paper Eq. 7–8, DESIGN §5): adapt the pretrained flow network to one
+//! recording with the contrast-maximisation loss only (no ground truth).
+//!
+//! Per step (one window): voxel grid → network → dense flow (px per window) →
+//! [`crate::cm::cm_loss`] on the window's undistorted events with times normalised to
+//! `[0, 1]` (so its flow unit is px per window too) → its exact f64 gradient is pushed
+//! into burn's graph through [`crate::cm_grad::cm_surrogate`] → Adam on the trainable
+//! tensors. Modes: `lora` (adapters r = 16 on every conv, base frozen; default), `full`
+//! (every base weight trainable; the paper's "Full Ft"), `none` (pretrained as is).
+//! The learning rate decays exponentially from `lr_start` to `lr_end` over all steps.
+//! Windows without events are skipped (nothing to sharpen).
+
+use crate::net::{FlowNet, NetConfig, to_f32, to_f64};
+use crate::source::Source;
+use burn::tensor::{DType, Device, Gradients, Tensor, TensorData};
+use scene::error::{Error, Result};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Which parameters LoCM trains.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// LoRA adapters only (the paper's LoCM).
+    #[default]
+    Lora,
+    /// All base weights ("Full Ft").
+    Full,
+    /// No fine-tuning ("w/o Flow Ft").
+    None,
+}
+
+impl std::str::FromStr for Mode {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Mode, String> {
+        match s.to_ascii_lowercase().as_str() {
+            "lora" => Ok(Mode::Lora),
+            "full" => Ok(Mode::Full),
+            "none" => Ok(Mode::None),
+            _ => Err(format!("mode '{s}' is not lora, full or none")),
+        }
+    }
+}
+
+/// Settings of the `evflow` stage (fine-tuning and prediction); every key optional in
+/// `settings.toml`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FlowSettings {
+    pub mode: Mode,
+    /// Passes over the windows.
+    pub epochs: usize,
+    /// Adam learning rate at the first step.
+    pub lr_start: f64,
+    /// Learning rate at the last step (exponential decay in between).
+    pub lr_end: f64,
+    /// LoRA rank r.
+    pub rank: usize,
+    /// LoRA α (the update is scaled by α/r).
+    pub alpha: f64,
+    /// Weight λ of the TV term of the CM loss.
+    pub lambda_tv: f64,
+    /// Pyramid levels of the CM objective.
+    pub cm_scales: usize,
+    /// Events per window used by the CM loss (even stride; 0 = all). Prediction always
+    /// covers every event.
+    pub max_cm_events: usize,
+    /// Seed of the LoRA initialisation.
+    pub seed: u64,
+    /// Base weights (safetensors with a JSON sidecar); `None` = the shipped weights.
+    pub weights: Option<PathBuf>,
+    /// Write dense previews (`.flo`, EXR, colour-wheel PNG) per window.
+    pub previews: bool,
+}
+
+impl Default for FlowSettings {
+    fn default() -> Self {
+        FlowSettings {
+            mode: Mode::Lora,
+            epochs: 3,
+            lr_start: 5e-4,
+            lr_end: 1e-4,
+            rank: 16,
+            alpha: 16.0,
+            lambda_tv: 0.01,
+            cm_scales: 3,
+            max_cm_events: 200_000,
+            seed: 0,
+            weights: None,
+            previews: true,
+        }
+    }
+}
+
+impl FlowSettings {
+    /// `Err` with a sentence when a setting is out of range.
+    pub fn validate(&self) -> std::result::Result<(), String> {
+        let pos = |v: f64| v.is_finite() && v > 0.0;
+        if !pos(self.lr_start) || !pos(self.lr_end) {
+            return Err("lr_start and lr_end must be finite and > 0".into());
+        }
+        if self.rank == 0 || !pos(self.alpha) {
+            return Err("rank must be > 0 and alpha > 0".into());
+        }
+        if !(self.lambda_tv.is_finite() && self.lambda_tv >= 0.0) {
+            return Err("lambda_tv must be finite and >= 0".into());
+        }
+        if self.cm_scales == 0 || self.cm_scales > 8 {
+            return Err("cm_scales must be in 1..=8".into());
+        }
+        if self.epochs > 10_000 {
+            return Err("epochs must be <= 10000".into());
+        }
+        Ok(())
+    }
+
+    pub fn cm_config(&self) -> crate::cm::CmConfig {
+        crate::cm::CmConfig {
+            scales: self.cm_scales,
+            lambda_tv: self.lambda_tv,
+        }
+    }
+}
+
+/// Environment variable that overrides the shipped weights' location.
+pub const WEIGHTS_ENV: &str = "EVFLOW_WEIGHTS";
+
+/// Directory of the weights shipped with the project.
+pub fn shipped_weights_dir() -> PathBuf {
+    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/weights"))
+}
+
+/// The base weights to use: `explicit` if given, else `$EVFLOW_WEIGHTS`, else the shipped
+/// `evflow/weights/default.safetensors` (or the only `*.safetensors` there).
+pub fn resolve_weights(explicit: Option<&Path>) -> Result<PathBuf> {
+    if let Some(p) = explicit {
+        return Ok(p.to_path_buf());
+    }
+    if let Some(p) = std::env::var_os(WEIGHTS_ENV) {
+        return Ok(PathBuf::from(p));
+    }
+    let dir = shipped_weights_dir();
+    let default = dir.join("default.safetensors");
+    if default.is_file() {
+        return Ok(default);
+    }
+    let mut found: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .map(|rd| {
+            rd.filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| p.extension().is_some_and(|e| e == "safetensors"))
+                .collect()
+        })
+        .unwrap_or_default();
+    found.sort();
+    match found.len() {
+        1 => Ok(found.remove(0)),
+        0 => Err(Error::invalid(
+            &dir,
+            format!(
+                "no shipped flow-network weights here; pass --weights FILE \
+                 (or set {WEIGHTS_ENV}), or run `evflow pretrain`"
+            ),
+        )),
+        _ => Err(Error::invalid(
+            &dir,
+            "several weight files and no default.safetensors; pass --weights FILE",
+        )),
+    }
+}
+
+/// Load base weights onto `device` (which may be an autodiff device).
+pub fn load_base(path: &Path, device: &Device) -> Result<FlowNet> {
+    FlowNet::load(path, None, device, DType::F32)
+}
+
+/// A copy of `net` for inference: adapters merged, tensors off the autodiff graph.
+pub fn for_inference(net: &FlowNet) -> FlowNet {
+    let mut n = net.clone();
+    n.merge_lora();
+    for c in &mut n.convs {
+        c.weight = c.weight.clone().detach().inner();
+        c.bias = c.bias.clone().detach().inner();
+    }
+    n.device = n.device.clone().inner();
+    n
+}
+
+/// Progress of one fine-tuning step.
+#[derive(Clone, Copy, Debug)]
+pub struct Step {
+    pub epoch: usize,
+    pub epochs: usize,
+    /// Step within the epoch (windows with events only).
+    pub step: usize,
+    pub steps: usize,
+    pub window: usize,
+    pub loss: f64,
+    pub lr: f64,
+}
+
+/// What fine-tuning did.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct FinetuneReport {
+    pub mode: Mode,
+    pub net: Option<NetConfig>,
+    pub epochs: usize,
+    pub windows: usize,
+    /// Windows with events (the steps per epoch).
+    pub trained_windows: usize,
+    pub trainable_params: usize,
+    /// CM loss of every step, in order.
+    pub loss_curve: Vec<f64>,
+    /// Mean CM loss per epoch (during training).
+    pub epoch_loss: Vec<f64>,
+    /// Wall time per epoch, seconds.
+    pub epoch_s: Vec<f64>,
+    /// Mean wall time of one step (forward, CM loss, backward, Adam), seconds.
+    pub step_s: f64,
+    /// Mean CM loss over the windows before and after training (no gradient).
+    pub cm_loss_before: f64,
+    pub cm_loss_after: f64,
+}
+
+/// Adam moments of one tensor.
+struct Slot {
+    m: Vec<f32>,
+    v: Vec<f32>,
+}
+
+const BETA1: f64 = 0.9;
+const BETA2: f64 = 0.999;
+const ADAM_EPS: f64 = 1e-8;
+
+/// One Adam update of `t` from its gradient in `grads` (no gradient: unchanged).
+fn adam<const D: usize>(t: &mut Tensor<D>, grads: &Gradients, slot: &mut Slot, lr: f64, k: i32) {
+    let Some(g) = t.grad(grads) else {
+        return;
+    };
+    let g = to_f32(g);
+    let shape = t.dims();
+    let (device, dtype) = (t.device(), t.dtype());
+    let mut p = to_f32(t.clone().detach());
+    if slot.m.len() != g.len() {
+        slot.m = vec![0.0; g.len()];
+        slot.v = vec![0.0; g.len()];
+    }
+    let (c1, c2) = (1.0 - BETA1.powi(k), 1.0 - BETA2.powi(k));
+    for i in 0..p.len() {
+        let gi = g[i] as f64;
+        let m = BETA1 * slot.m[i] as f64 + (1.0 - BETA1) * gi;
+        let v = BETA2 * slot.v[i] as f64 + (1.0 - BETA2) * gi * gi;
+        slot.m[i] = m as f32;
+        slot.v[i] = v as f32;
+        p[i] -= (lr * (m / c1) / ((v / c2).sqrt() + ADAM_EPS)) as f32;
+    }
+    *t = Tensor::<D>::from_data(
+        TensorData::new(p, shape).convert_dtype(dtype),
+        (&device, dtype),
+    )
+    .require_grad();
+}
+
+/// Dense flow (px per window) of a window as f64 `(u, v)`, and the output tensor.
+fn flow_of(net: &FlowNet, src: &Source, w: &crate::source::Window) -> (Tensor<4>, Vec<f64>) {
+    let (wd, ht) = (src.width() as usize, src.height() as usize);
+    let bins = net.config.bins;
+    let vox = src.voxel(w, bins);
+    let x = crate::net::tensor4(vox, [1, bins, ht, wd], &net.device, net.dtype);
+    let flow = net.forward(x);
+    let vals = to_f64(flow.clone());
+    (flow, vals)
+}
+
+/// Mean CM loss of `net` over the windows with events (no gradient).
+pub fn mean_cm_loss(net: &FlowNet, src: &Source, s: &FlowSettings) -> f64 {
+    let (wd, ht) = (src.width() as usize, src.height() as usize);
+    let n = wd * ht;
+    let cfg = s.cm_config();
+    let mut sum = 0.0;
+    let mut count = 0;
+    for w in src.windows.iter().filter(|w| !w.is_empty()) {
+        let (_, f) = flow_of(net, src, w);
+        let ev = src.cm_events(w, s.max_cm_events);
+        sum += crate::cm::cm_loss(&ev, &f[..n], &f[n..], (wd, ht), (0.0, 1.0), &cfg).loss;
+        count += 1;
+    }
+    if count == 0 { 0.0 } else { sum / count as f64 }
+}
+
+/// Fine-tune `net` (on an autodiff device for `lora`/`full`) on the windows of `src`.
+/// `progress` is called after every step. With `lora`, fresh adapters are attached.
+pub fn finetune(
+    net: &mut FlowNet,
+    src: &Source,
+    s: &FlowSettings,
+    mut progress: impl FnMut(&Step),
+) -> Result<FinetuneReport> {
+    s.validate()
+        .map_err(|e| Error::Other(format!("settings: {e}")))?;
+    let mut report = FinetuneReport {
+        mode: s.mode,
+        net: Some(net.config),
+        epochs: s.epochs,
+        windows: src.windows.len(),
+        ..Default::default()
+    };
+    let plain = for_inference(net);
+    report.cm_loss_before = mean_cm_loss(&plain, src, s);
+    report.cm_loss_after = report.cm_loss_before;
+    let trained: Vec<_> = src.windows.iter().filter(|w| !w.is_empty()).collect();
+    report.trained_windows = trained.len();
+    if s.mode == Mode::None || s.epochs == 0 || trained.is_empty() {
+        return Ok(report);
+    }
+    if !net.device.is_autodiff() {
+        return Err(Error::Other(
+            "fine-tuning needs an autodiff device (Device::flex().autodiff())".into(),
+        ));
+    }
+    match s.mode {
+        Mode::Lora => {
+            net.attach_lora(s.rank, s.alpha, s.seed);
+            net.set_trainable(false, true);
+        }
+        _ => net.set_trainable(true, false),
+    }
+    report.trainable_params = net
+        .convs
+        .iter()
+        .map(|c| match (&c.lora, s.mode) {
+            (Some(l), Mode::Lora) => {
+                l.a.dims().iter().product::<usize>() + l.b.dims().iter().product::<usize>()
+            }
+            _ => c.shape().iter().product::<usize>() + c.shape()[0],
+        })
+        .sum();
+    let (wd, ht) = (src.width() as usize, src.height() as usize);
+    let n = wd * ht;
+    let cfg = s.cm_config();
+    let total = (s.epochs * trained.len()) as f64;
+    let mut slots: Vec<Slot> = (0..2 * net.convs.len())
+        .map(|_| Slot {
+            m: Vec::new(),
+            v: Vec::new(),
+        })
+        .collect();
+    let mut k = 0i32;
+    let mut step_time = 0.0;
+    for epoch in 0..s.epochs {
+        let start = Instant::now();
+        let mut epoch_sum = 0.0;
+        for (i, w) in trained.iter().enumerate() {
+            let t0 = Instant::now();
+            let frac = if total > 1.0 {
+                k as f64 / (total - 1.0)
+            } else {
+                0.0
+            };
+            let lr = s.lr_start * (s.lr_end / s.lr_start).powf(frac);
+            let (flow, f) = flow_of(net, src, w);
+            let ev = src.cm_events(w, s.max_cm_events);
+            let l = crate::cm::cm_loss(&ev, &f[..n], &f[n..], (wd, ht), (0.0, 1.0), &cfg);
+            if !l.loss.is_finite() || l.grad_u.iter().chain(&l.grad_v).any(|g| !g.is_finite()) {
+                return Err(Error::Other(format!(
+                    "CM loss is not finite at epoch {epoch}, window {}",
+                    w.index
+                )));
+            }
+            let grads = crate::cm_grad::cm_surrogate(flow, &l.grad_u, &l.grad_v).backward();
+            k += 1;
+            for (ci, c) in net.convs.iter_mut().enumerate() {
+                let (s0, s1) = slots[2 * ci..].split_at_mut(1);
+                match (s.mode, c.lora.as_mut()) {
+                    (Mode::Lora, Some(lo)) => {
+                        adam(&mut lo.a, &grads, &mut s0[0], lr, k);
+                        adam(&mut lo.b, &grads, &mut s1[0], lr, k);
+                    }
+                    _ => {
+                        adam(&mut c.weight, &grads, &mut s0[0], lr, k);
+                        adam(&mut c.bias, &grads, &mut s1[0], lr, k);
+                    }
+                }
+            }
+            step_time += t0.elapsed().as_secs_f64();
+            report.loss_curve.push(l.loss);
+            epoch_sum += l.loss;
+            progress(&Step {
+                epoch,
+                epochs: s.epochs,
+                step: i,
+                steps: trained.len(),
+                window: w.index,
+                loss: l.loss,
+                lr,
+            });
+        }
+        report.epoch_loss.push(epoch_sum / trained.len() as f64);
+        report.epoch_s.push(start.elapsed().as_secs_f64());
+    }
+    report.step_s = step_time / k.max(1) as f64;
+    report.cm_loss_after = mean_cm_loss(&for_inference(net), src, s);
+    Ok(report)
+}

@@ -1,0 +1,823 @@
+//! Pretraining of the flow network on synthetic scenes with ground-truth flow (issue 4
+//! item 4, DESIGN §5 "Pretrained weights").
+//!
+//! **Data.** For every `(preset, seed)` a synthetic world is built in memory from the
+//! preset ([`scene::synth::SynthConfig::preset`]) and randomised by the seed
+//! ([`scene_config`]): textures (pattern, feature size, colours, texture seeds), camera
+//! path, object placement, spin axes, a speed factor, the contrast threshold and sensor
+//! noise. Its events and per-event ground-truth flow come from
+//! [`crate::synthesize::simulate_scene`]. A training sample is a random window
+//! `[t_a, t_a + L]` (L uniform in `[window_min_s, window_max_s]`) of a random scene: input
+//! the normalised voxel grid (Eq. 15), target the mean per-event ground-truth
+//! displacement (px per window) of each pixel with non-noise events, randomly flipped
+//! horizontally and vertically.
+//!
+//! **Loss.** `supervised_weight · mean EPE over pixels with events` (px per window, the
+//! network's unit) `+ cm_weight · L_CM` ([`crate::cm::cm_loss`] on the window's events
+//! with times normalised to `[0, 1]`, exact gradient through
+//! [`crate::cm_grad::cm_surrogate`]). Adam, learning rate decaying exponentially from
+//! `lr` to `lr_final`.
+//!
+//! **Held-out evaluation.** Scenes from `eval_seeds` (which must not overlap
+//! `train_seeds`; their textures, colours, placements and speeds come from those seeds)
+//! at fixed, evenly spaced windows: EPE and % outliers (> 3 px) at pixels with events,
+//! the EPE of zero flow for reference, the flow-warp loss and the forward time.
+//!
+//! Output directory (written under a temp name, renamed at the end): [`WEIGHTS_FILE`]
+//! (+ its JSON sidecar, see [`FlowNet::save`]) and `report.json` ([`PretrainReport`]).
+
+use crate::cm::{CmConfig, CmEvents, cm_loss};
+use crate::eval::{FlowMetrics, FlowWarpLoss, flow_metrics, flow_warp_loss};
+use crate::net::{FlowNet, NetConfig, tensor4, to_f32, to_f64};
+use crate::synthesize::simulate_scene;
+use burn::tensor::{DType, Device, Tensor, TensorData};
+use glam::DVec3;
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use scene::error::{Error, Result};
+use scene::events::EventStream;
+use scene::synth::gt::NOISE_ID;
+use scene::synth::{Pattern, SynthConfig, SynthWorld};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Name of the weights file inside the output directory.
+pub const WEIGHTS_FILE: &str = "weights.safetensors";
+
+/// Settings of a pretraining run (TOML/JSON; every field defaulted).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PretrainSettings {
+    /// Base width C of the network.
+    pub base: usize,
+    /// Voxel-grid bins B.
+    pub bins: usize,
+    /// Largest flow the network can output, px per window.
+    pub max_flow: f64,
+    /// Presets of the training scenes (each combined with every training seed).
+    pub presets: Vec<String>,
+    /// Seeds of the training scenes.
+    pub train_seeds: Vec<u64>,
+    /// Presets and seeds of the held-out scenes (seeds disjoint from `train_seeds`).
+    pub eval_presets: Vec<String>,
+    pub eval_seeds: Vec<u64>,
+    /// Square sensor size of the synthetic scenes, px.
+    pub resolution: u32,
+    /// Length of each synthetic recording, s.
+    pub scene_duration: f64,
+    /// Internal render rate of the event simulator, Hz.
+    pub render_rate_hz: f64,
+    /// Range of the window length L, s.
+    pub window_min_s: f64,
+    pub window_max_s: f64,
+    /// Range of the per-scene speed factor applied to all motion.
+    pub speed_min: f64,
+    pub speed_max: f64,
+    /// Adam steps.
+    pub iterations: usize,
+    /// Windows per step.
+    pub batch: usize,
+    /// Learning rate at the first and the last step (exponential decay between).
+    pub lr: f64,
+    pub lr_final: f64,
+    /// Weight of the supervised EPE loss.
+    pub supervised_weight: f64,
+    /// Weight of the contrast-maximisation loss (0 = off).
+    pub cm_weight: f64,
+    /// Events per window used by the CM loss (even stride; 0 = all).
+    pub cm_max_events: usize,
+    /// Seed of network initialisation and window sampling.
+    pub seed: u64,
+    /// Windows per held-out scene.
+    pub eval_windows: usize,
+    /// Evaluate on the held-out scenes every this many steps (0 = only at the end).
+    pub eval_every: usize,
+}
+
+impl Default for PretrainSettings {
+    fn default() -> Self {
+        PretrainSettings {
+            base: 16,
+            bins: 5,
+            max_flow: 32.0,
+            presets: ["static", "rigid", "nonrigid", "fast"]
+                .map(String::from)
+                .to_vec(),
+            train_seeds: (1..=6).collect(),
+            eval_presets: vec!["rigid".into(), "fast".into()],
+            eval_seeds: vec![1001, 1002],
+            resolution: 64,
+            scene_duration: 1.0,
+            render_rate_hz: 500.0,
+            window_min_s: 0.05,
+            window_max_s: 0.2,
+            speed_min: 0.5,
+            speed_max: 3.0,
+            iterations: 1500,
+            batch: 4,
+            lr: 1e-3,
+            lr_final: 1e-4,
+            supervised_weight: 1.0,
+            cm_weight: 0.0,
+            cm_max_events: 20_000,
+            seed: 0,
+            eval_windows: 8,
+            eval_every: 0,
+        }
+    }
+}
+
+impl PretrainSettings {
+    /// `Err` with a sentence naming the first bad setting.
+    pub fn validate(&self) -> std::result::Result<(), String> {
+        if self.base == 0 || self.bins < 2 {
+            return Err("base must be ≥ 1 and bins ≥ 2".into());
+        }
+        for (name, v) in [
+            ("max_flow", self.max_flow),
+            ("scene_duration", self.scene_duration),
+            ("render_rate_hz", self.render_rate_hz),
+            ("window_min_s", self.window_min_s),
+            ("speed_min", self.speed_min),
+            ("lr", self.lr),
+            ("lr_final", self.lr_final),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!("{name} = {v} must be finite and > 0"));
+            }
+        }
+        if !(self.window_max_s >= self.window_min_s && self.window_max_s < self.scene_duration) {
+            return Err("need window_min_s ≤ window_max_s < scene_duration".into());
+        }
+        if !(self.speed_max.is_finite() && self.speed_max >= self.speed_min) {
+            return Err("speed_max must be finite and ≥ speed_min".into());
+        }
+        if !(self.supervised_weight >= 0.0 && self.cm_weight >= 0.0)
+            || self.supervised_weight + self.cm_weight <= 0.0
+        {
+            return Err("supervised_weight and cm_weight must be ≥ 0, not both 0".into());
+        }
+        if self.batch == 0 || self.presets.is_empty() || self.train_seeds.is_empty() {
+            return Err("batch, presets and train_seeds must be non-empty".into());
+        }
+        if !(16..=1024).contains(&self.resolution) {
+            return Err(format!(
+                "resolution {} must be in 16..=1024",
+                self.resolution
+            ));
+        }
+        for p in self.presets.iter().chain(&self.eval_presets) {
+            if SynthConfig::preset(p).is_none() {
+                return Err(format!(
+                    "unknown preset '{p}' (known: {:?})",
+                    scene::synth::PRESETS
+                ));
+            }
+        }
+        if let Some(s) = self
+            .eval_seeds
+            .iter()
+            .find(|s| self.train_seeds.contains(s))
+        {
+            return Err(format!(
+                "eval seed {s} is also a training seed; held-out scenes must differ"
+            ));
+        }
+        Ok(())
+    }
+
+    pub fn net_config(&self) -> NetConfig {
+        NetConfig {
+            base: self.base,
+            bins: self.bins,
+            max_flow: self.max_flow,
+        }
+    }
+}
+
+/// The synthetic world of `(preset, seed)`: the preset at `resolution`², randomised by
+/// `seed` (see the module doc). Different seeds give different textures.
+pub fn scene_config(preset: &str, seed: u64, s: &PretrainSettings) -> Result<SynthConfig> {
+    let mut cfg = SynthConfig::preset(preset)
+        .ok_or_else(|| Error::Other(format!("unknown synthetic preset '{preset}'")))?;
+    let mut rng = ChaCha8Rng::seed_from_u64(seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ 0x5eed);
+    cfg.width = s.resolution;
+    cfg.height = s.resolution;
+    cfg.duration = s.scene_duration;
+    cfg.render_rate_hz = s.render_rate_hz;
+    cfg.supersample = 1;
+    cfg.seed = seed;
+    cfg.contrast_threshold = rng.random_range(0.1..0.25);
+    cfg.threshold_sigma = rng.random_range(0.0..0.03);
+    cfg.shot_noise_hz = rng.random_range(0.0..0.3);
+    cfg.fov_x_deg = rng.random_range(45.0..75.0);
+    let g = rng.random_range(0.05..0.5);
+    cfg.background = [g, g, g];
+    let speed = rng.random_range(s.speed_min..=s.speed_max);
+    let cam = &mut cfg.camera;
+    cam.eye += DVec3::new(
+        rng.random_range(-0.5..0.5),
+        rng.random_range(-0.2..0.3),
+        rng.random_range(-0.4..0.4),
+    );
+    cam.target += DVec3::new(
+        rng.random_range(-0.3..0.3),
+        rng.random_range(-0.1..0.1),
+        0.0,
+    );
+    cam.sway *= rng.random_range(0.3..1.5);
+    cam.yaw_deg = rng.random_range(0.0..10.0);
+    cam.pitch_deg = rng.random_range(0.0..5.0);
+    cam.sway_hz *= speed;
+    cam.turn_hz *= speed;
+    let patterns = [Pattern::Checker, Pattern::Stripes, Pattern::Blobs];
+    for (k, o) in cfg.objects.iter_mut().enumerate() {
+        let t = &mut o.texture;
+        t.pattern = patterns[rng.random_range(0..3)];
+        t.cell *= rng.random_range(0.5..1.8);
+        let bright: f64 = rng.random_range(0.5..0.95);
+        let dark: f64 = rng.random_range(0.02..0.3);
+        t.colour_a = [0; 3].map(|_| (bright * rng.random_range(0.6..1.0)).min(1.0));
+        t.colour_b = [0; 3].map(|_| dark * rng.random_range(0.5..1.0));
+        t.detail = rng.random_range(0.0..0.3);
+        t.seed = rng.random();
+        let m = &mut o.motion;
+        if k >= 2 {
+            // The props (not the floor and wall): placement, spin axis, direction.
+            m.position += DVec3::new(
+                rng.random_range(-0.2..0.2),
+                rng.random_range(-0.1..0.1),
+                rng.random_range(-0.2..0.2),
+            );
+            let axis = DVec3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            );
+            if axis.length() > 0.1 {
+                m.spin_axis = axis;
+            }
+            let sign = if rng.random_bool(0.5) { -1.0 } else { 1.0 };
+            m.spin_deg_per_s *= sign * rng.random_range(0.5..1.5);
+            m.velocity *= sign;
+        }
+        m.velocity *= speed;
+        m.oscillation_hz *= speed;
+        m.spin_deg_per_s *= speed;
+        o.deform.hz *= speed;
+        o.deform.wave_hz *= speed;
+    }
+    cfg.validate()
+        .map_err(|e| Error::Other(format!("synthetic scene {preset}/{seed}: {e}")))?;
+    Ok(cfg)
+}
+
+/// Events of one synthetic scene with the ground-truth flow (px/s) of each event;
+/// `noise[i]` marks noise events (no valid flow).
+pub struct SceneData {
+    pub name: String,
+    pub events: EventStream,
+    pub u: Vec<f32>,
+    pub v: Vec<f32>,
+    pub noise: Vec<bool>,
+    pub duration: f64,
+}
+
+/// Simulate the scene of `(preset, seed)`.
+pub fn make_scene(preset: &str, seed: u64, s: &PretrainSettings) -> Result<SceneData> {
+    let cfg = scene_config(preset, seed, s)?;
+    let world = SynthWorld::new(&cfg)
+        .map_err(|e| Error::Other(format!("synthetic scene {preset}/{seed}: {e}")))?;
+    let (events, gt) = simulate_scene(&world)?;
+    let n = events.len();
+    let (mut u, mut v, mut noise) = (vec![0f32; n], vec![0f32; n], vec![true; n]);
+    for k in 0..gt.len() {
+        let i = gt.index[k] as usize;
+        if i < n {
+            u[i] = gt.u[k];
+            v[i] = gt.v[k];
+            noise[i] = gt.object[k] == NOISE_ID;
+        }
+    }
+    Ok(SceneData {
+        name: format!("{preset}/{seed}"),
+        events,
+        u,
+        v,
+        noise,
+        duration: cfg.duration,
+    })
+}
+
+/// One training or evaluation window: input voxel grid, target displacement (px per
+/// window; u then v, row-major) and the mask of pixels with non-noise events.
+pub struct Sample {
+    pub voxel: Vec<f32>,
+    pub target: Vec<f32>,
+    pub mask: Vec<f32>,
+    /// The window's non-noise events, times normalised to `[0, 1]` (for CM / flow-warp).
+    pub cm: CmEvents,
+}
+
+/// The sample of window `[t_a, t_b]` of `d`, flipped as asked.
+pub fn sample(d: &SceneData, (t_a, t_b): (f64, f64), bins: usize, flip: (bool, bool)) -> Sample {
+    let (w, h) = (d.events.width as usize, d.events.height as usize);
+    let range = d.events.window_range(t_a, t_b);
+    let len = t_b - t_a;
+    let slice = d.events.as_slice().sub(range.clone());
+    let mut voxel = crate::voxel::voxel_grid(&slice, t_a, t_b, bins, w as u32, h as u32);
+    let mut sum = vec![0f64; 2 * w * h];
+    let mut count = vec![0u32; w * h];
+    let mut cm = CmEvents::default();
+    for i in range {
+        if d.noise[i] {
+            continue;
+        }
+        let (x, y) = (d.events.x[i] as usize, d.events.y[i] as usize);
+        let p = y * w + x;
+        sum[p] += d.u[i] as f64 * len;
+        sum[w * h + p] += d.v[i] as f64 * len;
+        count[p] += 1;
+        cm.x.push(x as f64);
+        cm.y.push(y as f64);
+        cm.t.push((d.events.t[i] - t_a) / len);
+    }
+    let mut target = vec![0f32; 2 * w * h];
+    let mut mask = vec![0f32; w * h];
+    for p in 0..w * h {
+        if count[p] > 0 {
+            target[p] = (sum[p] / count[p] as f64) as f32;
+            target[w * h + p] = (sum[w * h + p] / count[p] as f64) as f32;
+            mask[p] = 1.0;
+        }
+    }
+    let (fx, fy) = flip;
+    if fx || fy {
+        let map = |x: usize, y: usize| {
+            let xs = if fx { w - 1 - x } else { x };
+            let ys = if fy { h - 1 - y } else { y };
+            ys * w + xs
+        };
+        let remap = |plane: &[f32], sign: f32| -> Vec<f32> {
+            let mut out = vec![0f32; w * h];
+            for y in 0..h {
+                for x in 0..w {
+                    out[y * w + x] = sign * plane[map(x, y)];
+                }
+            }
+            out
+        };
+        voxel = voxel.chunks(w * h).flat_map(|c| remap(c, 1.0)).collect();
+        let su = if fx { -1.0 } else { 1.0 };
+        let sv = if fy { -1.0 } else { 1.0 };
+        let mut t = remap(&target[..w * h], su);
+        t.extend(remap(&target[w * h..], sv));
+        target = t;
+        mask = remap(&mask, 1.0);
+        for k in 0..cm.len() {
+            if fx {
+                cm.x[k] = (w - 1) as f64 - cm.x[k];
+            }
+            if fy {
+                cm.y[k] = (h - 1) as f64 - cm.y[k];
+            }
+        }
+    }
+    Sample {
+        voxel,
+        target,
+        mask,
+        cm,
+    }
+}
+
+/// Figures on the held-out scenes.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct HeldOut {
+    /// Step after which this was measured.
+    pub step: usize,
+    /// The network's flow at pixels with events (px per window).
+    pub metrics: FlowMetrics,
+    /// Zero flow on the same pixels (EPE = mean gt magnitude).
+    pub zero: FlowMetrics,
+    /// Mean flow-warp ratio of the network's flow over the windows.
+    pub flow_warp_ratio: f64,
+    /// Mean forward time per window, seconds.
+    pub forward_s: f64,
+}
+
+/// What a pretraining run did.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct PretrainReport {
+    pub settings: PretrainSettings,
+    pub net: NetConfig,
+    pub params: usize,
+    pub train_scenes: Vec<String>,
+    pub train_events: usize,
+    pub eval_scenes: Vec<String>,
+    /// Seconds spent simulating the scenes.
+    pub data_s: f64,
+    pub train_s: f64,
+    /// Mean wall time of one step (batch build, forward, backward, Adam), seconds.
+    pub step_s: f64,
+    /// Training loss of every step.
+    pub loss_curve: Vec<f64>,
+    /// Held-out figures (at `eval_every` and at the end; the last is the final one).
+    pub held_out: Vec<HeldOut>,
+    /// The weights file written (inside the output directory).
+    pub weights: PathBuf,
+}
+
+/// Adam state of one parameter tensor.
+#[derive(Default)]
+struct Moments {
+    m: Vec<f32>,
+    v: Vec<f32>,
+}
+
+/// One Adam step on `t` from `grad` (values), step number `k ≥ 1`.
+fn adam_step<const D: usize>(t: &mut Tensor<D>, grad: Vec<f32>, mo: &mut Moments, lr: f64, k: i32) {
+    const B1: f64 = 0.9;
+    const B2: f64 = 0.999;
+    let shape = t.dims();
+    let (device, dtype) = (t.device(), t.dtype());
+    let mut p = to_f32(t.clone().detach());
+    if mo.m.len() != p.len() {
+        mo.m = vec![0.0; p.len()];
+        mo.v = vec![0.0; p.len()];
+    }
+    let (c1, c2) = (1.0 - B1.powi(k), 1.0 - B2.powi(k));
+    for i in 0..p.len() {
+        let g = grad[i] as f64;
+        let m = B1 * mo.m[i] as f64 + (1.0 - B1) * g;
+        let v = B2 * mo.v[i] as f64 + (1.0 - B2) * g * g;
+        mo.m[i] = m as f32;
+        mo.v[i] = v as f32;
+        p[i] -= (lr * (m / c1) / ((v / c2).sqrt() + 1e-8)) as f32;
+    }
+    *t = Tensor::<D>::from_data(
+        TensorData::new(p, shape).convert_dtype(dtype),
+        (&device, dtype),
+    )
+    .require_grad();
+}
+
+/// A copy of `net` on the inference (non-autodiff) device.
+pub fn inference_copy(net: &FlowNet) -> FlowNet {
+    let mut n = net.clone();
+    for c in &mut n.convs {
+        c.weight = c.weight.clone().detach().inner();
+        c.bias = c.bias.clone().detach().inner();
+    }
+    n.device = n.device.clone().inner();
+    n
+}
+
+/// Evenly spaced evaluation windows of a scene.
+fn eval_windows(d: &SceneData, s: &PretrainSettings) -> Vec<(f64, f64)> {
+    let len = 0.5 * (s.window_min_s + s.window_max_s);
+    let n = s.eval_windows.max(1);
+    let span = (d.duration - len).max(0.0);
+    (0..n)
+        .map(|k| {
+            let t_a = span * (k as f64 + 0.5) / n as f64;
+            (t_a, t_a + len)
+        })
+        .collect()
+}
+
+/// Score `net` (inference device) on fixed windows of the held-out scenes.
+pub fn evaluate(
+    net: &FlowNet,
+    scenes: &[SceneData],
+    s: &PretrainSettings,
+    step: usize,
+) -> Result<HeldOut> {
+    let (mut pu, mut pv, mut gu, mut gv, mut mask) = (vec![], vec![], vec![], vec![], vec![]);
+    let (mut fwl_sum, mut forward_s, mut windows) = (0.0, 0.0, 0usize);
+    for d in scenes {
+        let (w, h) = (d.events.width as usize, d.events.height as usize);
+        for win in eval_windows(d, s) {
+            let smp = sample(d, win, s.bins, (false, false));
+            let start = Instant::now();
+            let x = tensor4(smp.voxel.clone(), [1, s.bins, h, w], &net.device, net.dtype);
+            let flow = to_f64(net.forward(x));
+            forward_s += start.elapsed().as_secs_f64();
+            let fw: FlowWarpLoss =
+                flow_warp_loss(&smp.cm, &flow[..w * h], &flow[w * h..], (w, h), 0.5);
+            fwl_sum += fw.ratio;
+            windows += 1;
+            pu.extend_from_slice(&flow[..w * h]);
+            pv.extend_from_slice(&flow[w * h..]);
+            gu.extend(smp.target[..w * h].iter().map(|&x| x as f64));
+            gv.extend(smp.target[w * h..].iter().map(|&x| x as f64));
+            mask.extend(smp.mask.iter().map(|&m| m > 0.0));
+        }
+    }
+    let bad = |e: String| Error::Other(format!("held-out evaluation: {e}"));
+    let metrics = flow_metrics((&pu, &pv), (&gu, &gv), Some(&mask)).map_err(bad)?;
+    let zeros = vec![0.0; pu.len()];
+    let zero = flow_metrics((&zeros, &zeros), (&gu, &gv), Some(&mask)).map_err(bad)?;
+    let n = windows.max(1) as f64;
+    Ok(HeldOut {
+        step,
+        metrics,
+        zero,
+        flow_warp_ratio: fwl_sum / n,
+        forward_s: forward_s / n,
+    })
+}
+
+/// Build the training and held-out scenes.
+pub fn make_scenes(s: &PretrainSettings) -> Result<(Vec<SceneData>, Vec<SceneData>)> {
+    let mut train = Vec::new();
+    for p in &s.presets {
+        for &seed in &s.train_seeds {
+            train.push(make_scene(p, seed, s)?);
+        }
+    }
+    let mut held = Vec::new();
+    for p in &s.eval_presets {
+        for &seed in &s.eval_seeds {
+            held.push(make_scene(p, seed, s)?);
+        }
+    }
+    Ok((train, held))
+}
+
+/// Pretrain a network with `settings`, writing [`WEIGHTS_FILE`] (+ sidecar) and
+/// `report.json` into `out_dir` (atomically: all or nothing). `progress(step, steps,
+/// loss)` is called after every step.
+pub fn run(
+    settings: &PretrainSettings,
+    out_dir: &Path,
+    progress: &mut dyn FnMut(usize, usize, f64),
+) -> Result<PretrainReport> {
+    settings
+        .validate()
+        .map_err(|e| Error::Other(format!("pretrain settings: {e}")))?;
+    let s = settings;
+    let t0 = Instant::now();
+    let (train, held) = make_scenes(s)?;
+    let data_s = t0.elapsed().as_secs_f64();
+    let train_events = train.iter().map(|d| d.events.len()).sum();
+
+    let device = Device::flex().autodiff();
+    let mut net = FlowNet::new(s.net_config(), s.seed, &device, DType::F32);
+    net.set_trainable(true, false);
+    let mut moments: Vec<[Moments; 2]> = net.convs.iter().map(|_| Default::default()).collect();
+    let mut rng = ChaCha8Rng::seed_from_u64(s.seed ^ 0xda7a);
+    let res = s.resolution as usize;
+    let (bins, nb) = (s.bins, s.batch);
+    let cm_cfg = CmConfig::default();
+    let mut loss_curve = Vec::with_capacity(s.iterations);
+    let mut held_out = Vec::new();
+    let t_train = Instant::now();
+    for step in 0..s.iterations {
+        let frac = if s.iterations > 1 {
+            step as f64 / (s.iterations - 1) as f64
+        } else {
+            0.0
+        };
+        let lr = s.lr * (s.lr_final / s.lr).powf(frac);
+        let mut samples = Vec::with_capacity(nb);
+        while samples.len() < nb {
+            let d = &train[rng.random_range(0..train.len())];
+            let len = rng.random_range(s.window_min_s..=s.window_max_s);
+            let t_a = rng.random_range(0.0..=(d.duration - len).max(0.0));
+            let smp = sample(
+                d,
+                (t_a, t_a + len),
+                bins,
+                (rng.random_bool(0.5), rng.random_bool(0.5)),
+            );
+            if smp.mask.iter().any(|&m| m > 0.0) {
+                samples.push(smp);
+            }
+        }
+        let cat = |f: &dyn Fn(&Sample) -> &Vec<f32>| {
+            samples
+                .iter()
+                .flat_map(|x| f(x).iter().copied())
+                .collect::<Vec<f32>>()
+        };
+        let x = tensor4(
+            cat(&|x| &x.voxel),
+            [nb, bins, res, res],
+            &device,
+            DType::F32,
+        );
+        let target = tensor4(cat(&|x| &x.target), [nb, 2, res, res], &device, DType::F32);
+        let mask = tensor4(cat(&|x| &x.mask), [nb, 1, res, res], &device, DType::F32);
+        let flow = net.forward(x);
+        let diff = flow.clone() - target;
+        let epe = (diff.clone() * diff).sum_dim(1).add_scalar(1e-6).sqrt();
+        let msum = mask.clone().sum().into_scalar::<f32>().max(1.0) as f64;
+        let sup = (epe * mask).sum().div_scalar(msum);
+        let mut loss_value = s.supervised_weight * sup.clone().into_scalar::<f32>() as f64;
+        let mut total = sup.mul_scalar(s.supervised_weight);
+        if s.cm_weight > 0.0 {
+            for (k, smp) in samples.iter().enumerate() {
+                let ev = subsample(&smp.cm, s.cm_max_events);
+                let fk = flow.clone().slice([k..k + 1, 0..2, 0..res, 0..res]);
+                let f = to_f64(fk.clone().detach());
+                let l = cm_loss(
+                    &ev,
+                    &f[..res * res],
+                    &f[res * res..],
+                    (res, res),
+                    (0.0, 1.0),
+                    &cm_cfg,
+                );
+                if !l.loss.is_finite() {
+                    continue;
+                }
+                let wgt = s.cm_weight / nb as f64;
+                loss_value += wgt * l.loss;
+                let gu: Vec<f64> = l.grad_u.iter().map(|g| g * wgt).collect();
+                let gv: Vec<f64> = l.grad_v.iter().map(|g| g * wgt).collect();
+                total = total + crate::cm_grad::cm_surrogate(fk, &gu, &gv);
+            }
+        }
+        if !loss_value.is_finite() {
+            return Err(Error::Other(format!(
+                "pretraining diverged at step {step} (loss {loss_value})"
+            )));
+        }
+        let grads = total.backward();
+        let k = step as i32 + 1;
+        for (c, mo) in net.convs.iter_mut().zip(&mut moments) {
+            if let Some(g) = c.weight.grad(&grads) {
+                adam_step(&mut c.weight, to_f32(g), &mut mo[0], lr, k);
+            }
+            if let Some(g) = c.bias.grad(&grads) {
+                adam_step(&mut c.bias, to_f32(g), &mut mo[1], lr, k);
+            }
+        }
+        loss_curve.push(loss_value);
+        progress(step + 1, s.iterations, loss_value);
+        if s.eval_every > 0
+            && (step + 1) % s.eval_every == 0
+            && step + 1 < s.iterations
+            && !held.is_empty()
+        {
+            held_out.push(evaluate(&inference_copy(&net), &held, s, step + 1)?);
+        }
+    }
+    let train_s = t_train.elapsed().as_secs_f64();
+    let inf = inference_copy(&net);
+    if !held.is_empty() {
+        held_out.push(evaluate(&inf, &held, s, s.iterations)?);
+    }
+    let dir = scene::atomic::AtomicDir::new(out_dir)?;
+    let trained_by = format!(
+        "evflow pretrain (evflow::pretrain::run) with settings {}",
+        serde_json::to_string(s).unwrap_or_default()
+    );
+    inf.save(&dir.path().join(WEIGHTS_FILE), &trained_by)?;
+    let report = PretrainReport {
+        settings: s.clone(),
+        net: s.net_config(),
+        params: inf.param_count(),
+        train_scenes: train.iter().map(|d| d.name.clone()).collect(),
+        train_events,
+        eval_scenes: held.iter().map(|d| d.name.clone()).collect(),
+        data_s,
+        train_s,
+        step_s: train_s / s.iterations.max(1) as f64,
+        loss_curve,
+        held_out,
+        weights: out_dir.join(WEIGHTS_FILE),
+    };
+    scene::atomic::write_json_atomic(&dir.path().join("report.json"), &report)?;
+    dir.commit()?;
+    Ok(report)
+}
+
+/// At most `max` events at an even stride (all when `max == 0`).
+fn subsample(ev: &CmEvents, max: usize) -> CmEvents {
+    let n = ev.len();
+    if max == 0 || n <= max {
+        return ev.clone();
+    }
+    let stride = n.div_ceil(max);
+    let mut out = CmEvents::default();
+    for k in (0..n).step_by(stride) {
+        out.x.push(ev.x[k]);
+        out.y.push(ev.y[k]);
+        out.t.push(ev.t[k]);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tiny() -> PretrainSettings {
+        PretrainSettings {
+            base: 2,
+            presets: vec!["rigid".into()],
+            train_seeds: vec![1],
+            eval_presets: vec!["fast".into()],
+            eval_seeds: vec![2],
+            resolution: 32,
+            scene_duration: 0.25,
+            render_rate_hz: 200.0,
+            window_min_s: 0.05,
+            window_max_s: 0.1,
+            iterations: 3,
+            batch: 2,
+            cm_weight: 0.5,
+            eval_windows: 2,
+            ..PretrainSettings::default()
+        }
+    }
+
+    #[test]
+    fn settings_are_checked() {
+        assert!(PretrainSettings::default().validate().is_ok());
+        let mut s = PretrainSettings::default();
+        s.eval_seeds.push(s.train_seeds[0]);
+        assert!(s.validate().unwrap_err().contains("held-out"));
+        s = PretrainSettings {
+            presets: vec!["nope".into()],
+            ..PretrainSettings::default()
+        };
+        assert!(s.validate().unwrap_err().contains("nope"));
+        let e = toml::from_str::<PretrainSettings>("bogus = 1")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("bogus"), "{e}");
+        let s: PretrainSettings = toml::from_str("base = 8\niterations = 7").unwrap();
+        assert_eq!((s.base, s.iterations, s.batch), (8, 7, 4));
+    }
+
+    #[test]
+    fn seeds_change_textures_deterministically() {
+        let s = PretrainSettings::default();
+        let a = scene_config("rigid", 1, &s).unwrap();
+        let b = scene_config("rigid", 1001, &s).unwrap();
+        assert_eq!(a, scene_config("rigid", 1, &s).unwrap());
+        for (oa, ob) in a.objects.iter().zip(&b.objects) {
+            assert_ne!(oa.texture.seed, ob.texture.seed);
+            assert_ne!(oa.texture.colour_a, ob.texture.colour_a);
+        }
+        assert_eq!((a.width, a.height), (64, 64));
+    }
+
+    #[test]
+    fn flipped_samples_mirror_the_target() {
+        let s = tiny();
+        let d = make_scene("rigid", 1, &s).unwrap();
+        assert!(d.events.len() > 100, "{} events", d.events.len());
+        let a = sample(&d, (0.1, 0.2), 5, (false, false));
+        let b = sample(&d, (0.1, 0.2), 5, (true, true));
+        let n = 32;
+        let mut checked = 0;
+        for y in 0..n {
+            for x in 0..n {
+                let (p, q) = (y * n + x, (n - 1 - y) * n + (n - 1 - x));
+                assert_eq!(a.mask[p], b.mask[q]);
+                assert_eq!(a.target[p], -b.target[q]);
+                assert_eq!(a.target[n * n + p], -b.target[n * n + q]);
+                assert_eq!(a.voxel[p], b.voxel[q]);
+                checked += usize::from(a.mask[p] > 0.0);
+            }
+        }
+        assert!(checked > 10);
+        assert_eq!(a.cm.len(), b.cm.len());
+        assert!(a.cm.t.iter().all(|t| (0.0..=1.0).contains(t)));
+    }
+
+    #[test]
+    fn a_tiny_run_writes_loadable_weights_and_a_report() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("pre");
+        let mut calls = 0;
+        let r = run(&tiny(), &out, &mut |k, n, l| {
+            calls += 1;
+            assert!(k <= n && l.is_finite());
+        })
+        .unwrap();
+        assert_eq!(calls, 3);
+        assert_eq!(r.loss_curve.len(), 3);
+        assert_eq!(r.held_out.len(), 1);
+        let h = &r.held_out[0];
+        assert!(h.metrics.count > 0 && h.metrics.epe.is_finite());
+        assert!((h.zero.epe - h.zero.gt_magnitude).abs() < 1e-9);
+        let net =
+            FlowNet::load(&out.join(WEIGHTS_FILE), None, &Device::flex(), DType::F32).unwrap();
+        assert_eq!(net.config, tiny().net_config());
+        assert!(out.join("report.json").is_file());
+        let bad = PretrainSettings {
+            iterations: 1,
+            lr: -1.0,
+            ..tiny()
+        };
+        let e = run(&bad, &dir.path().join("bad"), &mut |_, _, _| {}).unwrap_err();
+        assert!(e.to_string().contains("lr"), "{e}");
+        assert!(!dir.path().join("bad").exists());
+    }
+}

@@ -1,0 +1,233 @@
+//! `degs events convert` and `degs synth`, driven through the binary.
+
+use scene::events::EventStream;
+use scene::formats::{ReadOptions, read_events, write_events, write_npz};
+use scene::manifest::Scene;
+use std::fs;
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn degs(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_degs"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn text(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).to_string()
+}
+
+/// A small stream with awkward timestamps (not whole microseconds for `.txt`/`.evs`).
+fn stream(micro: bool) -> EventStream {
+    let mut ev = EventStream::new(40, 30);
+    for i in 0..500u32 {
+        let t = if micro {
+            (1_000 + 37 * i as i64) as f64 / 1e6
+        } else {
+            0.001 + i as f64 * 3.7e-5 + 1e-13 * (i % 7) as f64
+        };
+        ev.t.push(t);
+        ev.x.push((i * 7 % 40) as u16);
+        ev.y.push((i * 11 % 30) as u16);
+        ev.p.push(if i % 3 == 0 { -1 } else { 1 });
+    }
+    ev
+}
+
+fn same(a: &EventStream, b: &EventStream) {
+    assert_eq!((a.width, a.height), (b.width, b.height));
+    assert_eq!(a.x, b.x);
+    assert_eq!(a.y, b.y);
+    assert_eq!(a.p, b.p);
+    let bits = |v: &[f64]| v.iter().map(|t| t.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&a.t), bits(&b.t));
+}
+
+#[test]
+fn convert_round_trips_between_formats_bit_exactly() {
+    let d = tempfile::tempdir().unwrap();
+    let p = |n: &str| d.path().join(n).display().to_string();
+    let ev = stream(false);
+    write_events(p("a.txt"), &ev).unwrap();
+    let o = degs(&["events", "convert", &p("a.txt"), &p("b.evs")]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("500 events"), "{}", text(&o));
+    let o = degs(&["events", "convert", &p("b.evs"), &p("c.txt")]);
+    assert!(o.status.success(), "{}", text(&o));
+    let none = ReadOptions::default();
+    same(&ev, &read_events(p("b.evs"), &none).unwrap());
+    same(&ev, &read_events(p("c.txt"), &none).unwrap());
+
+    // .npz holds whole microseconds and no sensor size
+    let ev = stream(true);
+    write_events(p("m.evs"), &ev).unwrap();
+    let o = degs(&["events", "convert", &p("m.evs"), &p("m.npz")]);
+    assert!(o.status.success(), "{}", text(&o));
+    let o = degs(&[
+        "events",
+        "convert",
+        &p("m.npz"),
+        &p("n.evs"),
+        "--sensor",
+        "40x30",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    same(&ev, &read_events(p("n.evs"), &none).unwrap());
+}
+
+#[test]
+fn hsergb_coordinates_are_divided_by_32() {
+    let d = tempfile::tempdir().unwrap();
+    let p = |n: &str| d.path().join(n).display().to_string();
+    let ev = stream(true);
+    // HS-ERGB layout: x, y stored ×32 (a sensor 32× larger holds them)
+    let mut scaled = ev.clone();
+    scaled.width *= 32;
+    scaled.height *= 32;
+    scaled.x.iter_mut().for_each(|x| *x *= 32);
+    scaled.y.iter_mut().for_each(|y| *y *= 32);
+    write_npz(p("hs.npz"), &scaled).unwrap();
+    let o = degs(&[
+        "events",
+        "convert",
+        &p("hs.npz"),
+        &p("hs.evs"),
+        "--sensor",
+        "40x30",
+        "--hsergb",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    same(
+        &ev,
+        &read_events(p("hs.evs"), &ReadOptions::default()).unwrap(),
+    );
+    // the explicit factor does the same
+    let o = degs(&[
+        "events",
+        "convert",
+        &p("hs.npz"),
+        &p("hs2.evs"),
+        "--sensor",
+        "40x30",
+        "--coord-scale",
+        "32",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert_eq!(
+        fs::read(p("hs.evs")).unwrap(),
+        fs::read(p("hs2.evs")).unwrap()
+    );
+    // without the option the coordinates fall outside the sensor: an error, no output
+    let o = degs(&[
+        "events",
+        "convert",
+        &p("hs.npz"),
+        &p("bad.evs"),
+        "--sensor",
+        "40x30",
+    ]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("hs.npz"), "{}", text(&o));
+    assert!(!Path::new(&p("bad.evs")).exists());
+}
+
+#[test]
+fn convert_errors_name_the_file_and_write_nothing() {
+    let d = tempfile::tempdir().unwrap();
+    let p = |n: &str| d.path().join(n).display().to_string();
+    write_events(p("ok.evs"), &stream(false)).unwrap();
+    let mut bytes = fs::read(p("ok.evs")).unwrap();
+    bytes.truncate(bytes.len() / 2);
+    fs::write(p("cut.evs"), &bytes).unwrap();
+    fs::write(p("junk.txt"), "0.1 1 2 1\nnot an event\n").unwrap();
+    fs::write(p("empty.npz"), b"").unwrap();
+    for (input, out) in [
+        ("cut.evs", "o1.txt"),
+        ("junk.txt", "o2.evs"),
+        ("empty.npz", "o3.evs"),
+        ("missing.evs", "o4.txt"),
+        ("ok.evs", "o5.xyz"),
+    ] {
+        let o = degs(&["events", "convert", &p(input), &p(out), "--sensor", "40x30"]);
+        assert!(!o.status.success(), "{input}");
+        let err = text(&o);
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+        assert!(err.contains(input) || err.contains(out), "{err}");
+        assert!(!Path::new(&p(out)).exists(), "{out} written");
+    }
+    let leftovers: Vec<_> = fs::read_dir(d.path())
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().contains(".tmp"))
+        .collect();
+    assert!(leftovers.is_empty());
+}
+
+/// Tiny settings so every preset writes in well under a second.
+const TINY: [&str; 12] = [
+    "--set",
+    "width=24",
+    "--set",
+    "height=16",
+    "--set",
+    "duration=0.25",
+    "--set",
+    "render_rate_hz=200",
+    "--set",
+    "test_frames=2",
+    "--set",
+    "supersample=1",
+];
+
+#[test]
+fn synth_writes_every_preset_in_the_scene_layout() {
+    let d = tempfile::tempdir().unwrap();
+    for preset in scene::synth::PRESETS {
+        let out = d.path().join(preset);
+        let mut args = vec!["synth", "--preset", preset, "--out", out.to_str().unwrap()];
+        args.extend_from_slice(&TINY);
+        let o = degs(&args);
+        assert!(o.status.success(), "{preset}: {}", text(&o));
+        let scene = Scene::open(&out).unwrap();
+        // train frames at k / train_fps over 0.25 s at 8 fps: 0, 0.125, 0.25
+        assert_eq!(scene.train.frames.len(), 3, "{preset}");
+        assert_eq!(scene.test.frames.len(), 2, "{preset}");
+        for f in scene.train.frames.iter().chain(&scene.test.frames) {
+            let img = scene::image_io::read_image(scene.image_path(f)).unwrap();
+            assert_eq!((img.width, img.height), (24, 16), "{preset}");
+        }
+        let ev = scene.load_events().unwrap();
+        assert_eq!((ev.width, ev.height), (24, 16));
+        assert!(!ev.is_empty(), "{preset}: no events");
+        assert!(out.join("events.evs").is_file());
+        let gt = scene::synth::gt::read_event_flow_gt(out.join("gt/event_flow.bin")).unwrap();
+        assert_eq!(gt.len(), ev.len(), "{preset}: one gt flow per event");
+        for split in ["train", "test"] {
+            let n = if split == "train" { 3 } else { 2 };
+            for i in 0..n {
+                let depth = out.join(format!("gt/{split}/depth_{i:04}.exr"));
+                let (w, h, z) = scene::image_io::read_exr_depth(&depth).unwrap();
+                assert_eq!((w, h), (24, 16));
+                assert!(z.iter().all(|z| z.is_finite() && *z >= 0.0));
+                let flow = out.join(format!("gt/{split}/flow_{i:04}.exr"));
+                assert!(flow.is_file(), "{}", flow.display());
+            }
+        }
+        let settings: toml::Table =
+            serde_json::from_slice::<serde_json::Value>(&fs::read(out.join("synth.json")).unwrap())
+                .ok()
+                .and_then(|v| toml::Value::try_from(v).ok())
+                .and_then(|v| v.as_table().cloned())
+                .unwrap();
+        assert_eq!(settings["width"].as_integer(), Some(24), "{preset}");
+    }
+    // a typo in a setting names it; nothing is written
+    let out = d.path().join("typo");
+    let o = degs(&["synth", "--out", out.to_str().unwrap(), "--set", "widht=3"]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("widht"), "{}", text(&o));
+    assert!(!out.exists());
+    let o = degs(&["synth", "--preset", "nope", "--out", out.to_str().unwrap()]);
+    assert!(text(&o).contains("nope") && text(&o).contains("rigid"));
+}

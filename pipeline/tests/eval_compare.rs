@@ -1,0 +1,224 @@
+//! `degs eval RUN` and `degs compare RUN…` on fabricated run directories: a tiny
+//! synthetic scene, renders with a known error, flow files with a known error.
+
+use evflow::flowfile::{EvFlow, write_evflow};
+use pipeline::experiment::synth_config;
+use pipeline::record::{Action, RunRecord, StageRecord};
+use scene::image_io::{read_image, write_png};
+use scene::manifest::Scene;
+use std::collections::BTreeMap;
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn degs(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_degs"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn tiny_scene(dir: &Path) -> PathBuf {
+    let set: toml::Table = "width = 32\nheight = 24\nduration = 0.25\nrender_rate_hz = 200\n\
+                            test_frames = 2\nsupersample = 1\nshot_noise_hz = 20.0\n"
+        .parse()
+        .unwrap();
+    let cfg = synth_config("rigid", &set).unwrap();
+    let out = dir.join("scene");
+    pipeline::synth::write_scene(&cfg, &out).unwrap();
+    out
+}
+
+fn stage(name: &str, action: Action, entry: Option<PathBuf>) -> StageRecord {
+    StageRecord {
+        stage: name.into(),
+        action,
+        key: Some(format!("{name}-key")),
+        binary: None,
+        binary_hash: None,
+        settings: serde_json::json!({}),
+        inputs: BTreeMap::new(),
+        entry,
+        wall_s: 0.0,
+        built_wall_s: Some(1.5),
+        peak_rss_kib: None,
+        exit_status: Some(0),
+        error: None,
+        log: None,
+    }
+}
+
+/// A run dir whose gaussians entry holds `renders` and whose evflow entry holds `flow/`.
+fn fabricate_run(root: &Path, name: &str, scene: &Path, renders: &Path, flows: Option<&Path>) {
+    let run = root.join("runs").join(name);
+    let record = RunRecord {
+        experiment: name.into(),
+        experiment_file: None,
+        cache_root: root.to_path_buf(),
+        status: "ok".into(),
+        started_unix: 0,
+        wall_s: 3.0,
+        jobs: 1,
+        stages: vec![
+            stage("synth", Action::Cached, Some(scene.to_path_buf())),
+            match flows {
+                Some(f) => stage("evflow", Action::Ran, Some(f.to_path_buf())),
+                None => stage("evflow", Action::Unavailable, None),
+            },
+            stage("gaussians", Action::Ran, Some(renders.to_path_buf())),
+            stage("assoc", Action::Unavailable, None),
+            stage("deform", Action::Unavailable, None),
+        ],
+    };
+    record.write(&run.join("run.json")).unwrap();
+}
+
+/// Copies of the test frames as renders; frame 1 gets pixel (0, 0) red changed by
+/// `delta` levels. Returns the expected PSNR of frame 1.
+fn renders(dir: &Path, scene: &Scene, delta: f32) -> f64 {
+    let out = dir.join("renders");
+    fs::create_dir_all(&out).unwrap();
+    let mut expected = f64::INFINITY;
+    for (i, f) in scene.test.frames.iter().enumerate() {
+        let mut img = read_image(scene.image_path(f)).unwrap();
+        if i == 1 && delta != 0.0 {
+            let v = (img.data[0] * 255.0).round();
+            let new = if v + delta <= 255.0 {
+                v + delta
+            } else {
+                v - delta
+            };
+            img.data[0] = new / 255.0;
+            let n = (img.width * img.height * img.channels) as f64;
+            expected = 10.0 * (255.0f64.powi(2) * n / (delta as f64).powi(2)).log10();
+        }
+        write_png(out.join(format!("{i:04}.png")), &img).unwrap();
+    }
+    expected
+}
+
+#[test]
+fn eval_and_compare_report_known_errors() {
+    let d = tempfile::tempdir().unwrap();
+    let root = d.path().join("cache-root");
+    let scene_dir = tiny_scene(d.path());
+    let scene = Scene::open(&scene_dir).unwrap();
+    let gt = scene::synth::gt::read_event_flow_gt(scene_dir.join("gt/event_flow.bin")).unwrap();
+    let noise = gt
+        .object
+        .iter()
+        .filter(|&&o| o == scene::synth::gt::NOISE_ID)
+        .count();
+    assert!(noise > 0 && noise < gt.len(), "{noise} of {}", gt.len());
+
+    // run A: one render off by 40 levels in one value; flow off by (3, -4) px/s,
+    // noise events given absurd flow (they must not count)
+    let a = d.path().join("a-gaussians");
+    let psnr1 = renders(&a, &scene, 40.0);
+    let flows = d.path().join("a-evflow");
+    fs::create_dir_all(flows.join("flow")).unwrap();
+    let half = gt.len() / 2;
+    for (w, range) in [(0usize, 0..half), (1, half..gt.len())] {
+        let mut fl = EvFlow {
+            width: gt.width,
+            height: gt.height,
+            t_a: 0.1 * w as f64,
+            t_b: 0.1 * w as f64 + 0.125,
+            t_ref: 0.1 * w as f64,
+            ..EvFlow::default()
+        };
+        for j in range {
+            fl.index.push(gt.index[j]);
+            let bad = gt.object[j] == scene::synth::gt::NOISE_ID;
+            fl.u.push(if bad { 1e4 } else { gt.u[j] + 3.0 });
+            fl.v.push(if bad { 1e4 } else { gt.v[j] - 4.0 });
+        }
+        write_evflow(&flows.join(format!("flow/{w:04}.evflow")), &fl).unwrap();
+    }
+    fabricate_run(&root, "a", &scene_dir, &a, Some(&flows));
+    // run B: perfect renders, no flow stage
+    let b = d.path().join("b-gaussians");
+    renders(&b, &scene, 0.0);
+    fabricate_run(&root, "b", &scene_dir, &b, None);
+
+    let run_a = root.join("runs/a");
+    let o = degs(&["eval", run_a.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let m: serde_json::Value =
+        serde_json::from_slice(&fs::read(run_a.join("metrics.json")).unwrap()).unwrap();
+    let frames = m["frames"].as_array().unwrap();
+    assert_eq!(frames.len(), 2);
+    assert_eq!(frames[0]["psnr"], 100.0);
+    assert_eq!(frames[0]["ssim"], 1.0);
+    let p1 = frames[1]["psnr"].as_f64().unwrap();
+    assert!((p1 - psnr1).abs() < 1e-9, "{p1} vs {psnr1}");
+    let s1 = frames[1]["ssim"].as_f64().unwrap();
+    assert!(s1 < 1.0 && s1 > 0.9, "{s1}");
+    let mean = m["psnr_mean"].as_f64().unwrap();
+    assert!((mean - (100.0 + psnr1) / 2.0).abs() < 1e-9);
+    assert_eq!(m["render_stage"], "gaussians");
+    // flow: |(3, -4)| = 5 px/s for every non-noise event (f32 rounding of gt + 3)
+    assert_eq!(m["flow_source"], "gt/event_flow.bin");
+    assert_eq!(
+        m["flow_events"].as_u64().unwrap() as usize,
+        gt.len() - noise
+    );
+    let epe = m["flow_epe"].as_f64().unwrap();
+    assert!((epe - 5.0).abs() < 1e-3, "{epe}");
+    let err_px = m["flow_err_px"].as_f64().unwrap();
+    assert!((err_px - 5.0 * 0.125).abs() < 1e-3, "{err_px}");
+    assert_eq!(m["flow_outliers"], 0.0);
+
+    // compare by run directory and by experiment name (with --cache)
+    let o = degs(&[
+        "compare",
+        run_a.to_str().unwrap(),
+        "b",
+        "--cache",
+        root.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let table = String::from_utf8_lossy(&o.stdout).to_string();
+    let lines: Vec<&str> = table.lines().collect();
+    assert_eq!(lines.len(), 3, "{table}");
+    assert!(lines[0].contains("PSNR dB") && lines[0].contains("EPE px/s"));
+    let cols = |l: &str| l.split_whitespace().map(str::to_string).collect::<Vec<_>>();
+    let ca = cols(lines[1]);
+    assert_eq!(ca[1], format!("{:.2}", (100.0 + psnr1) / 2.0), "{table}");
+    assert_eq!(ca[3], "2");
+    assert_eq!(ca[4], "5.000");
+    assert_eq!(ca[5], "0.625");
+    assert_eq!(ca[6], "0.0%");
+    let cb = cols(lines[2]);
+    assert_eq!(cb[0], "b");
+    assert_eq!(&cb[1..5], ["100.00", "1.0000", "2", "-"]);
+    assert!(root.join("runs/b/metrics.json").is_file());
+}
+
+#[test]
+fn eval_errors_name_what_is_wrong() {
+    let d = tempfile::tempdir().unwrap();
+    let root = d.path().join("cache-root");
+    let scene_dir = tiny_scene(d.path());
+    let scene = Scene::open(&scene_dir).unwrap();
+    let g = d.path().join("g");
+    renders(&g, &scene, 0.0);
+    fs::remove_file(g.join("renders/0001.png")).unwrap();
+    fabricate_run(&root, "short", &scene_dir, &g, None);
+    let o = degs(&["eval", root.join("runs/short").to_str().unwrap()]);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr).to_string();
+    assert!(err.contains("2 test frames but 1 renders"), "{err}");
+    assert!(err.contains("renders"), "{err}");
+
+    let o = degs(&["eval", "no-such-run", "--cache", root.to_str().unwrap()]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("no-such-run"));
+
+    let bad = root.join("runs/bad");
+    fs::create_dir_all(&bad).unwrap();
+    fs::write(bad.join("run.json"), "{ truncated").unwrap();
+    let o = degs(&["eval", bad.to_str().unwrap()]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("run.json"));
+}
