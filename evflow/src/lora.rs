@@ -110,7 +110,7 @@ pub fn sidecar(path: &Path) -> std::path::PathBuf {
 pub fn load_adapters(net: &mut FlowNet, path: &Path) -> Result<()> {
     let text = std::fs::read_to_string(sidecar(path)).map_err(|e| Error::Io {
         path: sidecar(path),
-        source: e,
+        err: e,
     })?;
     let meta: AdapterMeta = serde_json::from_str(&text)
         .map_err(|e| Error::invalid(sidecar(path), format!("bad adapter sidecar: {e}")))?;

@@ -8,11 +8,12 @@ pub enum Error {
     #[error("{}: {msg}", path.display())]
     Invalid { path: PathBuf, msg: String },
     /// The operating system refused (missing file, permissions, disk full…).
-    #[error("{}: {source}", path.display())]
+    #[error("{}: {err}", path.display())]
     Io {
         path: PathBuf,
-        #[source]
-        source: std::io::Error,
+        // Not a `source`: the message already ends with it, and error chains printed
+        // with `{:#}` would repeat it.
+        err: std::io::Error,
     },
     /// An error that is not about one file (bad arguments, inconsistent settings).
     #[error("{0}")]
@@ -32,7 +33,7 @@ impl Error {
     pub fn io(path: impl AsRef<Path>, source: std::io::Error) -> Self {
         Error::Io {
             path: path.as_ref().to_path_buf(),
-            source,
+            err: source,
         }
     }
 }

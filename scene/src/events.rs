@@ -157,8 +157,12 @@ impl<'a> EventSlice<'a> {
         self.t.is_empty()
     }
 
-    /// Indices (relative to this slice) of the events with `t0 ≤ t < t1`.
+    /// Indices (relative to this slice) of the events with `t0 ≤ t < t1` (half-open;
+    /// empty when `t1 ≤ t0` or a bound is NaN).
     pub fn window_range(&self, t0: f64, t1: f64) -> Range<usize> {
+        if t0.is_nan() {
+            return self.t.len()..self.t.len(); // no t satisfies NaN ≤ t
+        }
         let a = self.t.partition_point(|&t| t < t0);
         let b = a + self.t[a..].partition_point(|&t| t < t1);
         a..b

@@ -599,3 +599,38 @@ fn unknown_extension_and_missing_file() {
     let e = err_text(read_events("/nonexistent/ev.evs", &ReadOptions::default()));
     assert!(e.contains("/nonexistent/ev.evs"), "{e}");
 }
+
+#[test]
+fn npz_not_a_zip_cut_archive_and_empty_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = dir.path().join("good.npz");
+    write_npz(&good, &microsecond_stream(500)).unwrap();
+    let bytes = std::fs::read(&good).unwrap();
+    assert_eq!(&bytes[..4], b"PK\x03\x04", "a zip archive");
+    // A bare .npy saved as .npz (magic \x93NUMPY, not PK): no zip directory at all.
+    let npy_file = npy(&[1i64, 2, 3]);
+    // Broken local-header magic: the zip directory (at the end) is intact, so the
+    // archive opens and the first member fails.
+    let mut magic = bytes.clone();
+    magic[..4].copy_from_slice(b"\x93NUM");
+    let half = bytes[..bytes.len() / 2].to_vec();
+    let zip = "not a valid .npz (zip)";
+    let cases = [
+        ("npy.npz", npy_file, zip),
+        ("text.npz", b"t,x,y,p\n1,2,3,1\n".to_vec(), zip),
+        ("magic.npz", magic, "x.npy: cannot open"),
+        ("half.npz", half, zip),
+        ("empty.npz", vec![], "file is empty"),
+    ];
+    // Every cut of the archive too: an error naming the file, never a panic or a stream.
+    let cuts = (0..bytes.len())
+        .step_by(97)
+        .map(|n| ("cut.npz", bytes[..n].to_vec(), ""));
+    for (name, data, want) in cases.into_iter().chain(cuts) {
+        let p = dir.path().join(name);
+        std::fs::write(&p, &data).unwrap();
+        let r = std::panic::catch_unwind(|| read_events(&p, &opts(346, 260)));
+        let e = err_text(r.unwrap_or_else(|_| panic!("{name} ({} B) panicked", data.len())));
+        assert!(e.contains(name) && e.contains(want), "{name}: {e}");
+    }
+}
