@@ -38,6 +38,10 @@ pub struct CmConfig {
     pub scales: usize,
     /// Weight of the TV regulariser on the flow.
     pub lambda_tv: f64,
+    /// Finest pyramid level used (0 = full resolution; coarse-to-fine schedules raise
+    /// it early in training). Clamped to `scales − 1`.
+    #[serde(default)]
+    pub first_level: usize,
 }
 
 impl Default for CmConfig {
@@ -45,6 +49,7 @@ impl Default for CmConfig {
         CmConfig {
             scales: 3,
             lambda_tv: 0.01,
+            first_level: 0,
         }
     }
 }
@@ -172,8 +177,22 @@ pub fn gradient_magnitude(
     scales: usize,
     grad: Option<&mut [f64]>,
 ) -> f64 {
+    gradient_magnitude_from(img, w, h, scales, 0, grad)
+}
+
+/// Multi-scale GM over the pyramid levels `first..scales` (level 0 = `img`; `first`
+/// clamped to `scales − 1`): their mean. With `grad`, fills dGM/dimg.
+pub fn gradient_magnitude_from(
+    img: &[f64],
+    w: usize,
+    h: usize,
+    scales: usize,
+    first: usize,
+    grad: Option<&mut [f64]>,
+) -> f64 {
     let scales = scales.max(1);
-    let inv = 1.0 / scales as f64;
+    let first = first.min(scales - 1);
+    let inv = 1.0 / (scales - first) as f64;
     let mut levels: Vec<(Vec<f64>, usize, usize)> = vec![(img.to_vec(), w, h)];
     for _ in 1..scales {
         let (l, lw, lh) = levels.last().unwrap();
@@ -183,13 +202,15 @@ pub fn gradient_magnitude(
     let want_grad = grad.is_some();
     let mut total = 0.0;
     let mut level_grads = Vec::new();
-    for (l, lw, lh) in &levels {
+    for (i, (l, lw, lh)) in levels.iter().enumerate() {
         let mut g = if want_grad {
             vec![0.0; lw * lh]
         } else {
             Vec::new()
         };
-        total += inv * gm_single(l, *lw, *lh, want_grad.then_some(&mut g[..]), inv);
+        if i >= first {
+            total += inv * gm_single(l, *lw, *lh, want_grad.then_some(&mut g[..]), inv);
+        }
         level_grads.push(g);
     }
     if let Some(out) = grad {
@@ -282,7 +303,14 @@ pub fn cm_loss(
         };
     }
     let zero = vec![0.0; w * h];
-    let gm0 = gradient_magnitude(&iwe(ev, &zero, &zero, t_a, w, h), w, h, cfg.scales, None);
+    let gm0 = gradient_magnitude_from(
+        &iwe(ev, &zero, &zero, t_a, w, h),
+        w,
+        h,
+        cfg.scales,
+        cfg.first_level,
+        None,
+    );
     let mut data = 0.0;
     let mut gm_mean = 0.0;
     let refs = references(t_a, t_b);
@@ -290,7 +318,7 @@ pub fn cm_loss(
     let mut g_img = vec![0.0; w * h];
     for (t_ref, wt) in refs {
         let img = iwe(ev, u, v, t_ref, w, h);
-        let gm = gradient_magnitude(&img, w, h, cfg.scales, Some(&mut g_img));
+        let gm = gradient_magnitude_from(&img, w, h, cfg.scales, cfg.first_level, Some(&mut g_img));
         gm_mean += wt * gm / wsum;
         if gm0 <= 0.0 || gm <= 0.0 {
             continue;
@@ -363,12 +391,45 @@ mod tests {
 
     #[test]
     fn gradient_matches_finite_differences() {
-        let (w, h) = (12, 10);
-        let (ev, u, v) = random_case(7, w, h, 150);
         let cfg = CmConfig {
             scales: 2,
             lambda_tv: 0.05,
+            first_level: 0,
         };
+        check_gradient(12, 10, &cfg);
+    }
+
+    #[test]
+    fn coarse_levels_only_gradient_matches_finite_differences() {
+        // Levels 1..3 of a 3-level pyramid (the coarse-to-fine schedule's first epochs).
+        let cfg = CmConfig {
+            scales: 3,
+            lambda_tv: 0.05,
+            first_level: 1,
+        };
+        check_gradient(16, 12, &cfg);
+        // The full-resolution level does change the value.
+        let (ev, u, v) = random_case(7, 16, 12, 150);
+        let all = CmConfig {
+            first_level: 0,
+            ..cfg.clone()
+        };
+        let a = cm_loss(&ev, &u, &v, (16, 12), (0.0, 1.0), &cfg).loss;
+        let b = cm_loss(&ev, &u, &v, (16, 12), (0.0, 1.0), &all).loss;
+        assert!((a - b).abs() > 1e-6, "{a} {b}");
+        // first_level past the coarsest level is clamped to it.
+        let top = |f| CmConfig {
+            first_level: f,
+            ..cfg.clone()
+        };
+        let c2 = cm_loss(&ev, &u, &v, (16, 12), (0.0, 1.0), &top(2)).loss;
+        let c9 = cm_loss(&ev, &u, &v, (16, 12), (0.0, 1.0), &top(9)).loss;
+        assert_eq!(c2, c9);
+    }
+
+    fn check_gradient(w: usize, h: usize, cfg: &CmConfig) {
+        let cfg = cfg.clone();
+        let (ev, u, v) = random_case(7, w, h, 150);
         let l = cm_loss(&ev, &u, &v, (w, h), (0.0, 1.0), &cfg);
         assert!(l.loss.is_finite() && l.loss > 0.0);
         let eps = 1e-6;

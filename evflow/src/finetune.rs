@@ -63,13 +63,26 @@ pub struct FlowSettings {
     pub lambda_tv: f64,
     /// Pyramid levels of the CM objective.
     pub cm_scales: usize,
+    /// Coarse-to-fine: the first epoch uses only the coarsest CM pyramid level, the
+    /// last all of them (the finest level used moves down linearly over the epochs).
+    /// On by default: on large per-window motion it keeps LoRA from sharpening the
+    /// events towards a wrong flow (BENCHMARKS.md, LoCM ablation).
+    pub cm_coarse_to_fine: bool,
     /// Events per window used by the CM loss (even stride; 0 = all). Prediction always
     /// covers every event.
     pub max_cm_events: usize,
     /// Seed of the LoRA initialisation.
     pub seed: u64,
-    /// Base weights (safetensors with a JSON sidecar); `None` = the shipped weights.
+    /// Base weights (safetensors, with or without a JSON sidecar); `None` = the shipped
+    /// weights.
     pub weights: Option<PathBuf>,
+    /// Base width C that bare weights (no sidecar) must have; `None` = read it from
+    /// `enc1.weight`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub weights_width: Option<usize>,
+    /// Scale of the tanh heads (px per window) for bare weights; `None` = 32.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub weights_max_flow: Option<f64>,
     /// Write dense previews (`.flo`, EXR, colour-wheel PNG) per window.
     pub previews: bool,
 }
@@ -85,9 +98,12 @@ impl Default for FlowSettings {
             alpha: 16.0,
             lambda_tv: 0.01,
             cm_scales: 3,
+            cm_coarse_to_fine: true,
             max_cm_events: 200_000,
             seed: 0,
             weights: None,
+            weights_width: None,
+            weights_max_flow: None,
             previews: true,
         }
     }
@@ -115,10 +131,19 @@ impl FlowSettings {
         Ok(())
     }
 
+    /// Settings for base weights without a sidecar.
+    pub fn bare_weights(&self) -> crate::weights::BareWeights {
+        crate::weights::BareWeights {
+            base: self.weights_width,
+            max_flow: self.weights_max_flow,
+        }
+    }
+
     pub fn cm_config(&self) -> crate::cm::CmConfig {
         crate::cm::CmConfig {
             scales: self.cm_scales,
             lambda_tv: self.lambda_tv,
+            first_level: 0,
         }
     }
 }
@@ -169,9 +194,10 @@ pub fn resolve_weights(explicit: Option<&Path>) -> Result<PathBuf> {
     }
 }
 
-/// Load base weights onto `device` (which may be an autodiff device).
+/// Load base weights onto `device` (which may be an autodiff device); without a
+/// sidecar the settings are inferred from the tensors ([`crate::weights::load`]).
 pub fn load_base(path: &Path, device: &Device) -> Result<FlowNet> {
-    FlowNet::load(path, None, device, DType::F32)
+    crate::weights::load(path, &Default::default(), device, DType::F32).map(|l| l.net)
 }
 
 /// A copy of `net` for inference: adapters merged, tensors off the autodiff graph.
@@ -208,6 +234,9 @@ pub struct FinetuneReport {
     pub windows: usize,
     /// Windows with events (the steps per epoch).
     pub trained_windows: usize,
+    /// Windows whose CM loss used a subsample (more than `max_cm_events` events).
+    #[serde(default)]
+    pub cm_subsampled_windows: Vec<usize>,
     pub trainable_params: usize,
     /// CM loss of every step, in order.
     pub loss_curve: Vec<f64>,
@@ -272,6 +301,24 @@ fn flow_of(net: &FlowNet, src: &Source, w: &crate::source::Window) -> (Tensor<4>
     (flow, vals)
 }
 
+/// Finest CM pyramid level used at `epoch` (0 unless `cm_coarse_to_fine`).
+pub fn coarse_level(s: &FlowSettings, epoch: usize) -> usize {
+    if !s.cm_coarse_to_fine || s.epochs < 2 {
+        return 0;
+    }
+    let left = 1.0 - epoch as f64 / (s.epochs - 1) as f64;
+    ((s.cm_scales - 1) as f64 * left).round() as usize
+}
+
+/// Windows with more events than the CM loss takes (`max_cm_events`).
+pub fn subsampled_windows<'a>(
+    src: &'a Source,
+    s: &FlowSettings,
+) -> impl Iterator<Item = &'a crate::source::Window> {
+    let max = s.max_cm_events;
+    src.windows.iter().filter(move |w| max > 0 && w.len() > max)
+}
+
 /// Mean CM loss of `net` over the windows with events (no gradient).
 pub fn mean_cm_loss(net: &FlowNet, src: &Source, s: &FlowSettings) -> f64 {
     let (wd, ht) = (src.width() as usize, src.height() as usize);
@@ -310,6 +357,7 @@ pub fn finetune(
     report.cm_loss_after = report.cm_loss_before;
     let trained: Vec<_> = src.windows.iter().filter(|w| !w.is_empty()).collect();
     report.trained_windows = trained.len();
+    report.cm_subsampled_windows = subsampled_windows(src, s).map(|w| w.index).collect();
     if s.mode == Mode::None || s.epochs == 0 || trained.is_empty() {
         return Ok(report);
     }
@@ -349,6 +397,10 @@ pub fn finetune(
     let mut step_time = 0.0;
     for epoch in 0..s.epochs {
         let start = Instant::now();
+        let cfg = crate::cm::CmConfig {
+            first_level: coarse_level(s, epoch),
+            ..cfg.clone()
+        };
         let mut epoch_sum = 0.0;
         for (i, w) in trained.iter().enumerate() {
             let t0 = Instant::now();
@@ -401,4 +453,34 @@ pub fn finetune(
     report.step_s = step_time / k.max(1) as f64;
     report.cm_loss_after = mean_cm_loss(&for_inference(net), src, s);
     Ok(report)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn coarse_to_fine_schedule() {
+        let s = |epochs, scales, on| FlowSettings {
+            epochs,
+            cm_scales: scales,
+            cm_coarse_to_fine: on,
+            ..FlowSettings::default()
+        };
+        let levels = |f: &FlowSettings| {
+            (0..f.epochs)
+                .map(|e| coarse_level(f, e))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(levels(&s(3, 3, true)), [2, 1, 0]);
+        assert_eq!(levels(&s(5, 3, true)), [2, 2, 1, 1, 0]);
+        assert_eq!(levels(&s(3, 3, false)), [0, 0, 0]);
+        assert_eq!(
+            levels(&s(1, 3, true)),
+            [0],
+            "a single epoch uses every level"
+        );
+        assert_eq!(levels(&s(3, 1, true)), [0, 0, 0]);
+        assert!(FlowSettings::default().cm_coarse_to_fine);
+    }
 }

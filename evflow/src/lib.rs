@@ -15,3 +15,4 @@ pub mod source;
 pub mod stage;
 pub mod synthesize;
 pub mod voxel;
+pub mod weights;

@@ -11,7 +11,7 @@ use std::path::PathBuf;
 /// (LoRA + contrast maximisation). Outputs per-event flow files (`flow/NNNN.evflow`,
 /// px/s) that `assoc` and `deform` read, dense previews and report.json.
 #[derive(Parser, Debug)]
-#[command(name = "evflow", version)]
+#[command(name = "evflow", version, after_help = evflow::weights::TENSOR_NAMES_HELP)]
 struct Cli {
     #[command(subcommand)]
     cmd: Cmd,
@@ -146,10 +146,18 @@ struct CommonArgs {
     /// Settings file (TOML, keys of FlowSettings); flags override it.
     #[arg(long)]
     config: Option<PathBuf>,
-    /// Base network weights (safetensors + .json sidecar). Default: $EVFLOW_WEIGHTS,
-    /// else the weights shipped in evflow/weights/.
+    /// Base network weights: safetensors with a .json sidecar, or bare (tensor names in
+    /// `evflow --help`). Default: $EVFLOW_WEIGHTS, else the weights shipped in
+    /// evflow/weights/.
     #[arg(long)]
     weights: Option<PathBuf>,
+    /// Base width C of bare --weights (no sidecar); checked against enc1.weight, which
+    /// gives it when omitted.
+    #[arg(long, requires = "weights")]
+    width: Option<usize>,
+    /// Largest flow of bare --weights' tanh heads, px per window [default 32].
+    #[arg(long, requires = "weights")]
+    max_flow: Option<f64>,
     /// Skip the dense previews (.flo, EXR, PNG).
     #[arg(long)]
     no_previews: bool,
@@ -194,6 +202,12 @@ fn settings_of(c: &CommonArgs) -> anyhow::Result<FlowSettings> {
     };
     if let Some(w) = &c.weights {
         s.weights = Some(w.clone());
+    }
+    if c.width.is_some() {
+        s.weights_width = c.width;
+    }
+    if c.max_flow.is_some() {
+        s.weights_max_flow = c.max_flow;
     }
     if c.no_previews {
         s.previews = false;

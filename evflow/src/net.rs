@@ -460,13 +460,14 @@ impl FlowNet {
             Err(_) => config.ok_or_else(|| {
                 Error::invalid(
                     path,
-                    "no JSON sidecar; give the network settings explicitly",
+                    "no JSON sidecar; give the network settings explicitly \
+                     (or load with evflow::weights::load, which infers them)",
                 )
             })?,
         };
         if config.base == 0
             || config.bins == 0
-            || config.max_flow.is_nan()
+            || !config.max_flow.is_finite()
             || config.max_flow <= 0.0
         {
             return Err(Error::invalid(
@@ -474,18 +475,54 @@ impl FlowNet {
                 format!("invalid network settings {config:?}"),
             ));
         }
-        let tensors = read_safetensors(path)?;
-        let mut net = FlowNet::new(config, 0, device, dtype);
-        for c in &mut net.convs {
-            let shape = c.shape();
-            let w = take(&tensors, path, &format!("{}.weight", c.name), &shape)?;
-            let b = take(&tensors, path, &format!("{}.bias", c.name), &[shape[0]])?;
-            c.weight = tensor4(w, shape, device, dtype);
-            c.bias = Tensor::<1>::from_data(
-                TensorData::new(b, [shape[0]]).convert_dtype(dtype),
-                (device, dtype),
-            );
+        FlowNet::from_tensors(path, config, &read_safetensors(path)?, device, dtype)
+    }
+
+    /// A network with `config` whose parameters are taken from `tensors` (read from
+    /// `path`, named in errors): every tensor of [`layout`] must be there with its shape.
+    pub fn from_tensors(
+        path: &Path,
+        config: NetConfig,
+        tensors: &TensorMap,
+        device: &Device,
+        dtype: DType,
+    ) -> Result<FlowNet> {
+        if config.base == 0 || config.base > 1 << 14 || config.bins == 0 || config.bins > 1024 {
+            return Err(Error::invalid(
+                path,
+                format!(
+                    "network settings out of range: C = {}, B = {}",
+                    config.base, config.bins
+                ),
+            ));
         }
-        Ok(net)
+        // Check every tensor before allocating anything (a hostile sidecar or shape
+        // must not make us allocate a huge network).
+        let mut convs = Vec::new();
+        for (name, out, inp, k, stride) in layout(&config) {
+            let shape = [out, inp, k, k];
+            let w = take(tensors, path, &format!("{name}.weight"), &shape)?;
+            let b = take(tensors, path, &format!("{name}.bias"), &[out])?;
+            convs.push((name, shape, w, b, stride));
+        }
+        let convs = convs
+            .into_iter()
+            .map(|(name, shape, w, b, stride)| Conv {
+                name,
+                weight: tensor4(w, shape, device, dtype),
+                bias: Tensor::<1>::from_data(
+                    TensorData::new(b, [shape[0]]).convert_dtype(dtype),
+                    (device, dtype),
+                ),
+                stride,
+                lora: None,
+            })
+            .collect();
+        Ok(FlowNet {
+            config,
+            convs,
+            device: device.clone(),
+            dtype,
+        })
     }
 }

@@ -14,7 +14,7 @@
 use crate::finetune::{FinetuneReport, FlowSettings, Mode, Step, for_inference};
 use crate::predict::PredictReport;
 use crate::source::{Source, WindowSpec};
-use burn::tensor::Device;
+use burn::tensor::{DType, Device};
 use scene::error::{Error, IoContext, Result};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -136,7 +136,11 @@ pub fn run(
         ));
     }
     let device = Device::flex().autodiff();
-    let mut net = crate::finetune::load_base(&weights, &device)?;
+    let loaded = crate::weights::load(&weights, &s.bare_weights(), &device, DType::F32)?;
+    if let Some(note) = loaded.note(&weights) {
+        emit(Event::Warning(&note));
+    }
+    let mut net = loaded.net;
     if let Some(a) = adapter {
         crate::lora::load_adapters(&mut net, a)?;
     }
@@ -157,6 +161,18 @@ pub fn run(
         mode: Mode::None,
         ..Default::default()
     };
+    if train && s.mode != Mode::None && s.epochs > 0 {
+        for w in crate::finetune::subsampled_windows(&src, s) {
+            let kept = src.cm_events(w, s.max_cm_events).len();
+            emit(Event::Warning(&format!(
+                "window {} has {} events; the CM loss uses an even-stride subsample of \
+                 {kept} (max_cm_events = {}); prediction covers every event",
+                w.index,
+                w.len(),
+                s.max_cm_events
+            )));
+        }
+    }
     if train {
         phases.start("finetune");
         emit(Event::Phase("finetune"));
