@@ -9,6 +9,7 @@
 use crate::metrics;
 use crate::model::Model;
 use crate::raster::TileRasterizer;
+use crate::train::settings::Init;
 use crate::train::{Frame, StepInfo, TrainSettings, Trainer, View, init};
 use scene::atomic::{AtomicDir, write_bytes_atomic, write_json_atomic};
 use scene::error::{Error, Result};
@@ -106,6 +107,8 @@ pub struct TrainReport {
     pub gaussians: usize,
     pub field_parameters: usize,
     pub train_frames: usize,
+    /// Initial Gaussians placed on surfaces (from the PLY or stereo; the rest random).
+    pub init_surface_points: usize,
     pub test: Evaluation,
 }
 
@@ -259,13 +262,13 @@ fn write_depths(model: &Model, views: &[View], dir: &Path) -> Result<()> {
     Ok(())
 }
 
-/// Initial Gaussians: the PLY if given (all flagged dynamic), else random points in the
-/// box the train cameras look at.
+/// Initial Gaussians: the PLY if given (all flagged dynamic), else as `settings.init`
+/// says; with the number of them placed on surfaces (PLY points or stereo points).
 fn initial_splats(
     settings: &TrainSettings,
     views: &[View],
     ply: Option<&Path>,
-) -> Result<crate::train::Splats> {
+) -> Result<(crate::train::Splats, usize)> {
     match ply {
         Some(p) => {
             let (mut s, _) = crate::ply::read(p)?;
@@ -273,22 +276,22 @@ fn initial_splats(
                 return Err(Error::invalid(p, "the point cloud has no Gaussians"));
             }
             s.dynamic = vec![true; s.len()];
-            Ok(s)
+            let n = s.len();
+            Ok((s, n))
         }
         None => {
             let cams: Vec<_> = views.iter().map(|v| v.camera).collect();
             let n = settings.init_points;
-            Ok(if settings.init_frustum {
-                init::frustum_splats(
-                    &cams,
-                    n,
-                    settings.init_near,
-                    settings.init_far,
-                    settings.seed,
-                )
-            } else {
-                let (centre, half) = init::camera_bounds(&cams);
-                init::random_splats(n, centre, half, settings.seed)
+            let (near, far) = (settings.init_near, settings.init_far);
+            Ok(match settings.init {
+                Init::Stereo => {
+                    init::stereo_splats(views, n, near, far, &settings.stereo, settings.seed)
+                }
+                Init::Frustum => (init::frustum_splats(&cams, n, near, far, settings.seed), 0),
+                Init::Box => {
+                    let (centre, half) = init::camera_bounds(&cams);
+                    (init::random_splats(n, centre, half, settings.seed), 0)
+                }
             })
         }
     }
@@ -328,7 +331,9 @@ pub fn train(
     let views = load_views(&scene, &scene.train)?;
     let test_views = load_views(&scene, &scene.test)?;
     let inputs = input_hashes(&scene, args.init_ply.as_deref())?;
-    let splats = initial_splats(&settings, &views, args.init_ply.as_deref())?;
+    phases.start("init");
+    let (splats, init_surface_points) =
+        initial_splats(&settings, &views, args.init_ply.as_deref())?;
     let cams: Vec<_> = views.iter().map(|v| v.camera).collect();
     let extent = scene_extent(&settings, &cams);
     let out = AtomicDir::new(&args.out)?;
@@ -373,6 +378,7 @@ pub fn train(
         gaussians: model.splats.len(),
         field_parameters: model.field.as_ref().map_or(0, |f| f.params.len()),
         train_frames: views.len(),
+        init_surface_points,
         test,
         settings,
     };

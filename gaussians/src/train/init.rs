@@ -21,12 +21,18 @@ pub fn camera_extent(cams: &[Camera]) -> f32 {
     (1.1 * r).max(1e-3) as f32
 }
 
-/// Box the cameras look at: centre = least-squares meeting point of the optical axes,
-/// half-size = the smallest camera distance to it × tan(half the horizontal FOV), so
-/// every camera sees the whole box. Returns (centre, half-size).
+/// Box the cameras look at. Centre = the least-squares meeting point of the optical
+/// axes when they converge (they span more than ~10° and meet in front of every camera);
+/// for nearly parallel axes (cameras along one short path looking the same way) that
+/// point is ill-conditioned and can sit anywhere along the axes, so the centre is then
+/// the point of the mean optical axis nearest the world origin (where normalised
+/// datasets put the scene), or 1 unit ahead when the origin is behind the cameras.
+/// Half-size = the smallest camera distance to the centre × tan(half the horizontal
+/// FOV), so every camera sees the whole box. Returns (centre, half-size).
 pub fn camera_bounds(cams: &[Camera]) -> (DVec3, f64) {
     let mut a = glam::DMat3::ZERO;
     let mut b = DVec3::ZERO;
+    let (mut mean_o, mut mean_d) = (DVec3::ZERO, DVec3::ZERO);
     for c in cams {
         let o = c.cam_to_world.centre();
         let d = (c.cam_to_world.rotation * DVec3::NEG_Z).normalize();
@@ -34,14 +40,28 @@ pub fn camera_bounds(cams: &[Camera]) -> (DVec3, f64) {
         let p = glam::DMat3::IDENTITY - glam::DMat3::from_cols(d * d.x, d * d.y, d * d.z);
         a += p;
         b += p * o;
+        mean_o += o;
+        mean_d += d;
     }
-    let centre = if a.determinant().abs() > 1e-9 {
-        a.inverse() * b
-    } else {
-        // parallel axes: a point in front of the mean camera
-        let c = &cams[0];
-        c.cam_to_world.centre() + c.cam_to_world.rotation * DVec3::NEG_Z
-    };
+    let n = cams.len().max(1) as f64;
+    mean_o /= n;
+    mean_d = mean_d.normalize_or(DVec3::NEG_Z);
+    // The smallest eigenvalue of Σ(I − d dᵀ)/n is ≈ sin² of the axes' angular spread
+    // (0 for parallel axes); its inverse bounds how far noise moves the solution.
+    let min_eig = smallest_eigenvalue(a / n);
+    let meet = (min_eig > (10f64.to_radians().sin() * 0.5).powi(2))
+        .then(|| a.inverse() * b)
+        .filter(|x| {
+            x.is_finite()
+                && cams.iter().all(|c| {
+                    let d = c.cam_to_world.rotation * DVec3::NEG_Z;
+                    (*x - c.cam_to_world.centre()).dot(d) > 0.0
+                })
+        });
+    let centre = meet.unwrap_or_else(|| {
+        let ahead = (-mean_o).dot(mean_d);
+        mean_o + mean_d * if ahead > 1e-3 { ahead } else { 1.0 }
+    });
     let half = cams
         .iter()
         .map(|c| (c.cam_to_world.centre() - centre).length() * (c.intrinsics.fov_x() * 0.5).tan())
@@ -54,6 +74,22 @@ pub fn camera_bounds(cams: &[Camera]) -> (DVec3, f64) {
             1.0
         },
     )
+}
+
+/// Smallest eigenvalue of a symmetric 3×3 matrix (closed form, trigonometric).
+fn smallest_eigenvalue(m: glam::DMat3) -> f64 {
+    let e = |i: usize, j: usize| m.col(j)[i];
+    let p1 = e(0, 1).powi(2) + e(0, 2).powi(2) + e(1, 2).powi(2);
+    let q = (e(0, 0) + e(1, 1) + e(2, 2)) / 3.0;
+    if p1 < 1e-30 {
+        return e(0, 0).min(e(1, 1)).min(e(2, 2));
+    }
+    let p2 = (e(0, 0) - q).powi(2) + (e(1, 1) - q).powi(2) + (e(2, 2) - q).powi(2) + 2.0 * p1;
+    let p = (p2 / 6.0).sqrt();
+    let bm = (m - glam::DMat3::IDENTITY * q) * (1.0 / p);
+    let r = (bm.determinant() / 2.0).clamp(-1.0, 1.0);
+    let phi = r.acos() / 3.0;
+    q + 2.0 * p * (phi + 2.0 * std::f64::consts::PI / 3.0).cos()
 }
 
 /// `n` random Gaussians uniform in the cube `centre ± half`. The scale is the expected
@@ -131,4 +167,72 @@ pub fn frustum_splats(
         s.dynamic.push(true);
     }
     s
+}
+
+/// Up to `n` initial Gaussians from plane-sweep stereo over the train views
+/// ([`super::stereo`]), plus `random_fraction · n` random [`frustum_splats`] (all `n`
+/// random when stereo finds no point). Stereo points keep their colour (SH DC), opacity 0.1, and a
+/// footprint of the pixel spacing the sampling leaves at their depth.
+pub fn stereo_splats(
+    views: &[super::View],
+    n: usize,
+    near_frac: f64,
+    far_frac: f64,
+    st: &super::stereo::StereoSettings,
+    seed: u64,
+) -> (Splats, usize) {
+    use super::stereo::{StereoView, stereo_points};
+    let cams: Vec<Camera> = views.iter().map(|v| v.camera).collect();
+    if cams.is_empty() {
+        return (Splats::default(), 0);
+    }
+    let (centre, _) = camera_bounds(&cams);
+    let d = cams
+        .iter()
+        .map(|c| (c.cam_to_world.centre() - centre).length())
+        .sum::<f64>()
+        / cams.len() as f64;
+    let d = d.max(1e-3);
+    let sv: Vec<StereoView> = views
+        .iter()
+        .map(|v| StereoView {
+            camera: &v.camera,
+            rgb: &v.rgb,
+        })
+        .collect();
+    let mut pts = stereo_points(&sv, near_frac * d, far_frac * d, st);
+    // Random points only where stereo found nothing at all: floaters cost more than the
+    // holes they would fill (measured, BENCHMARKS.md).
+    let n_random = if pts.is_empty() {
+        n
+    } else {
+        (n as f64 * st.random_fraction).round() as usize
+    };
+    let n_stereo = n - n_random.min(n);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed ^ 0x5757);
+    // Partial Fisher–Yates: a uniform sample of `n_stereo` points.
+    for i in 0..n_stereo.min(pts.len()) {
+        let j = rng.random_range(i..pts.len());
+        pts.swap(i, j);
+    }
+    pts.truncate(n_stereo);
+    let found = pts.len();
+    let mut s = frustum_splats(&cams, n_random.min(n), near_frac, far_frac, seed);
+    // Pixels per sampled point in one view, so neighbouring Gaussians just touch.
+    let k = &cams[0].intrinsics;
+    let px_spacing = ((k.width as f64 * k.height as f64 * views.len() as f64) / found.max(1) as f64)
+        .sqrt()
+        .max(1.0) as f32;
+    let opacity = (0.1f32 / 0.9).ln();
+    for p in pts {
+        let scale = 0.5 * p.depth / p.focal * px_spacing;
+        s.means.push(p.position);
+        s.log_scales.push([scale.max(1e-6).ln(); 3]);
+        s.rotations.push([1.0, 0.0, 0.0, 0.0]);
+        s.opacity_logits.push(opacity);
+        s.sh_dc.push(p.colour.map(|c| (c - 0.5) / SH_C0));
+        s.sh_rest.push([0.0; 45]);
+        s.dynamic.push(true);
+    }
+    (s, found)
 }

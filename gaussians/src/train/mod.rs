@@ -7,6 +7,7 @@
 
 pub mod init;
 pub mod settings;
+pub mod stereo;
 
 use crate::densify::{self, Geometry, GradStats};
 use crate::field::{self, Deformation, Mlp};

@@ -1,8 +1,22 @@
 //! Training settings (`settings.toml`): schedules and learning rates after Deform-GS
 //! (REFERENCES.md), scaled to the 3500-iteration warm-up of DEGS.
 
+pub use super::stereo::StereoSettings;
 use crate::densify::DensifySettings;
 use crate::field::FieldSettings;
+
+/// Initial Gaussians without a point cloud.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Init {
+    /// Plane-sweep stereo over the train frames, plus a few random frustum points.
+    #[default]
+    Stereo,
+    /// Random points in the train cameras' viewing frusta.
+    Frustum,
+    /// Random points in the box the cameras look at (Deform-GS synthetic init).
+    Box,
+}
 use serde::{Deserialize, Serialize};
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -37,9 +51,12 @@ pub struct TrainSettings {
     pub densify: DensifySettings,
     /// Random initial Gaussians (when no point cloud is given).
     pub init_points: usize,
-    /// Place them in the cameras' frusta (else in the box the cameras look at).
-    pub init_frustum: bool,
-    /// Frustum depth range, × each camera's distance to the point the cameras look at.
+    /// Where the initial Gaussians come from when no point cloud is given.
+    pub init: Init,
+    /// Plane-sweep stereo settings (`init = "stereo"`).
+    pub stereo: StereoSettings,
+    /// Depth range of the frustum points and of the stereo sweep, × each camera's
+    /// distance to the point the cameras look at.
     pub init_near: f64,
     pub init_far: f64,
     /// Scene extent for learning rates and densification (0 = auto: the larger of the
@@ -80,7 +97,8 @@ impl Default for TrainSettings {
                 ..DensifySettings::default()
             },
             init_points: 20_000,
-            init_frustum: true,
+            init: Init::Stereo,
+            stereo: StereoSettings::default(),
             init_near: 0.3,
             init_far: 2.5,
             scene_extent: 0.0,
@@ -116,6 +134,7 @@ impl TrainSettings {
         if !(self.init_near > 0.0 && self.init_far > self.init_near) {
             return Err("0 < init_near < init_far required".into());
         }
+        self.stereo.validate()?;
         if self.scene_extent.is_nan() || self.scene_extent < 0.0 {
             return Err("scene_extent must be ≥ 0".into());
         }
