@@ -161,17 +161,12 @@ pub fn run(
         mode: Mode::None,
         ..Default::default()
     };
-    if train && s.mode != Mode::None && s.epochs > 0 {
-        for w in crate::finetune::subsampled_windows(&src, s) {
-            let kept = src.cm_events(w, s.max_cm_events).len();
-            emit(Event::Warning(&format!(
-                "window {} has {} events; the CM loss uses an even-stride subsample of \
-                 {kept} (max_cm_events = {}); prediction covers every event",
-                w.index,
-                w.len(),
-                s.max_cm_events
-            )));
-        }
+    if train
+        && s.mode != Mode::None
+        && s.epochs > 0
+        && let Some(note) = subsample_note(&src, s)
+    {
+        emit(Event::Warning(&note));
     }
     if train {
         phases.start("finetune");
@@ -228,6 +223,34 @@ pub fn run(
     scene::atomic::write_json_atomic(&dir.path().join("report.json"), &report)?;
     dir.commit()?;
     Ok(report)
+}
+
+/// One line saying which windows the CM loss subsamples (`None` when none is).
+fn subsample_note(src: &Source, s: &FlowSettings) -> Option<String> {
+    let big: Vec<_> = crate::finetune::subsampled_windows(src, s).collect();
+    let largest = big
+        .iter()
+        .max_by_key(|w| (w.len(), std::cmp::Reverse(w.index)))?;
+    let tail = "prediction covers every event";
+    Some(if big.len() == 1 {
+        format!(
+            "window {} has {} events; the CM loss uses an even-stride subsample of {} \
+             (max_cm_events = {}); {tail}",
+            largest.index,
+            largest.len(),
+            src.cm_events(largest, s.max_cm_events).len(),
+            s.max_cm_events
+        )
+    } else {
+        format!(
+            "{} windows have more than {} events (up to {} in window {}); the CM loss \
+             uses an even-stride subsample of each (max_cm_events); {tail}",
+            big.len(),
+            s.max_cm_events,
+            largest.len(),
+            largest.index
+        )
+    })
 }
 
 /// Figures of one window from `evflow eval` (computed with [`crate::eval`]).

@@ -125,6 +125,18 @@ pub fn load(path: &Path, bare: &BareWeights, device: &Device, dtype: DType) -> R
                 ),
             ));
         }
+        if let Some(m) = bare.max_flow
+            && m != net.config.max_flow
+        {
+            return Err(Error::invalid(
+                &side,
+                format!(
+                    "--max-flow {m} given, but the sidecar says max_flow = {} \
+                     (--max-flow is for weights without a sidecar)",
+                    net.config.max_flow
+                ),
+            ));
+        }
         return Ok(Loaded {
             net,
             inferred: false,

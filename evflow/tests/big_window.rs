@@ -92,3 +92,62 @@ fn millions_of_events_in_one_window_give_finite_flow_for_every_event() {
     assert_eq!((w, h), (W, H));
     assert!(u.iter().chain(&v).all(|x| x.is_finite()));
 }
+
+#[test]
+fn several_subsampled_windows_give_one_warning() {
+    use evflow::finetune::FlowSettings;
+    use evflow::source::WindowSpec;
+    use evflow::stage::{Event, Input};
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("small.evs");
+    let mut ev = scene::events::EventStream::with_capacity(32, 24, 3000);
+    for i in 0..3000u32 {
+        let t = i as f64 * 1e-4;
+        ev.push(t, ((i * 7) % 32) as u16, ((i * 5) % 24) as u16, 1);
+    }
+    scene::formats::evs::write_evs(&path, &ev).unwrap();
+    let input = Input::Events {
+        path,
+        sensor: (32, 24),
+        calib: None,
+        spec: WindowSpec {
+            windows: vec![(0.0, 0.09995), (0.09995, 0.19995), (0.19995, 0.29995)],
+            window_length: None,
+        },
+    };
+    let s = FlowSettings {
+        epochs: 1,
+        max_cm_events: 500,
+        previews: false,
+        ..FlowSettings::default()
+    };
+    let mut warnings = Vec::new();
+    let r = evflow::stage::run(&input, &tmp.path().join("out"), &s, true, None, |e| {
+        if let Event::Warning(w) = e {
+            warnings.push(w.to_string());
+        }
+    })
+    .unwrap();
+    // Windows of 1000 events each (boundaries half-way between events).
+    assert_eq!(r.windows, 3);
+    assert_eq!(r.finetune.cm_subsampled_windows, vec![0, 1, 2]);
+    assert_eq!(warnings.len(), 1, "{warnings:?}");
+    assert!(
+        warnings[0].contains("3 windows have more than 500 events (up to 1000 in window 0)"),
+        "{}",
+        warnings[0]
+    );
+    // Below the limit: no warning, nothing subsampled.
+    let s = FlowSettings {
+        max_cm_events: 1000,
+        ..s
+    };
+    warnings.clear();
+    let r = evflow::stage::run(&input, &tmp.path().join("out2"), &s, true, None, |e| {
+        if let Event::Warning(w) = e {
+            warnings.push(w.to_string());
+        }
+    })
+    .unwrap();
+    assert!(warnings.is_empty() && r.finetune.cm_subsampled_windows.is_empty());
+}

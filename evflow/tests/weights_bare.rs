@@ -112,6 +112,23 @@ fn bare_weights_load_with_inferred_settings() {
         "{e}"
     );
     let e = err_of(
+        &with,
+        BareWeights {
+            max_flow: Some(32.0),
+            ..Default::default()
+        },
+    );
+    assert!(
+        e.contains("with.safetensors.json") && e.contains("max_flow = 16"),
+        "{e}"
+    );
+    // The sidecar's own value (and no flags) is fine.
+    let same = BareWeights {
+        base: Some(4),
+        max_flow: Some(16.0),
+    };
+    assert!(load(&with, &same, &dev, DType::F32).is_ok());
+    let e = err_of(
         &bare,
         BareWeights {
             max_flow: Some(f64::INFINITY),
