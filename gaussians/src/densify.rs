@@ -35,7 +35,8 @@ pub struct DensifySettings {
     pub max_world_frac: f32,
     /// Reset opacities to 0.01 every this many iterations (0 = never).
     pub opacity_reset_interval: u32,
-    /// Hard cap on the number of Gaussians.
+    /// Hard cap on the number of Gaussians (0 in a `TrainSettings`: automatic, see
+    /// `TrainSettings::gaussian_cap`).
     pub max_gaussians: usize,
 }
 

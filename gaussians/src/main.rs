@@ -15,46 +15,34 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Verb {
-    /// Train canonical Gaussians + deformation field on a scene's RGB frames.
-    Train {
-        #[arg(long)]
-        scene: PathBuf,
-        #[arg(long)]
-        out: PathBuf,
-        /// settings.toml (flags override it)
-        #[arg(long)]
-        config: Option<PathBuf>,
-        #[arg(long)]
-        iterations: Option<u32>,
-        #[arg(long)]
-        seed: Option<u64>,
-        /// Initial Gaussians from a 3DGS PLY instead of random points
-        #[arg(long)]
-        init_ply: Option<PathBuf>,
-        #[arg(long)]
-        field_width: Option<usize>,
-        #[arg(long)]
-        field_depth: Option<usize>,
-        /// Static 3DGS: no deformation field
-        #[arg(long)]
-        no_deform: bool,
-    },
+    /// Train canonical Gaussians + deformation field on a scene's RGB frames (the DEGS
+    /// warm-up; with more iterations, the RGB-only baseline). Writes point_cloud.ply,
+    /// model.json, field.safetensors, depth/NNNN.exr (train frames), renders/NNNN.png
+    /// (test frames) and report.json (test PSNR/SSIM, time per phase). Ctrl-C stops
+    /// at the next iteration and still writes a usable model.
+    Train(TrainArgs),
     /// Render a saved model at the frames of a scene split, with PSNR/SSIM.
     Render {
+        /// Model directory written by `gaussians train`
         #[arg(long)]
         model: PathBuf,
+        /// Scene directory whose cameras, times and images are used
         #[arg(long)]
         scene: PathBuf,
+        /// Output directory: renders/NNNN.png, depth/NNNN.exr, report.json
         #[arg(long)]
         out: PathBuf,
+        /// Which frames of the scene to render
         #[arg(long, value_enum, default_value_t = Split::Test)]
         split: Split,
     },
     /// Write an RGB-only synthetic scene (no events), for tests and benchmarks.
     #[command(hide = true)]
     SynthRgb {
+        /// Preset: static, rigid, nonrigid, fast
         #[arg(long, default_value = "static")]
         preset: String,
+        /// Output scene directory
         #[arg(long)]
         out: PathBuf,
         /// Image width and height
@@ -65,28 +53,7 @@ enum Verb {
 
 fn main() -> ExitCode {
     match Cli::parse().verb {
-        Verb::Train {
-            scene,
-            out,
-            config,
-            iterations,
-            seed,
-            init_ply,
-            field_width,
-            field_depth,
-            no_deform,
-        } => {
-            let args = TrainArgs {
-                scene,
-                out,
-                config,
-                iterations,
-                seed,
-                init_ply,
-                field_width,
-                field_depth,
-                no_deform,
-            };
+        Verb::Train(args) => {
             let total = match stage::resolve_settings(&args) {
                 Ok(s) => s.iterations,
                 Err(e) => return fail(e),

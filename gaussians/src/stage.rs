@@ -21,16 +21,38 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Options of `gaussians train` (flags override the config file).
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, clap::Args)]
 pub struct TrainArgs {
+    /// Scene directory (transforms_train.json, transforms_test.json, images/)
+    #[arg(long)]
     pub scene: PathBuf,
+    /// Output directory (written under a temporary name, renamed when complete)
+    #[arg(long)]
     pub out: PathBuf,
+    /// settings.toml with any TrainSettings (flags below override it; the resolved
+    /// settings are written to OUT/settings.toml)
+    #[arg(long)]
     pub config: Option<PathBuf>,
+    /// Training iterations [default: 3500, the DEGS warm-up; more = the RGB-only baseline]
+    #[arg(long)]
     pub iterations: Option<u32>,
+    /// Seed of the initialisation, frame order and field weights [default: 0]
+    #[arg(long)]
     pub seed: Option<u64>,
+    /// Initial Gaussians from a 3DGS PLY (e.g. SfM points) instead of `--init`
+    #[arg(long)]
     pub init_ply: Option<PathBuf>,
+    /// Initial Gaussians without a PLY [default: stereo]
+    #[arg(long, value_enum)]
+    pub init: Option<Init>,
+    /// Hidden width of the deformation field MLP [default: 64]
+    #[arg(long)]
     pub field_width: Option<usize>,
+    /// Hidden layers of the deformation field MLP [default: 4]
+    #[arg(long)]
     pub field_depth: Option<usize>,
+    /// Static 3DGS: no deformation field
+    #[arg(long)]
     pub no_deform: bool,
 }
 
@@ -49,6 +71,9 @@ pub fn resolve_settings(args: &TrainArgs) -> Result<TrainSettings> {
     if let Some(seed) = args.seed {
         s.seed = seed;
         s.field.seed = seed;
+    }
+    if let Some(init) = args.init {
+        s.init = init;
     }
     if let Some(w) = args.field_width {
         s.field.width = w;
@@ -326,8 +351,10 @@ pub fn train(
     let start = std::time::Instant::now();
     let mut phases = Phases::new();
     phases.start("load");
-    let settings = resolve_settings(args)?;
+    let mut settings = resolve_settings(args)?;
     let scene = Scene::open(&args.scene)?;
+    let pixels = scene.train.camera.width as usize * scene.train.camera.height as usize;
+    settings.densify.max_gaussians = settings.gaussian_cap(pixels);
     let views = load_views(&scene, &scene.train)?;
     let test_views = load_views(&scene, &scene.test)?;
     let inputs = input_hashes(&scene, args.init_ply.as_deref())?;

@@ -213,6 +213,10 @@ impl Trainer {
             self.order.shuffle(&mut self.rng);
         }
         let view = &views[self.order.pop().expect("views")];
+        if self.settings.densify.max_gaussians == 0 {
+            let pixels = view.rgb.len() / 3;
+            self.settings.densify.max_gaussians = self.settings.gaussian_cap(pixels);
+        }
         let it = self.iteration;
         let field_on = self.field_on();
         let sh = self.sh_degree();

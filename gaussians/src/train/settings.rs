@@ -49,6 +49,10 @@ pub struct TrainSettings {
     pub sh_degree: u32,
     pub sh_interval: u32,
     pub densify: DensifySettings,
+    /// Cap on the Gaussians per pixel of a train frame, used when
+    /// `densify.max_gaussians` is 0 (auto): a model needs no more Gaussians than its
+    /// views have pixels to constrain them (measured, BENCHMARKS.md).
+    pub max_gaussians_per_pixel: f64,
     /// Random initial Gaussians (when no point cloud is given).
     pub init_points: usize,
     /// Where the initial Gaussians come from when no point cloud is given.
@@ -93,9 +97,10 @@ impl Default for TrainSettings {
             densify: DensifySettings {
                 until_iter: 2500,
                 opacity_reset_interval: 0,
-                max_gaussians: 100_000,
+                max_gaussians: 0,
                 ..DensifySettings::default()
             },
+            max_gaussians_per_pixel: 2.0,
             init_points: 20_000,
             init: Init::Stereo,
             stereo: StereoSettings::default(),
@@ -110,6 +115,14 @@ impl Default for TrainSettings {
 }
 
 impl TrainSettings {
+    /// The Gaussian cap for train frames of `pixels` pixels: `densify.max_gaussians`,
+    /// or when that is 0, `max_gaussians_per_pixel × pixels` (at least `init_points`).
+    pub fn gaussian_cap(&self, pixels: usize) -> usize {
+        match self.densify.max_gaussians {
+            0 => ((self.max_gaussians_per_pixel * pixels as f64) as usize).max(self.init_points),
+            n => n,
+        }
+    }
     /// Parse a `settings.toml`; unknown keys are errors.
     pub fn from_toml(text: &str) -> Result<Self, String> {
         toml::from_str(text).map_err(|e| e.to_string())
@@ -128,13 +141,16 @@ impl TrainSettings {
         if self.sh_degree > 3 {
             return Err("sh_degree must be ≤ 3".into());
         }
-        if self.densify.max_gaussians == 0 || self.init_points == 0 {
-            return Err("max_gaussians and init_points must be positive".into());
+        if self.init_points == 0 {
+            return Err("init_points must be positive".into());
         }
         if !(self.init_near > 0.0 && self.init_far > self.init_near) {
             return Err("0 < init_near < init_far required".into());
         }
         self.stereo.validate()?;
+        if !(self.max_gaussians_per_pixel > 0.0 && self.max_gaussians_per_pixel.is_finite()) {
+            return Err("max_gaussians_per_pixel must be positive".into());
+        }
         if self.scene_extent.is_nan() || self.scene_extent < 0.0 {
             return Err("scene_extent must be ≥ 0".into());
         }
@@ -164,5 +180,29 @@ mod tests {
         };
         assert!(bad.validate().is_err());
         assert!(s.validate().is_ok());
+    }
+
+    #[test]
+    fn the_gaussian_cap_follows_the_image_unless_set() {
+        let mut s = TrainSettings::default();
+        assert_eq!(s.densify.max_gaussians, 0);
+        assert_eq!(s.gaussian_cap(128 * 128), 32_768);
+        // never below the initial count
+        assert_eq!(s.gaussian_cap(64 * 64), 20_000);
+        s.max_gaussians_per_pixel = 0.5;
+        s.init_points = 1000;
+        assert_eq!(s.gaussian_cap(100 * 100), 5_000);
+        s.densify.max_gaussians = 777;
+        assert_eq!(s.gaussian_cap(100 * 100), 777);
+        s.max_gaussians_per_pixel = f64::NAN;
+        assert!(s.validate().is_err());
+        let bad = TrainSettings {
+            stereo: StereoSettings {
+                planes: 1,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        assert!(bad.validate().unwrap_err().contains("planes"));
     }
 }
