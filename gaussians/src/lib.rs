@@ -5,6 +5,7 @@ pub mod metrics;
 pub mod model;
 pub mod optim;
 pub mod ply;
+pub mod progress;
 pub mod raster;
 pub mod stage;
 pub mod train;

@@ -100,6 +100,16 @@ fn stereo_depth_matches_the_true_depth_where_it_keeps_pixels() {
         assert!(f.0 > 0.5, "view {i}: kept {f:?}");
         assert!(f.1 > 0.85 && f.2 < 0.02, "view {i}: {f:?}");
     }
+    // Long recordings: only `max_reference_views` evenly spaced views are swept.
+    let few = StereoSettings {
+        max_reference_views: 3,
+        ..s
+    };
+    let maps = fused_depth_maps(&views, near, far, &few);
+    let swept: Vec<usize> = (0..maps.len()).filter(|&i| !maps[i].is_empty()).collect();
+    assert_eq!(swept, vec![0, 4, 8]);
+    let kept4 = maps[4].iter().filter(|&&d| d > 0.0).count();
+    assert!(kept4 > 96 * 96 / 5, "{kept4}");
 }
 
 #[test]

@@ -220,7 +220,8 @@ pub fn stereo_splats(
     let mut s = frustum_splats(&cams, n_random.min(n), near_frac, far_frac, seed);
     // Pixels per sampled point in one view, so neighbouring Gaussians just touch.
     let k = &cams[0].intrinsics;
-    let px_spacing = ((k.width as f64 * k.height as f64 * views.len() as f64) / found.max(1) as f64)
+    let swept = views.len().min(st.max_reference_views);
+    let px_spacing = ((k.width as f64 * k.height as f64 * swept as f64) / found.max(1) as f64)
         .sqrt()
         .max(1.0) as f32;
     let opacity = (0.1f32 / 0.9).ln();

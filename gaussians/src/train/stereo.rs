@@ -42,6 +42,9 @@ pub struct StereoSettings {
     pub consistency: f32,
     /// Other views that must agree with a pixel's depth for it to be kept.
     pub min_consistent: usize,
+    /// Reference views swept at most (evenly spaced over the train frames); every view
+    /// can still serve as a neighbour. Bounds the cost on long recordings.
+    pub max_reference_views: usize,
     /// Radius of the hole filling, × the image width (0 = no filling).
     pub fill_radius: f64,
     /// Fraction of the initial Gaussians that are random (frustum) points, for what
@@ -60,6 +63,7 @@ impl Default for StereoSettings {
             min_texture: 0.02,
             consistency: 0.03,
             min_consistent: 2,
+            max_reference_views: 16,
             fill_radius: 0.08,
             random_fraction: 0.1,
         }
@@ -68,15 +72,24 @@ impl Default for StereoSettings {
 
 impl StereoSettings {
     pub fn validate(&self) -> Result<(), String> {
-        if !(2..=1024).contains(&self.planes) || self.neighbours == 0 || self.window > 16 {
-            return Err("stereo: 2 ≤ planes ≤ 1024, neighbours ≥ 1, window ≤ 16".into());
-        }
-        if !(self.ratio > 0.0 && self.ratio <= 1.0 && self.max_cost > 0.0)
-            || !(0.0..=1.0).contains(&self.random_fraction)
-            || self.min_texture.is_nan()
-            || !(self.consistency > 0.0)
-            || !(0.0..=0.5).contains(&self.fill_radius)
+        if !(2..=1024).contains(&self.planes)
+            || self.neighbours == 0
+            || self.window > 16
+            || self.max_reference_views < 2
         {
+            return Err(
+                "stereo: 2 ≤ planes ≤ 1024, neighbours ≥ 1, window ≤ 16, max_reference_views ≥ 2"
+                    .into(),
+            );
+        }
+        let ok = self.ratio > 0.0
+            && self.ratio <= 1.0
+            && self.max_cost > 0.0
+            && (0.0..=1.0).contains(&self.random_fraction)
+            && !self.min_texture.is_nan()
+            && self.consistency > 0.0
+            && (0.0..=0.5).contains(&self.fill_radius);
+        if !ok {
             return Err("stereo: 0 < ratio ≤ 1, max_cost > 0, random_fraction in [0, 1]".into());
         }
         Ok(())
@@ -100,6 +113,14 @@ pub struct StereoPoint {
     pub focal: f32,
 }
 
+/// A neighbour view seen from a reference view: reference rays rotated into the
+/// neighbour's frame and the reference centre in that frame.
+struct NeighbourMap<'a> {
+    rays: Vec<[f32; 3]>,
+    t: [f32; 3],
+    view: &'a StereoView<'a>,
+}
+
 /// Depth map of one reference view: depth per pixel, 0 where rejected.
 pub fn depth_map(
     views: &[StereoView],
@@ -119,7 +140,7 @@ pub fn depth_map(
     // Per neighbour: the rotated reference rays R·r(p) and the translation, so that the
     // point at depth d maps to d·(R·r) + t in the neighbour's camera frame.
     let ref_to_world = r.camera.cam_to_world;
-    let maps: Vec<(Vec<[f32; 3]>, [f32; 3], &StereoView)> = nbrs
+    let maps: Vec<NeighbourMap> = nbrs
         .iter()
         .map(|&j| {
             let nb = &views[j];
@@ -132,7 +153,11 @@ pub fn depth_map(
                     (rot * ray).as_vec3().to_array()
                 })
                 .collect();
-            (rays, t.as_vec3().to_array(), nb)
+            NeighbourMap {
+                rays,
+                t: t.as_vec3().to_array(),
+                view: nb,
+            }
         })
         .collect();
     let inv = |i: usize| {
@@ -147,8 +172,8 @@ pub fn depth_map(
             let d = 1.0 / inv(i);
             let mut per: Vec<Vec<f32>> = maps
                 .iter()
-                .map(|(rays, t, nb)| {
-                    let raw = plane_cost(r.rgb, nb, rays, *t, d, w, h);
+                .map(|m| {
+                    let raw = plane_cost(r.rgb, m.view, &m.rays, m.t, d, w, h);
                     box_sum(&raw, w, h, s.window)
                 })
                 .collect();
@@ -206,9 +231,11 @@ pub fn depth_map(
         .collect()
 }
 
-/// Depth maps of every view after the cross-view consistency check: a pixel survives
-/// when its point, projected into at least `min_consistent` other views, lands on a kept
-/// pixel whose depth agrees with the projected depth within `consistency` (relative).
+/// Depth maps of the reference views (at most `max_reference_views`, evenly spaced; the
+/// other views' maps are empty) after the cross-view consistency check: a pixel survives
+/// when its point, projected into at least `min_consistent` other reference views, lands
+/// on a kept pixel whose depth agrees with the projected depth within `consistency`
+/// (relative).
 /// Outliers of single views rarely agree with another view, so the fused maps hold
 /// few floaters.
 pub fn fused_depth_maps(
@@ -217,8 +244,15 @@ pub fn fused_depth_maps(
     far: f64,
     s: &StereoSettings,
 ) -> Vec<Vec<f32>> {
+    let refs = reference_views(views.len(), s.max_reference_views);
     let maps: Vec<Vec<f32>> = (0..views.len())
-        .map(|i| depth_map(views, i, near, far, s))
+        .map(|i| {
+            if refs.contains(&i) {
+                depth_map(views, i, near, far, s)
+            } else {
+                Vec::new()
+            }
+        })
         .collect();
     (0..views.len())
         .map(|i| {
@@ -234,7 +268,7 @@ pub fn fused_depth_maps(
                     let px = glam::DVec2::new((p % w) as f64, (p / w) as f64);
                     let x = v.camera.unproject_world(px, d as f64);
                     let agree = (0..views.len())
-                        .filter(|&j| j != i)
+                        .filter(|&j| j != i && !maps[j].is_empty())
                         .filter(|&j| {
                             let o = &views[j].camera;
                             let Some((q, dq)) = o.project_world(x) else {
@@ -254,6 +288,17 @@ pub fn fused_depth_maps(
                 .collect()
         })
         .collect()
+}
+
+/// `k` reference views evenly spaced over `n` (all of them when `n ≤ k`), so the sweep's
+/// cost stays bounded on recordings with many frames.
+fn reference_views(n: usize, k: usize) -> Vec<usize> {
+    if n <= k {
+        return (0..n).collect();
+    }
+    let mut v: Vec<usize> = (0..k).map(|i| i * (n - 1) / (k - 1).max(1)).collect();
+    v.dedup();
+    v
 }
 
 /// Fill the holes of a depth map (flat, untextured regions) from the kept pixels within
@@ -308,7 +353,7 @@ pub fn stereo_points(
                 v.camera.intrinsics.height as usize,
             );
             let r = (s.fill_radius * w as f64).round() as usize;
-            if r == 0 {
+            if r == 0 || m.is_empty() {
                 m
             } else {
                 fill_holes(&m, w, h, r, s.consistency)
@@ -317,6 +362,9 @@ pub fn stereo_points(
         .collect();
     let mut out = Vec::new();
     for (v, depth) in views.iter().zip(&maps) {
+        if depth.is_empty() {
+            continue;
+        }
         let k = &v.camera.intrinsics;
         let (w, n) = (k.width as usize, depth.len());
         for (p, &d) in depth.iter().enumerate() {
