@@ -65,62 +65,16 @@ pub fn psnr_u8(a: &[f32], b: &[f32]) -> f64 {
     }
 }
 
-/// Mean SSIM (Wang et al. 2004: 11×11 Gaussian window, σ = 1.5, K1 = 0.01, K2 = 0.03,
-/// L = 255) over the valid windows of every channel of interleaved images.
+/// Mean SSIM of interleaved images given as 0–255 levels: `gaussians::metrics::ssim_u8`
+/// (11×11 Gaussian window, σ = 1.5, K1 = 0.01, K2 = 0.03, zero-padded windows averaged
+/// over every pixel and channel, as the 3DGS/Deform-GS evaluation computes it), so
+/// `degs eval` and the `gaussians` report give the same figure for the same renders.
 pub fn ssim_u8(a: &[f32], b: &[f32], width: usize, height: usize, channels: usize) -> f64 {
-    const R: usize = 5;
-    if width < 2 * R + 1 || height < 2 * R + 1 {
-        return if a == b { 1.0 } else { 0.0 };
-    }
-    let mut w = [0f64; 2 * R + 1];
-    for (i, wi) in w.iter_mut().enumerate() {
-        let d = i as f64 - R as f64;
-        *wi = (-d * d / (2.0 * 1.5 * 1.5)).exp();
-    }
-    let s: f64 = w.iter().sum();
-    w.iter_mut().for_each(|x| *x /= s);
-    let (c1, c2) = ((0.01f64 * 255.0).powi(2), (0.03f64 * 255.0).powi(2));
-    let (ow, oh) = (width - 2 * R, height - 2 * R);
-    let total: f64 = (0..channels)
-        .into_par_iter()
-        .map(|c| {
-            // separable blur of x, y, x², y², xy: horizontal pass then vertical
-            let px = |img: &[f32], x: usize, y: usize| img[(y * width + x) * channels + c] as f64;
-            let mut h = vec![[0f64; 5]; ow * height];
-            for y in 0..height {
-                for x in 0..ow {
-                    let mut acc = [0f64; 5];
-                    for (k, wk) in w.iter().enumerate() {
-                        let (p, q) = (px(a, x + k, y), px(b, x + k, y));
-                        acc[0] += wk * p;
-                        acc[1] += wk * q;
-                        acc[2] += wk * p * p;
-                        acc[3] += wk * q * q;
-                        acc[4] += wk * p * q;
-                    }
-                    h[y * ow + x] = acc;
-                }
-            }
-            let mut sum = 0.0;
-            for y in 0..oh {
-                for x in 0..ow {
-                    let mut m = [0f64; 5];
-                    for (k, wk) in w.iter().enumerate() {
-                        let v = h[(y + k) * ow + x];
-                        for j in 0..5 {
-                            m[j] += wk * v[j];
-                        }
-                    }
-                    let (mx, my) = (m[0], m[1]);
-                    let (vx, vy, cxy) = (m[2] - mx * mx, m[3] - my * my, m[4] - mx * my);
-                    sum += ((2.0 * mx * my + c1) * (2.0 * cxy + c2))
-                        / ((mx * mx + my * my + c1) * (vx + vy + c2));
-                }
-            }
-            sum / (ow * oh) as f64
-        })
-        .sum();
-    total / channels as f64
+    let planar = |x: &[f32]| {
+        let unit: Vec<f32> = x.iter().map(|v| v / 255.0).collect();
+        gaussians::metrics::interleaved_to_planar(&unit, width, height, channels)
+    };
+    gaussians::metrics::ssim_u8(&planar(a), &planar(b), width, height)
 }
 
 /// PSNR of identical images is reported as this (dB), so means and JSON stay finite.
@@ -429,46 +383,70 @@ mod tests {
         assert!(psnr_u8(&a, &b).abs() < 1e-12);
     }
 
-    #[test]
-    fn ssim_identity_symmetry_and_constant_shift() {
-        let (w, h) = (24, 20);
-        let a = ramp(w, h, 3, 1.0);
-        assert!((ssim_u8(&a, &a, w, h, 3) - 1.0).abs() < 1e-12);
-        let b = ramp(w, h, 3, 0.7);
-        let s = ssim_u8(&a, &b, w, h, 3);
-        assert!(s < 0.999 && s > -1.0);
-        assert!((s - ssim_u8(&b, &a, w, h, 3)).abs() < 1e-12);
-        // constant images differing by d: only the luminance term remains
-        let (x, y) = (vec![100.0f32; w * h], vec![110.0f32; w * h]);
-        let c1 = (0.01f64 * 255.0).powi(2);
-        let want = (2.0 * 100.0 * 110.0 + c1) / (100.0f64.powi(2) + 110.0f64.powi(2) + c1);
-        assert!((ssim_u8(&x, &y, w, h, 1) - want).abs() < 1e-9);
+    /// Brute-force SSIM of one channel (0–255 levels): every pixel's 11×11 Gaussian
+    /// window, zero outside the image, averaged over all pixels.
+    fn ssim_brute(a: &[f32], b: &[f32], w: usize, h: usize) -> f64 {
+        let g = |d: isize| (-((d as f64).powi(2)) / 4.5).exp();
+        let norm: f64 = (-5..=5).map(g).sum::<f64>().powi(2);
+        let (c1, c2) = (6.5025, 58.5225);
+        let mut total = 0.0;
+        for cy in 0..h as isize {
+            for cx in 0..w as isize {
+                let mut m = [0f64; 5];
+                for dy in -5..=5isize {
+                    for dx in -5..=5isize {
+                        let (x, y) = (cx + dx, cy + dy);
+                        if x < 0 || y < 0 || x >= w as isize || y >= h as isize {
+                            continue;
+                        }
+                        let wt = g(dx) * g(dy) / norm;
+                        let i = y as usize * w + x as usize;
+                        let (p, q) = (a[i] as f64, b[i] as f64);
+                        m[0] += wt * p;
+                        m[1] += wt * q;
+                        m[2] += wt * p * p;
+                        m[3] += wt * q * q;
+                        m[4] += wt * p * q;
+                    }
+                }
+                let (vx, vy, cxy) = (m[2] - m[0] * m[0], m[3] - m[1] * m[1], m[4] - m[0] * m[1]);
+                total += ((2.0 * m[0] * m[1] + c1) * (2.0 * cxy + c2))
+                    / ((m[0] * m[0] + m[1] * m[1] + c1) * (vx + vy + c2));
+            }
+        }
+        total / (w * h) as f64
     }
 
     #[test]
-    fn ssim_matches_a_direct_window_sum() {
-        // brute force, one 11x11 window (the image is exactly 11x11)
-        let (w, h) = (11, 11);
+    fn ssim_identity_and_symmetry() {
+        let (w, h) = (24, 20);
+        let a = ramp(w, h, 3, 1.0);
+        assert!((ssim_u8(&a, &a, w, h, 3) - 1.0).abs() < 1e-9);
+        let b = ramp(w, h, 3, 0.7);
+        let s = ssim_u8(&a, &b, w, h, 3);
+        assert!(s < 0.999 && s > -1.0);
+        assert!((s - ssim_u8(&b, &a, w, h, 3)).abs() < 1e-9);
+    }
+
+    #[test]
+    fn ssim_matches_a_brute_force_window_sum() {
+        // one channel, and three channels as the mean of their brute-force values
+        let (w, h) = (13, 11);
         let a = ramp(w, h, 1, 1.0);
         let b = ramp(w, h, 1, 0.5);
-        let g = |i: usize| (-((i as f64 - 5.0).powi(2)) / 4.5).exp();
-        let norm: f64 = (0..11).map(g).sum::<f64>().powi(2);
-        let mut m = [0f64; 5];
-        for y in 0..h {
-            for x in 0..w {
-                let wt = g(x) * g(y) / norm;
-                let (p, q) = (a[y * w + x] as f64, b[y * w + x] as f64);
-                m[0] += wt * p;
-                m[1] += wt * q;
-                m[2] += wt * p * p;
-                m[3] += wt * q * q;
-                m[4] += wt * p * q;
-            }
-        }
-        let (c1, c2) = (6.5025, 58.5225);
-        let want = ((2.0 * m[0] * m[1] + c1) * (2.0 * (m[4] - m[0] * m[1]) + c2))
-            / ((m[0] * m[0] + m[1] * m[1] + c1) * (m[2] - m[0] * m[0] + m[3] - m[1] * m[1] + c2));
-        assert!((ssim_u8(&a, &b, w, h, 1) - want).abs() < 1e-9);
+        let want = ssim_brute(&a, &b, w, h);
+        assert!((ssim_u8(&a, &b, w, h, 1) - want).abs() < 1e-6, "{want}");
+        let (x, y) = (vec![100.0f32; w * h], vec![110.0f32; w * h]);
+        assert!((ssim_u8(&x, &y, w, h, 1) - ssim_brute(&x, &y, w, h)).abs() < 1e-6);
+        let a3 = ramp(w, h, 3, 1.0);
+        let b3 = ramp(w, h, 3, 0.6);
+        let chan =
+            |v: &[f32], c: usize| -> Vec<f32> { v.iter().skip(c).step_by(3).copied().collect() };
+        let want3 = (0..3)
+            .map(|c| ssim_brute(&chan(&a3, c), &chan(&b3, c), w, h))
+            .sum::<f64>()
+            / 3.0;
+        assert!((ssim_u8(&a3, &b3, w, h, 3) - want3).abs() < 1e-6, "{want3}");
     }
 
     #[test]
