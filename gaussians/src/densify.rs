@@ -35,25 +35,31 @@ pub struct DensifySettings {
     pub max_world_frac: f32,
     /// Reset opacities to 0.01 every this many iterations (0 = never).
     pub opacity_reset_interval: u32,
-    /// Hard cap on the number of Gaussians (0 in a `TrainSettings`: automatic, see
-    /// `TrainSettings::gaussian_cap`).
+    /// Hard cap on the number of Gaussians. 0 = automatic in a `TrainSettings` (the
+    /// trainer resolves it, see `TrainSettings::gaussian_cap`); [`plan`] itself reads 0
+    /// as no cap.
     pub max_gaussians: usize,
 }
 
+/// The warm-up's values, so a partial `[densify]` table in a `settings.toml` keeps them
+/// for the keys it does not name. 3DGS densifies until 15k of 30k iterations, resets
+/// opacity every 3k and has no cap; in a 3500-iteration warm-up a reset costs more than
+/// it gains (measured, BENCHMARKS.md), so densify until 2500, never reset, and cap the
+/// count automatically (`max_gaussians = 0`, see `TrainSettings::gaussian_cap`).
 impl Default for DensifySettings {
     fn default() -> Self {
         DensifySettings {
             interval: 100,
             from_iter: 500,
-            until_iter: 15_000,
+            until_iter: 2500,
             grad_threshold: 0.0002,
             percent_dense: 0.01,
             split_scale_div: 1.6,
             min_opacity: 0.005,
             max_screen_radius: 20.0,
             max_world_frac: 0.1,
-            opacity_reset_interval: 3000,
-            max_gaussians: 200_000,
+            opacity_reset_interval: 0,
+            max_gaussians: 0,
         }
     }
 }
@@ -171,7 +177,12 @@ pub fn plan(
         .collect();
     cand.sort_by(|&a, &b| stats.mean_grad(b).total_cmp(&stats.mean_grad(a)));
     let kept = (0..n).filter(|&i| !prune_source(i)).count();
-    let mut budget = s.max_gaussians.saturating_sub(kept);
+    let cap = if s.max_gaussians == 0 {
+        usize::MAX
+    } else {
+        s.max_gaussians
+    };
+    let mut budget = cap.saturating_sub(kept);
     let mut action = vec![0u8; n]; // 0 keep, 1 clone, 2 split
     for &i in &cand {
         if budget == 0 {

@@ -91,15 +91,7 @@ impl Default for TrainSettings {
             dssim_weight: 0.2,
             sh_degree: 3,
             sh_interval: 1000,
-            // 3DGS densifies until 15k of 30k iterations and resets opacity every 3k;
-            // in a 3500-iteration warm-up a reset costs more than it gains (measured,
-            // BENCHMARKS.md), so densify until 2500 and never reset.
-            densify: DensifySettings {
-                until_iter: 2500,
-                opacity_reset_interval: 0,
-                max_gaussians: 0,
-                ..DensifySettings::default()
-            },
+            densify: DensifySettings::default(),
             max_gaussians_per_pixel: 2.0,
             init_points: 20_000,
             init: Init::Stereo,
@@ -172,6 +164,14 @@ mod tests {
         assert_eq!(back, s);
         let p = TrainSettings::from_toml("iterations = 100\n[field]\nwidth = 32\n").unwrap();
         assert_eq!((p.iterations, p.field.width, p.field.depth), (100, 32, 4));
+        // A partial table keeps the warm-up's values for the keys it does not name.
+        let d = TrainSettings::from_toml("[densify]\nuntil_iter = 5000\n").unwrap();
+        assert_eq!(d.densify.until_iter, 5000);
+        assert_eq!(
+            (d.densify.opacity_reset_interval, d.densify.max_gaussians),
+            (0, 0)
+        );
+        assert_eq!(d.densify.interval, s.densify.interval);
         assert!(TrainSettings::from_toml("iteratons = 1").is_err());
         assert!(TrainSettings::from_toml("iterations = -1").is_err());
         let bad = TrainSettings {
