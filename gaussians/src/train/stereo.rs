@@ -17,6 +17,9 @@
 //! - a pixel is kept when its window has texture, its best cost is low and clearly below
 //!   the best cost away from the winner (`ratio` test), so flat or ambiguous regions
 //!   give no points.
+//!
+//! Cost: `planes × neighbours × pixels` bilinear samples per reference view (rayon over
+//! planes), memory one `planes × pixels` f32 cost volume at a time (≈ 100 MB at 512²).
 
 use rayon::prelude::*;
 use scene::Camera;
