@@ -353,10 +353,8 @@ pub fn train(
     let start = std::time::Instant::now();
     let mut phases = Phases::new();
     phases.start("load");
-    let mut settings = resolve_settings(args)?;
+    let settings = resolve_settings(args)?;
     let scene = Scene::open(&args.scene)?;
-    let pixels = scene.train.camera.width as usize * scene.train.camera.height as usize;
-    settings.densify.max_gaussians = settings.gaussian_cap(pixels);
     let views = load_views(&scene, &scene.train)?;
     let test_views = load_views(&scene, &scene.test)?;
     let inputs = input_hashes(&scene, args.init_ply.as_deref())?;
@@ -368,11 +366,13 @@ pub fn train(
     let out = AtomicDir::new(&args.out)?;
 
     phases.start("train");
-    let mut trainer = Trainer::new(settings.clone(), splats, extent);
+    let mut trainer = Trainer::new(settings, splats, extent);
     let summary = trainer.run(&TileRasterizer, &views, stop, on_step);
 
     phases.start("save");
     let model = Model::from_trainer(&trainer);
+    // The settings as trained (the automatic Gaussian cap resolved).
+    let settings = trainer.settings.clone();
     drop(trainer);
     model.save(out.path())?;
     write_bytes_atomic(

@@ -92,6 +92,9 @@ fn trains_writes_every_output_and_reloads_identically() {
     assert!(report["test"]["psnr"].as_array().unwrap().len() == 3);
     let settings = std::fs::read_to_string(out.join("settings.toml")).unwrap();
     assert_eq!(TrainSettings::from_toml(&settings).unwrap(), r.settings);
+    // the automatic Gaussian cap is recorded as resolved: 2 per pixel of 40×40, at
+    // least the 2000 initial Gaussians
+    assert_eq!(r.settings.densify.max_gaussians, 3200);
 
     // the saved model renders exactly as the trained one
     let back = Model::load(&out).unwrap();

@@ -171,8 +171,9 @@ pub fn frustum_splats(
 
 /// Up to `n` initial Gaussians from plane-sweep stereo over the train views
 /// ([`super::stereo`]), plus `random_fraction · n` random [`frustum_splats`] (all `n`
-/// random when stereo finds no point). Stereo points keep their colour (SH DC), opacity 0.1, and a
-/// footprint of the pixel spacing the sampling leaves at their depth.
+/// random when stereo finds no point). Stereo points keep their colour (SH DC), opacity
+/// 0.1, and a footprint of the pixel spacing the sampling leaves at their depth. Returns
+/// the Gaussians and how many of them came from stereo.
 pub fn stereo_splats(
     views: &[super::View],
     n: usize,

@@ -214,6 +214,7 @@ impl Trainer {
         }
         let view = &views[self.order.pop().expect("views")];
         if self.settings.densify.max_gaussians == 0 {
+            // automatic cap: resolved once, from the size of the train frames
             let pixels = view.rgb.len() / 3;
             self.settings.densify.max_gaussians = self.settings.gaussian_cap(pixels);
         }

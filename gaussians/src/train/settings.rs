@@ -4,6 +4,7 @@
 pub use super::stereo::StereoSettings;
 use crate::densify::DensifySettings;
 use crate::field::FieldSettings;
+use serde::{Deserialize, Serialize};
 
 /// Initial Gaussians without a point cloud.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
@@ -17,7 +18,6 @@ pub enum Init {
     /// Random points in the box the cameras look at (Deform-GS synthetic init).
     Box,
 }
-use serde::{Deserialize, Serialize};
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]

@@ -163,8 +163,9 @@ pub fn depth_map(
             }
         })
         .collect();
-    let inv = |i: usize| {
-        let a = i as f64 / (s.planes - 1) as f64;
+    // Inverse depth of (fractional) plane index `x`: uniform from 1/far to 1/near.
+    let inv = |x: f32| {
+        let a = x as f64 / (s.planes - 1) as f64;
         (1.0 / far + a * (1.0 / near - 1.0 / far)) as f32
     };
     let keep = nbrs.len().div_ceil(2);
@@ -172,8 +173,8 @@ pub fn depth_map(
     let volume: Vec<Vec<f32>> = (0..s.planes)
         .into_par_iter()
         .map(|i| {
-            let d = 1.0 / inv(i);
-            let mut per: Vec<Vec<f32>> = maps
+            let d = 1.0 / inv(i as f32);
+            let per: Vec<Vec<f32>> = maps
                 .iter()
                 .map(|m| {
                     let raw = plane_cost(r.rgb, m.view, &m.rays, m.t, d, w, h);
@@ -188,7 +189,6 @@ pub fn depth_map(
                 buf.sort_unstable_by(f32::total_cmp);
                 *o = buf[..keep].iter().sum::<f32>() / keep as f32;
             }
-            per.clear();
             out
         })
         .collect();
@@ -227,9 +227,7 @@ pub fn depth_map(
             } else {
                 0.0
             };
-            let a = (bi as f32 + off) / (s.planes - 1) as f32;
-            let inv_d = (1.0 / far) as f32 + a * ((1.0 / near - 1.0 / far) as f32);
-            1.0 / inv_d
+            1.0 / inv(bi as f32 + off)
         })
         .collect()
 }
