@@ -143,7 +143,7 @@ fn train_image(world: &SynthWorld, t: f64, sharp: &Render) -> Vec<f32> {
     let mut acc = vec![0f32; sharp.rgb.len()];
     for k in 0..n {
         let s = t + cfg.exposure_s * ((k as f64 + 0.5) / n as f64 - 0.5);
-        let r = world.render(s.clamp(0.0, cfg.duration));
+        let r = world.render_frame(s.clamp(0.0, cfg.duration));
         for (a, c) in acc.iter_mut().zip(&r.rgb) {
             *a += c / n as f32;
         }
@@ -159,7 +159,7 @@ fn write_split(world: &SynthWorld, root: &Path, split: &str, times: &[f64]) -> R
     let gt_dir = root.join("gt").join(split);
     let mut frames = Vec::with_capacity(times.len());
     for (k, &t) in times.iter().enumerate() {
-        let r = world.render(t);
+        let r = world.render_frame(t);
         let rgb = if split == "train" {
             train_image(world, t, &r)
         } else {

@@ -491,7 +491,7 @@ pub fn write_rgb_synthetic_scene(cfg: &scene::synth::SynthConfig, out: &Path) ->
     ] {
         let mut frames = Vec::new();
         for (k, &t) in times.iter().enumerate() {
-            let r = world.render(t);
+            let r = world.render_frame(t);
             let file_path = format!("images/{split}_{k:04}.png");
             let img = Image {
                 width: r.width,

@@ -363,6 +363,51 @@ fn invalid_configs_are_rejected() {
         ..SynthConfig::default()
     };
     assert!(cfg.validate().is_err());
+    for n in [0, 9] {
+        let cfg = SynthConfig {
+            frame_supersample: n,
+            ..SynthConfig::default()
+        };
+        assert!(cfg.validate().unwrap_err().contains("frame_supersample"));
+    }
+}
+
+/// The RGB frames integrate over the pixel: more samples converge to the area average
+/// (a 16×16-sample reference), and `render_frame` uses `frame_supersample` while the
+/// event simulator's `render` uses `supersample`.
+#[test]
+fn frame_supersampling_converges_to_the_pixel_area_average() {
+    let cfg = SynthConfig {
+        width: 48,
+        height: 48,
+        supersample: 1,
+        frame_supersample: 4,
+        ..SynthConfig::preset("static").unwrap()
+    };
+    let w = SynthWorld::new(&cfg).unwrap();
+    let reference = w.render_sampled(0.3, 16).rgb;
+    let rms = |rgb: &[f32]| {
+        let se: f64 = rgb
+            .iter()
+            .zip(&reference)
+            .map(|(a, b)| ((a - b) as f64).powi(2))
+            .sum();
+        (se / rgb.len() as f64).sqrt()
+    };
+    let errors: Vec<f64> = [1, 2, 4, 8]
+        .iter()
+        .map(|&n| rms(&w.render_sampled(0.3, n).rgb))
+        .collect();
+    // Point sampling aliases the hard texture edges; each doubling roughly halves the error.
+    assert!(errors[0] > 0.02, "point-sampled error {errors:?}");
+    for k in 1..4 {
+        assert!(errors[k] < 0.75 * errors[k - 1], "errors {errors:?}");
+    }
+    assert!(errors[3] < 0.3 * errors[0], "errors {errors:?}");
+    assert_eq!(w.render_frame(0.3).rgb, w.render_sampled(0.3, 4).rgb);
+    assert_eq!(w.render(0.3).rgb, w.render_sampled(0.3, 1).rgb);
+    // Depth, flow and ids stay those of the pixel centre.
+    assert_eq!(w.render_frame(0.3).depth, w.render(0.3).depth);
 }
 
 #[test]

@@ -29,8 +29,13 @@ pub struct SynthConfig {
     pub blur_subframes: usize,
     /// Exposure time of a blurred training frame, seconds (centred on the frame time).
     pub exposure_s: f64,
-    /// `n×n` samples per pixel for the colour (depth, flow and ids use the pixel centre).
+    /// `n×n` colour samples per pixel of the event simulator's internal renders
+    /// (depth, flow and ids use the pixel centre).
     pub supersample: u32,
+    /// `n×n` colour samples per pixel of the RGB train and test frames. A frame camera
+    /// integrates light over the pixel; with too few samples the hard texture edges
+    /// alias differently in every view, which no 3D model can reproduce.
+    pub frame_supersample: u32,
     /// Nominal contrast threshold C (both polarities), log units.
     pub contrast_threshold: f64,
     /// Per-pixel threshold mismatch σ.
@@ -399,6 +404,7 @@ impl SynthConfig {
             blur_subframes: 1,
             exposure_s: 0.01,
             supersample: 2,
+            frame_supersample: 8,
             contrast_threshold: 0.1,
             threshold_sigma: 0.0,
             refractory_s: 0.0,
@@ -450,8 +456,14 @@ impl SynthConfig {
         if !(0.0..=1.0).contains(&self.hot_pixel_fraction) {
             return Err("hot_pixel_fraction must be in [0, 1]".into());
         }
-        if self.blur_subframes == 0 || self.supersample == 0 || self.supersample > 8 {
-            return Err("blur_subframes must be ≥ 1 and supersample in 1..=8".into());
+        let sampling_ok = |n: u32| (1..=8).contains(&n);
+        if self.blur_subframes == 0
+            || !sampling_ok(self.supersample)
+            || !sampling_ok(self.frame_supersample)
+        {
+            return Err(
+                "blur_subframes must be ≥ 1, supersample and frame_supersample in 1..=8".into(),
+            );
         }
         if self.render_rate_hz * self.duration > 1e6 {
             return Err("render_rate_hz × duration exceeds 10⁶ internal frames".into());

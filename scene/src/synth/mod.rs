@@ -2,7 +2,8 @@
 //! scenes with ground truth"). Not a Gaussian rasterizer: every pixel casts a ray
 //! against textured planes, boxes and ellipsoids and returns
 //!
-//! - linear RGB in [0, 1] (optionally `n×n` supersampled),
+//! - linear RGB in [0, 1] (`n×n` supersampled: `frame_supersample` for the RGB frames,
+//!   `supersample` for the event simulator's internal renders),
 //! - depth `d = −z_cam` (OpenGL axes as [`crate::camera`]; 0 where nothing is hit),
 //! - dense optical flow in px/s, **analytic**: the time derivative of the projection of
 //!   the surface point hit at the pixel centre, including camera motion,
@@ -297,8 +298,22 @@ impl SynthWorld {
         f.flow(px, f.cast(px).as_ref())
     }
 
-    /// Render colour, depth, flow and object ids at time `t` (rows in parallel).
+    /// Render colour, depth, flow and object ids at time `t` as the event simulator's
+    /// internal renders see it (`supersample`² colour samples per pixel).
     pub fn render(&self, t: f64) -> Render {
+        self.render_sampled(t, self.cfg.supersample)
+    }
+
+    /// Render as the RGB (APS) camera sees it: `frame_supersample`² colour samples per
+    /// pixel, i.e. the light integrated over the pixel's area, so hard texture edges
+    /// and sub-pixel detail (the far checker floor) are area-averaged, not aliased.
+    pub fn render_frame(&self, t: f64) -> Render {
+        self.render_sampled(t, self.cfg.frame_supersample)
+    }
+
+    /// Render with `ss × ss` colour samples per pixel (rows in parallel); depth, flow
+    /// and object ids are those of the pixel centre.
+    pub fn render_sampled(&self, t: f64, ss: u32) -> Render {
         let (w, h) = (self.cfg.width as usize, self.cfg.height as usize);
         let frame = self.frame(t);
         let mut out = Render {
@@ -310,7 +325,7 @@ impl SynthWorld {
             flow_v: vec![0.0; w * h],
             object_id: vec![0; w * h],
         };
-        let ss = self.cfg.supersample as usize;
+        let ss = ss.max(1) as usize;
         out.rgb
             .par_chunks_mut(3 * w)
             .zip(out.depth.par_chunks_mut(w))
