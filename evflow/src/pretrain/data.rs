@@ -12,14 +12,20 @@ use scene::events::EventStream;
 use scene::synth::gt::NOISE_ID;
 use scene::synth::{Pattern, SynthConfig, SynthWorld};
 
-/// The synthetic world of `(preset, seed)`: the preset at `resolution`², randomised by
-/// `seed` (see the module doc). Different seeds give different textures.
-pub fn scene_config(preset: &str, seed: u64, s: &PretrainSettings) -> Result<SynthConfig> {
+/// The synthetic world of `(preset, seed)`: the preset at `size`², randomised by `seed`
+/// (see the module doc). Different seeds give different textures; the world does not
+/// depend on `size` (only its sampling does).
+pub fn scene_config(
+    preset: &str,
+    seed: u64,
+    size: u32,
+    s: &PretrainSettings,
+) -> Result<SynthConfig> {
     let mut cfg = SynthConfig::preset(preset)
         .ok_or_else(|| Error::Other(format!("unknown synthetic preset '{preset}'")))?;
     let mut rng = ChaCha8Rng::seed_from_u64(seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ 0x5eed);
-    cfg.width = s.resolution;
-    cfg.height = s.resolution;
+    cfg.width = size;
+    cfg.height = size;
     cfg.duration = s.scene_duration;
     cfg.render_rate_hz = s.render_rate_hz;
     cfg.supersample = 1;
@@ -100,9 +106,9 @@ pub struct SceneData {
     pub duration: f64,
 }
 
-/// Simulate the scene of `(preset, seed)`.
-pub fn make_scene(preset: &str, seed: u64, s: &PretrainSettings) -> Result<SceneData> {
-    let cfg = scene_config(preset, seed, s)?;
+/// Simulate the scene of `(preset, seed)` at `size`².
+pub fn make_scene(preset: &str, seed: u64, size: u32, s: &PretrainSettings) -> Result<SceneData> {
+    let cfg = scene_config(preset, seed, size, s)?;
     let world = SynthWorld::new(&cfg)
         .map_err(|e| Error::Other(format!("synthetic scene {preset}/{seed}: {e}")))?;
     let (events, gt) = simulate_scene(&world)?;
@@ -117,7 +123,11 @@ pub fn make_scene(preset: &str, seed: u64, s: &PretrainSettings) -> Result<Scene
         }
     }
     Ok(SceneData {
-        name: format!("{preset}/{seed}"),
+        name: if size == s.resolution {
+            format!("{preset}/{seed}")
+        } else {
+            format!("{preset}/{seed}@{size}")
+        },
         events,
         u,
         v,
@@ -136,9 +146,25 @@ pub struct Sample {
     pub cm: CmEvents,
 }
 
-/// The sample of window `[t_a, t_b]` of `d`, flipped as asked.
-pub fn sample(d: &SceneData, (t_a, t_b): (f64, f64), bins: usize, flip: (bool, bool)) -> Sample {
-    let (w, h) = (d.events.width as usize, d.events.height as usize);
+/// How a window is turned into a training sample. `Augment::default()` is the window as
+/// recorded.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Augment {
+    /// Mirror horizontally / vertically (flow u / v changes sign).
+    pub flip: (bool, bool),
+    /// Swap the x and y axes (square samples only; flow (u, v) becomes (v, u)).
+    pub transpose: bool,
+    /// Play the window backwards: event times mirrored, polarities and flow negated (the
+    /// voxel grid becomes `−E[B−1−n]`, exactly what the reversed events give).
+    pub reverse: bool,
+    /// Keep only the `size`² block at `(x0, y0)`: `(x0, y0, size)`.
+    pub crop: Option<(usize, usize, usize)>,
+}
+
+/// The sample of window `[t_a, t_b]` of `d`, augmented as asked (crop first, then
+/// transpose, then flips).
+pub fn sample(d: &SceneData, (t_a, t_b): (f64, f64), bins: usize, aug: Augment) -> Sample {
+    let (mut w, mut h) = (d.events.width as usize, d.events.height as usize);
     let range = d.events.window_range(t_a, t_b);
     let len = t_b - t_a;
     let slice = d.events.as_slice().sub(range.clone());
@@ -168,12 +194,52 @@ pub fn sample(d: &SceneData, (t_a, t_b): (f64, f64), bins: usize, flip: (bool, b
             mask[p] = 1.0;
         }
     }
-    let (fx, fy) = flip;
-    if fx || fy {
+    if aug.reverse {
+        let plane = w * h;
+        let old = voxel.clone();
+        for n in 0..bins {
+            let src = &old[(bins - 1 - n) * plane..(bins - n) * plane];
+            for (o, &v) in voxel[n * plane..(n + 1) * plane].iter_mut().zip(src) {
+                *o = -v;
+            }
+        }
+        target.iter_mut().for_each(|v| *v = -*v);
+        cm.t.iter_mut().for_each(|t| *t = 1.0 - *t);
+    }
+    if let Some((x0, y0, c)) = aug.crop {
+        assert!(x0 + c <= w && y0 + c <= h, "crop outside the sensor");
+        let cut = |planes: &[f32]| -> Vec<f32> {
+            planes
+                .chunks(w * h)
+                .flat_map(|pl| {
+                    (y0..y0 + c).flat_map(move |y| pl[y * w + x0..y * w + x0 + c].iter().copied())
+                })
+                .collect()
+        };
+        voxel = cut(&voxel);
+        target = cut(&target);
+        mask = cut(&mask);
+        let mut kept = CmEvents::default();
+        for k in 0..cm.len() {
+            let (x, y) = (cm.x[k] as usize, cm.y[k] as usize);
+            if (x0..x0 + c).contains(&x) && (y0..y0 + c).contains(&y) {
+                kept.x.push(cm.x[k] - x0 as f64);
+                kept.y.push(cm.y[k] - y0 as f64);
+                kept.t.push(cm.t[k]);
+            }
+        }
+        cm = kept;
+        (w, h) = (c, c);
+    }
+    let (fx, fy) = aug.flip;
+    let tr = aug.transpose;
+    assert!(!tr || w == h, "transpose needs a square sample");
+    if fx || fy || tr {
+        // Output pixel (x, y) comes from source pixel `map(x, y)`.
         let map = |x: usize, y: usize| {
             let xs = if fx { w - 1 - x } else { x };
             let ys = if fy { h - 1 - y } else { y };
-            ys * w + xs
+            if tr { xs * w + ys } else { ys * w + xs }
         };
         let remap = |plane: &[f32], sign: f32| -> Vec<f32> {
             let mut out = vec![0f32; w * h];
@@ -187,11 +253,16 @@ pub fn sample(d: &SceneData, (t_a, t_b): (f64, f64), bins: usize, flip: (bool, b
         voxel = voxel.chunks(w * h).flat_map(|c| remap(c, 1.0)).collect();
         let su = if fx { -1.0 } else { 1.0 };
         let sv = if fy { -1.0 } else { 1.0 };
-        let mut t = remap(&target[..w * h], su);
-        t.extend(remap(&target[w * h..], sv));
+        let (pu, pv) = target.split_at(w * h);
+        let (pu, pv) = if tr { (pv, pu) } else { (pu, pv) };
+        let mut t = remap(pu, su);
+        t.extend(remap(pv, sv));
         target = t;
         mask = remap(&mask, 1.0);
         for k in 0..cm.len() {
+            if tr {
+                std::mem::swap(&mut cm.x[k], &mut cm.y[k]);
+            }
             if fx {
                 cm.x[k] = (w - 1) as f64 - cm.x[k];
             }
@@ -213,14 +284,31 @@ pub fn make_scenes(s: &PretrainSettings) -> Result<(Vec<SceneData>, Vec<SceneDat
     let mut train = Vec::new();
     for p in &s.presets {
         for &seed in &s.train_seeds {
-            train.push(make_scene(p, seed, s)?);
+            let size = match s.train_sizes.len() {
+                0 => s.resolution,
+                n => s.train_sizes[train.len() % n],
+            };
+            train.push(make_scene(p, seed, size, s)?);
         }
     }
+    Ok((train, make_held_out(s)?))
+}
+
+/// Build the held-out scenes (at `resolution`, speeds from `eval_speed` if set).
+pub fn make_held_out(s: &PretrainSettings) -> Result<Vec<SceneData>> {
     let mut held = Vec::new();
+    let hs = match s.eval_speed {
+        Some([lo, hi]) => PretrainSettings {
+            speed_min: lo,
+            speed_max: hi,
+            ..s.clone()
+        },
+        None => s.clone(),
+    };
     for p in &s.eval_presets {
         for &seed in &s.eval_seeds {
-            held.push(make_scene(p, seed, s)?);
+            held.push(make_scene(p, seed, s.resolution, &hs)?);
         }
     }
-    Ok((train, held))
+    Ok(held)
 }

@@ -39,7 +39,9 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 mod data;
-pub use data::{Sample, SceneData, make_scene, make_scenes, sample, scene_config};
+pub use data::{
+    Augment, Sample, SceneData, make_held_out, make_scene, make_scenes, sample, scene_config,
+};
 
 /// Name of the weights file inside the output directory.
 pub const WEIGHTS_FILE: &str = "weights.safetensors";
@@ -73,6 +75,18 @@ pub struct PretrainSettings {
     /// Range of the per-scene speed factor applied to all motion.
     pub speed_min: f64,
     pub speed_max: f64,
+    /// Speed range of the held-out scenes, `[min, max]` (default: the training range).
+    pub eval_speed: Option<[f64; 2]>,
+    /// Square sizes (px) at which the training scenes are rendered, cycling over the
+    /// scenes in order; windows of scenes larger than `resolution` are cropped to
+    /// `resolution`² at a random place (finer texture and larger motion in pixels at the
+    /// same step cost). Empty: every scene at `resolution`. Held-out scenes are always
+    /// at `resolution`.
+    pub train_sizes: Vec<u32>,
+    /// Also transpose training windows (x ↔ y) at random, besides the flips.
+    pub augment_transpose: bool,
+    /// Also play training windows backwards at random ([`Augment::reverse`]).
+    pub augment_reverse: bool,
     /// Adam steps.
     pub iterations: usize,
     /// Windows per step.
@@ -113,6 +127,10 @@ impl Default for PretrainSettings {
             window_max_s: 0.2,
             speed_min: 0.5,
             speed_max: 3.0,
+            eval_speed: None,
+            train_sizes: Vec::new(),
+            augment_transpose: false,
+            augment_reverse: false,
             iterations: 1500,
             batch: 4,
             lr: 1e-3,
@@ -151,6 +169,23 @@ impl PretrainSettings {
         }
         if !(self.speed_max.is_finite() && self.speed_max >= self.speed_min) {
             return Err("speed_max must be finite and ≥ speed_min".into());
+        }
+        if let Some([lo, hi]) = self.eval_speed
+            && !(lo.is_finite() && lo > 0.0 && hi.is_finite() && hi >= lo)
+        {
+            return Err(format!(
+                "eval_speed [{lo}, {hi}] must be finite, > 0, min ≤ max"
+            ));
+        }
+        if let Some(z) = self
+            .train_sizes
+            .iter()
+            .find(|&&z| z < self.resolution || z > 1024)
+        {
+            return Err(format!(
+                "train_sizes entry {z} must be in resolution ({})..=1024",
+                self.resolution
+            ));
         }
         if !(self.supervised_weight >= 0.0 && self.cm_weight >= 0.0)
             || self.supervised_weight + self.cm_weight <= 0.0
@@ -302,7 +337,7 @@ pub fn evaluate(
     for d in scenes {
         let (w, h) = (d.events.width as usize, d.events.height as usize);
         for win in eval_windows(d, s) {
-            let smp = sample(d, win, s.bins, (false, false));
+            let smp = sample(d, win, s.bins, Augment::default());
             let start = Instant::now();
             let x = tensor4(smp.voxel.clone(), [1, s.bins, h, w], &net.device, net.dtype);
             let flow = to_f64(net.forward(x));
@@ -372,12 +407,22 @@ pub fn run(
             let d = &train[rng.random_range(0..train.len())];
             let len = rng.random_range(s.window_min_s..=s.window_max_s);
             let t_a = rng.random_range(0.0..=(d.duration - len).max(0.0));
-            let smp = sample(
-                d,
-                (t_a, t_a + len),
-                bins,
-                (rng.random_bool(0.5), rng.random_bool(0.5)),
-            );
+            let flip = (rng.random_bool(0.5), rng.random_bool(0.5));
+            // Draws only for what is enabled, so older settings give the same stream.
+            let transpose = s.augment_transpose && rng.random_bool(0.5);
+            let reverse = s.augment_reverse && rng.random_bool(0.5);
+            let (w, h) = (d.events.width as usize, d.events.height as usize);
+            let crop = (w > res || h > res).then(|| {
+                let x0 = rng.random_range(0..=w - res);
+                (x0, rng.random_range(0..=h - res), res)
+            });
+            let aug = Augment {
+                flip,
+                transpose,
+                reverse,
+                crop,
+            };
+            let smp = sample(d, (t_a, t_a + len), bins, aug);
             if smp.mask.iter().any(|&m| m > 0.0) {
                 samples.push(smp);
             }
