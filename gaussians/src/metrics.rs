@@ -33,22 +33,21 @@ pub fn interleaved_to_planar(
     out
 }
 
-/// PSNR (dB) of two images after 8-bit quantisation; ∞ when identical.
+/// PSNR (dB) of two images after 8-bit quantisation; ∞ when identical. Computed on the
+/// integer levels (`10·log10(255² / MSE)`), so it is exact for 8-bit inputs.
 pub fn psnr_u8(a: &[f32], b: &[f32]) -> f64 {
     assert_eq!(a.len(), b.len());
+    let level = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as f64;
     let mse = a
         .iter()
         .zip(b)
-        .map(|(&x, &y)| {
-            let d = (quantize_u8(x) - quantize_u8(y)) as f64;
-            d * d
-        })
+        .map(|(&x, &y)| (level(x) - level(y)).powi(2))
         .sum::<f64>()
         / a.len().max(1) as f64;
     if mse == 0.0 {
         f64::INFINITY
     } else {
-        -10.0 * mse.log10()
+        10.0 * (255.0f64 * 255.0 / mse).log10()
     }
 }
 

@@ -51,18 +51,11 @@ fn to_u8_levels(img: &Image) -> Vec<f32> {
 }
 
 /// PSNR (dB) of two 8-bit images given as 0–255 levels; `f64::INFINITY` when equal.
+/// The formula is `gaussians::metrics::psnr_u8`'s (levels ÷ 255 quantise back to the
+/// same levels), so `degs eval` and the `gaussians` report agree.
 pub fn psnr_u8(a: &[f32], b: &[f32]) -> f64 {
-    let mse = a
-        .iter()
-        .zip(b)
-        .map(|(x, y)| ((x - y) as f64).powi(2))
-        .sum::<f64>()
-        / a.len().max(1) as f64;
-    if mse == 0.0 {
-        f64::INFINITY
-    } else {
-        10.0 * (255.0f64 * 255.0 / mse).log10()
-    }
+    let unit = |x: &[f32]| x.iter().map(|v| v / 255.0).collect::<Vec<f32>>();
+    gaussians::metrics::psnr_u8(&unit(a), &unit(b))
 }
 
 /// Mean SSIM of interleaved images given as 0–255 levels: `gaussians::metrics::ssim_u8`
