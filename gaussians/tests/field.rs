@@ -12,6 +12,7 @@ fn small(depth: usize, width: usize) -> FieldSettings {
         pos_freqs: 3,
         time_freqs: 2,
         seed: 7,
+        zero_head_init: false,
     }
 }
 
@@ -84,6 +85,7 @@ fn layout_matches_deform_gs_sizes() {
         pos_freqs: 10,
         time_freqs: 6,
         seed: 0,
+        zero_head_init: true,
     };
     assert_eq!(Mlp::<f32>::input_dim(&s), 63 + 13);
     let layers = Mlp::<f32>::layout(&s);
@@ -243,4 +245,22 @@ fn load_rejects_bad_files_with_the_file_name() {
     assert!(field::io::load(dir.path()).is_err());
     std::fs::write(dir.path().join("field.json"), b"{garbage").unwrap();
     assert!(field::io::load(dir.path()).is_err());
+}
+
+/// A zero head makes the field the identity (all deltas exactly 0), while the head's
+/// weight gradient is non-zero, so training can leave the identity.
+#[test]
+fn zero_head_outputs_zero_deltas_and_still_learns() {
+    let mut m = Mlp::<f64>::new(small(3, 8), 2);
+    m.zero_head();
+    let x = points(16);
+    let (out, cache) = m.forward(&x, &[0.4]);
+    assert!(out.iter().all(|&v| v == 0.0));
+    let g = m.backward(&cache, &vec![1.0; out.len()]);
+    let head = *m.layers.last().unwrap();
+    let head_grad: f64 = g[head.weight..head.bias + head.fan_out]
+        .iter()
+        .map(|v| v.abs())
+        .sum();
+    assert!(head_grad > 1e-3, "head gradient {head_grad}");
 }

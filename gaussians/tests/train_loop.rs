@@ -247,9 +247,14 @@ fn dynamic_only_leaves_static_gaussians_undeformed() {
     for k in 0..4 {
         init.dynamic[k] = false;
     }
+    // A random head (not the default zero head) so the dynamic Gaussians move at once.
     let s = TrainSettings {
         static_iterations: 0,
         dynamic_only: true,
+        field: gaussians::field::FieldSettings {
+            zero_head_init: false,
+            ..Default::default()
+        },
         ..Default::default()
     };
     let t = Trainer::new(s, init.clone(), 1.0);
@@ -308,4 +313,29 @@ fn run_stops_on_the_flag_and_counts_phases() {
     let sum = t.run(&Additive, &views, &stop, |_| {});
     assert!(!sum.interrupted);
     assert_eq!(sum.iterations, 40);
+}
+
+/// With the default zero head, switching the field on leaves the model exactly as the
+/// static phase left it (no jump in the loss at the switch).
+#[test]
+fn default_field_starts_as_the_identity() {
+    let init = random_splats(16, DVec3::ZERO, 0.5, 9);
+    let s = TrainSettings {
+        static_iterations: 0,
+        ..Default::default()
+    };
+    let t = Trainer::new(s, init.clone(), 1.0);
+    assert!(t.field_on());
+    for time in [0.0, 0.3, 1.0] {
+        let (d, _) = t.deformed(time);
+        assert_eq!(d.means, init.means);
+        for (a, b) in d
+            .log_scales
+            .iter()
+            .flatten()
+            .zip(init.log_scales.iter().flatten())
+        {
+            assert!((a - b).abs() < 1e-6, "{a} vs {b}");
+        }
+    }
 }

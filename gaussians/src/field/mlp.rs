@@ -124,6 +124,15 @@ impl<T: Real> Mlp<T> {
         }
     }
 
+    /// Set the output head's weights and bias to zero: the field outputs zero deltas
+    /// until trained. The head's weight gradient `aᵀ·g` is non-zero, so training moves
+    /// the head first and the hidden layers follow.
+    pub fn zero_head(&mut self) {
+        if let Some(head) = self.layers.last().copied() {
+            self.params[head.weight..head.bias + head.fan_out].fill(T::ZERO);
+        }
+    }
+
     /// Build the encoded input rows `[γ(x), γ(t)]`. `t` has length 1 (broadcast) or n.
     pub fn encode(&self, x: &[[T; 3]], t: &[T]) -> Vec<T> {
         let s = &self.settings;

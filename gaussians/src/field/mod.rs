@@ -23,6 +23,11 @@ pub struct FieldSettings {
     pub time_freqs: usize,
     /// Initialisation seed.
     pub seed: u64,
+    /// Start the output head at zero (weights and bias), so the field is the identity
+    /// when it is switched on and the static phase's model is not disturbed. Off: the
+    /// PyTorch/Deform-GS default init, whose random head moves every Gaussian by
+    /// ~0.1–0.3 units and perturbs its scale and rotation at the switch.
+    pub zero_head_init: bool,
 }
 
 impl Default for FieldSettings {
@@ -33,6 +38,7 @@ impl Default for FieldSettings {
             pos_freqs: 10,
             time_freqs: 6,
             seed: 0,
+            zero_head_init: true,
         }
     }
 }

@@ -138,7 +138,10 @@ impl Trainer {
         for k in 0..6 {
             adam.add_group(GROUPS[k], lrs[k], 1e-15, widths[k], n * widths[k]);
         }
-        let field = Mlp::<f32>::new(s.field, s.field.seed);
+        let mut field = Mlp::<f32>::new(s.field, s.field.seed);
+        if s.field.zero_head_init {
+            field.zero_head();
+        }
         let mut field_adam = Adam::default();
         field_adam.add_group("field", s.field_lr_init, 1e-15, 1, field.params.len());
         Trainer {

@@ -33,7 +33,10 @@ pub struct TrainSettings {
     /// Deform only Gaussians flagged `dynamic` (missing flags count as dynamic).
     pub dynamic_only: bool,
     pub field: FieldSettings,
-    /// Field learning rate, log-linear init → final over `iterations`.
+    /// Field learning rate, log-linear init → final over `iterations`. Deform-GS's
+    /// 8e-4 → 1.6e-6 is spread over 40k iterations; squeezed into a 3500-iteration
+    /// warm-up it left the field untrained (no better than a static model on the
+    /// nonrigid preset; BENCHMARKS.md "deformation field").
     pub field_lr_init: f64,
     pub field_lr_final: f64,
     /// Position learning rate × scene extent, log-linear over `iterations`.
@@ -80,8 +83,8 @@ impl Default for TrainSettings {
             deform: true,
             dynamic_only: false,
             field: FieldSettings::default(),
-            field_lr_init: 8e-4,
-            field_lr_final: 1.6e-6,
+            field_lr_init: 3e-3,
+            field_lr_final: 3e-4,
             position_lr_init: 1.6e-4 * 5.0,
             position_lr_final: 1.6e-6 * 5.0,
             feature_lr: 0.005,
