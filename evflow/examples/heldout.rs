@@ -6,8 +6,8 @@
 //! ```
 //!
 //! The held-out scenes, windows and metrics are those of `evflow pretrain` with
-//! SETTINGS.toml (`-` for the defaults); e.g. `evflow/weights/pretrain_c16.toml` gives the
-//! windows of the shipped weights' "held-out EPE". One line per weights file.
+//! SETTINGS.toml (`-` for the defaults); e.g. `evflow/weights/pretrain_c16_v1.toml` gives
+//! the windows (0.125 s) of the width table's "held-out EPE". One line per weights file.
 
 use burn::tensor::{DType, Device};
 use evflow::net::FlowNet;

@@ -45,7 +45,7 @@ fn preset_scene_opens_and_its_ground_truth_matches_the_renders() {
     assert!((scene.train.camera.fx - k.fx).abs() < 1e-9);
     for (split, frames) in [("train", &scene.train.frames), ("test", &scene.test.frames)] {
         for (i, f) in frames.iter().enumerate() {
-            let r = world.render(f.timestamp);
+            let r = world.render_frame(f.timestamp);
             let pose = world.camera_at(f.timestamp).cam_to_world;
             assert!((f.cam_to_world.translation - pose.translation).length() < 1e-9);
             assert!(f.cam_to_world.rotation.angle_between(pose.rotation) < 1e-6);
@@ -57,7 +57,7 @@ fn preset_scene_opens_and_its_ground_truth_matches_the_renders() {
             assert!(u == r.flow_u && v == r.flow_v, "{split} {i}: flow differs");
             let (_, _, ids) = read_object_png(gt.join(format!("object_{i:04}.png"))).unwrap();
             assert!(ids == r.object_id, "{split} {i}: ids differ");
-            // Images are the renders quantised to 8 bits.
+            // Images are the frame renders (frame_supersample) quantised to 8 bits.
             let img = read_image(scene.image_path(f)).unwrap();
             let worst = img
                 .data
@@ -173,7 +173,7 @@ fn blurred_train_frames_differ_from_sharp_test_renders() {
     let scene = Scene::open(&out).unwrap();
     let f = &scene.train.frames[1];
     let img = read_image(scene.image_path(f)).unwrap();
-    let sharp = world.render(f.timestamp);
+    let sharp = world.render_frame(f.timestamp);
     let diff: f32 = img
         .data
         .iter()
