@@ -4,14 +4,13 @@
 use evflow::cm::{CmConfig, CmEvents, cm_loss, gradient_magnitude, iwe, variance};
 use glam::DVec2;
 use scene::camera::{Distortion, Intrinsics};
-use std::path::Path;
 
-const DIR: &str = "../../shared/data/ecd_shapes_rotation";
+const DIR: &str = "ecd_shapes_rotation";
 const W: usize = 240;
 const H: usize = 180;
 
 fn data_dir() -> std::path::PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join(DIR)
+    scene::testdata::shared_data(DIR)
 }
 
 fn intrinsics() -> Intrinsics {

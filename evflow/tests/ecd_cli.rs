@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 fn data() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/ecd_shapes_rotation")
+    scene::testdata::shared_data("ecd_shapes_rotation")
 }
 
 fn evflow(args: &[&str], paths: &[(&str, &Path)]) -> String {

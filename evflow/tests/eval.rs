@@ -3,10 +3,10 @@
 
 use evflow::cm::{CmConfig, CmEvents};
 use evflow::eval::{EcdSlice, flow_metrics, flow_warp_loss, read_flow_npy, scale};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 fn ecd_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/ecd_shapes_rotation")
+    scene::testdata::shared_data("ecd_shapes_rotation")
 }
 
 #[test]

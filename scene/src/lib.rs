@@ -15,6 +15,7 @@ pub mod image_io;
 pub mod manifest;
 pub mod report;
 pub mod synth;
+pub mod testdata;
 pub use formats::{ReadOptions, read_events, write_evs};
 pub use image_io::Image;
 pub use manifest::{EventsRef, Frame, Manifest, Scene};

@@ -6,10 +6,9 @@ use scene::formats::{ReadOptions, read_events};
 use std::io::Write;
 use std::path::Path;
 
-const SAMPLE: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/../../shared/data/aedat4_sample/sample.aedat4"
-);
+fn sample() -> std::path::PathBuf {
+    scene::testdata::shared_data("aedat4_sample/sample.aedat4")
+}
 
 fn err_text<T: std::fmt::Debug>(r: scene::Result<T>) -> String {
     r.expect_err("expected an error").to_string()
@@ -17,7 +16,7 @@ fn err_text<T: std::fmt::Debug>(r: scene::Result<T>) -> String {
 
 #[test]
 fn reads_the_real_davis346_sample() {
-    let ev = read_events(SAMPLE, &ReadOptions::default()).unwrap();
+    let ev = read_events(sample(), &ReadOptions::default()).unwrap();
     // Figures from an independent Python decoder (LZ4 frame + FlatBuffers by hand):
     // 17 EVTS packets, 6,676 events, 3,563 ON, sensor 346x260.
     assert_eq!((ev.width, ev.height), (346, 260));
@@ -38,7 +37,7 @@ fn reads_the_real_davis346_sample() {
         sensor: Some((240, 180)),
         coord_scale: None,
     };
-    let e = err_text(read_events(SAMPLE, &o));
+    let e = err_text(read_events(sample(), &o));
     assert!(e.contains("sample.aedat4") && e.contains("346x260"), "{e}");
 }
 
@@ -298,7 +297,7 @@ fn hostile_and_corrupt_files() {
 #[test]
 fn every_truncation_and_many_bit_flips_of_the_sample_fail_cleanly() {
     let dir = tempfile::tempdir().unwrap();
-    let bytes = std::fs::read(SAMPLE).unwrap();
+    let bytes = std::fs::read(sample()).unwrap();
     let p = dir.path().join("mangled.aedat4");
     for cut in (0..bytes.len()).step_by(1999) {
         std::fs::write(&p, &bytes[..cut]).unwrap();

@@ -1,4 +1,4 @@
-//! Event file formats: bit-exact round trips, the real ECD sample, conversion, and
+//! Event file formats: bit-exact round trips, the real ecd() sample, conversion, and
 //! truncated / empty / corrupt / hostile input.
 
 mod common;
@@ -39,7 +39,7 @@ fn text_round_trip_is_bit_exact() {
 
 #[test]
 fn reads_the_real_ecd_sample() {
-    let ev = read_events(ECD, &opts(240, 180)).unwrap();
+    let ev = read_events(ecd(), &opts(240, 180)).unwrap();
     assert_eq!(ev.len(), 20_000);
     assert_eq!((ev.width, ev.height), (240, 180));
     // First and last lines of the file (checked with head/tail).
@@ -59,10 +59,10 @@ fn reads_the_real_ecd_sample() {
     assert_eq!(*ev.x.iter().max().unwrap(), 236);
     assert_eq!(*ev.y.iter().max().unwrap(), 179);
     // Without a sensor size the reader says what is missing.
-    let e = err_text(read_events(ECD, &ReadOptions::default()));
+    let e = err_text(read_events(ecd(), &ReadOptions::default()));
     assert!(e.contains("events.txt") && e.contains("sensor size"), "{e}");
     // A sensor too small for the data: the offending event is named.
-    let e = err_text(read_events(ECD, &opts(200, 180)));
+    let e = err_text(read_events(ecd(), &opts(200, 180)));
     assert!(e.contains("outside the 200x180 sensor"), "{e}");
 }
 
@@ -114,7 +114,7 @@ fn evs_round_trip_is_bit_exact_and_mappable() {
 fn convert_between_formats() {
     let dir = tempfile::tempdir().unwrap();
     let evs = dir.path().join("ecd.evs");
-    let s = convert(ECD, &evs, &opts(240, 180)).unwrap();
+    let s = convert(ecd(), &evs, &opts(240, 180)).unwrap();
     assert_eq!(s.events, 20_000);
     assert_eq!((s.width, s.height), (240, 180));
     assert_eq!((s.input_format, s.output_format), ("text", "evs"));
@@ -122,7 +122,7 @@ fn convert_between_formats() {
     let txt = dir.path().join("back.txt");
     let s2 = convert(&evs, &txt, &ReadOptions::default()).unwrap();
     assert_eq!(s2.events, 20_000);
-    let a = read_events(ECD, &opts(240, 180)).unwrap();
+    let a = read_events(ecd(), &opts(240, 180)).unwrap();
     let b = read_events(&txt, &ReadOptions::default()).unwrap();
     assert_same(&a, &b);
     let e = err_text(convert(

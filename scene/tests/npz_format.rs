@@ -86,7 +86,7 @@ fn npz_hs_ergb_layout_with_coordinate_scale() {
     let e = err_text(read_events(&p, &o));
     assert!(e.contains("event 2") && e.contains("outside"), "{e}");
     // coord_scale is refused for other formats.
-    let e = err_text(read_events(ECD, &o));
+    let e = err_text(read_events(ecd(), &o));
     assert!(e.contains("coord_scale"), "{e}");
 }
 

@@ -5,10 +5,9 @@ use scene::events::EventStream;
 use scene::formats::ReadOptions;
 
 /// The real ECD `shapes_rotation` slice shared by the tests.
-pub const ECD: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/../../shared/data/ecd_shapes_rotation/events.txt"
-);
+pub fn ecd() -> std::path::PathBuf {
+    scene::testdata::shared_data("ecd_shapes_rotation/events.txt")
+}
 
 /// A sorted pseudo-random stream with awkward timestamps (full f64 mantissas, ties).
 pub fn stream(n: usize, w: u32, h: u32, seed: u64) -> EventStream {
