@@ -195,14 +195,8 @@ pub fn sample(d: &SceneData, (t_a, t_b): (f64, f64), bins: usize, aug: Augment) 
         }
     }
     if aug.reverse {
-        let plane = w * h;
-        let old = voxel.clone();
-        for n in 0..bins {
-            let src = &old[(bins - 1 - n) * plane..(bins - n) * plane];
-            for (o, &v) in voxel[n * plane..(n + 1) * plane].iter_mut().zip(src) {
-                *o = -v;
-            }
-        }
+        // bin n of the reversed window is −(bin B−1−n)
+        voxel = voxel.chunks(w * h).rev().flatten().map(|v| -v).collect();
         target.iter_mut().for_each(|v| *v = -*v);
         cm.t.iter_mut().for_each(|t| *t = 1.0 - *t);
     }
