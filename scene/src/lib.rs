@@ -4,6 +4,7 @@
 
 pub mod atomic;
 pub mod camera;
+pub mod cli;
 pub mod error;
 pub mod events;
 

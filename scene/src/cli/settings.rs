@@ -1,0 +1,131 @@
+//! Stage settings files: read a TOML file (or take the defaults), apply the command
+//! line's overrides, validate, and write the resolved settings beside the outputs. Every
+//! stage binary does this the same way (docs/DESIGN.md §4).
+
+use crate::atomic::write_bytes_atomic;
+use crate::error::{Error, Result};
+use serde::Serialize;
+use serde::de::DeserializeOwned;
+use std::path::Path;
+
+/// A stage's settings: TOML with defaults for every key, unknown keys rejected
+/// (`#[serde(deny_unknown_fields, default)]`), and a check of the values.
+pub trait Settings: Serialize + DeserializeOwned + Default {
+    /// Why the values cannot be used, if they cannot.
+    fn validate(&self) -> std::result::Result<(), String>;
+}
+
+/// Parse settings from TOML text; errors name `origin` and the offending key.
+pub fn parse<S: Settings>(text: &str, origin: &Path) -> Result<S> {
+    toml::from_str(text).map_err(|e| Error::invalid(origin, e.message().trim()))
+}
+
+/// The settings of a run: `config` (or the defaults), then `overrides` (the flags),
+/// then [`Settings::validate`]. Errors name the file, or "command line" when there is none.
+pub fn resolve<S: Settings>(config: Option<&Path>, overrides: impl FnOnce(&mut S)) -> Result<S> {
+    let mut s = match config {
+        Some(p) => parse(&std::fs::read_to_string(p).map_err(|e| Error::io(p, e))?, p)?,
+        None => S::default(),
+    };
+    overrides(&mut s);
+    let origin = config.unwrap_or(Path::new("command line"));
+    s.validate().map_err(|e| Error::invalid(origin, e))?;
+    Ok(s)
+}
+
+/// TOML text of `s`, with values that came from `f32` fields written as the shortest
+/// decimal that reads back to the same `f32` (`0.0002`, not `0.00019999999494757503`).
+pub fn to_toml<S: Serialize>(s: &S) -> Result<String> {
+    let mut value = toml::Value::try_from(s)
+        .map_err(|e| Error::Other(format!("cannot write settings: {e}")))?;
+    tidy_floats(&mut value);
+    toml::to_string(&value).map_err(|e| Error::Other(format!("cannot write settings: {e}")))
+}
+
+/// Write the resolved settings as `dir/settings.toml` (atomically).
+pub fn write_resolved<S: Serialize>(dir: &Path, s: &S) -> Result<()> {
+    write_bytes_atomic(&dir.join("settings.toml"), to_toml(s)?.as_bytes())
+}
+
+/// Replace every float that is exactly an `f32` by the shortest decimal of that `f32`.
+/// A float read from TOML into an `f32` field and back gives the same `f32`; an `f64`
+/// field's value changes only if it was exactly an `f32` with a long expansion.
+pub fn tidy_floats(value: &mut toml::Value) {
+    match value {
+        toml::Value::Float(x) => {
+            let f = *x as f32;
+            if f.is_finite() && f as f64 == *x {
+                *x = f.to_string().parse().unwrap_or(*x);
+            }
+        }
+        toml::Value::Array(items) => items.iter_mut().for_each(tidy_floats),
+        toml::Value::Table(t) => t.iter_mut().for_each(|(_, v)| tidy_floats(v)),
+        _ => {}
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde::Deserialize;
+
+    #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+    #[serde(deny_unknown_fields, default)]
+    struct Demo {
+        rate: f32,
+        span: f64,
+        steps: u32,
+    }
+    impl Default for Demo {
+        fn default() -> Self {
+            Demo {
+                rate: 2e-4,
+                span: 0.1,
+                steps: 10,
+            }
+        }
+    }
+    impl Settings for Demo {
+        fn validate(&self) -> std::result::Result<(), String> {
+            if self.steps == 0 {
+                return Err("steps must be at least 1".into());
+            }
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn f32_values_print_short_and_read_back_exactly() {
+        let text = to_toml(&Demo::default()).unwrap();
+        assert!(text.contains("rate = 0.0002\n"), "{text}");
+        assert!(text.contains("span = 0.1\n"), "{text}");
+        let back: Demo = parse(&text, Path::new("x.toml")).unwrap();
+        assert_eq!(back, Demo::default());
+        assert_eq!(back.rate.to_bits(), 2e-4f32.to_bits());
+    }
+
+    #[test]
+    fn resolve_applies_overrides_then_validates_and_names_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("s.toml");
+        std::fs::write(&p, "steps = 3\n").unwrap();
+        let s: Demo = resolve(Some(&p), |s: &mut Demo| s.rate = 1.0).unwrap();
+        assert_eq!((s.steps, s.rate), (3, 1.0));
+        let e = resolve::<Demo>(Some(&p), |s| s.steps = 0)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with(&p.display().to_string()) && e.contains("at least 1"),
+            "{e}"
+        );
+        let e = resolve::<Demo>(None, |s| s.steps = 0)
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("command line:"), "{e}");
+        std::fs::write(&p, "stepz = 3\n").unwrap();
+        let e = resolve::<Demo>(Some(&p), |_| {}).unwrap_err().to_string();
+        assert!(e.contains("stepz") && e.contains("s.toml"), "{e}");
+        let e = resolve::<Demo>(Some(&dir.path().join("missing.toml")), |_| {}).unwrap_err();
+        assert!(e.to_string().contains("missing.toml"), "{e}");
+    }
+}
