@@ -3,7 +3,7 @@ pub mod densify;
 pub mod field;
 pub mod metrics;
 pub mod model;
-pub mod optim;
+pub use scene::optim;
 pub mod ply;
 pub mod progress;
 pub mod raster;

@@ -14,6 +14,7 @@ pub use events::{EventSlice, EventStream};
 pub mod formats;
 pub mod image_io;
 pub mod manifest;
+pub mod optim;
 pub mod report;
 pub mod synth;
 pub mod testdata;

@@ -1,6 +1,8 @@
-//! Adam with per-group learning rates and the log-linear learning-rate schedule of
-//! 3DGS / Deform-GS (`get_expon_lr_func`). Groups can grow and shrink when Gaussians
-//! are cloned, split or pruned: moment buffers follow the Gaussians via [`Adam::remap`].
+//! Adam with per-group learning rates, shared by every trainer (the Gaussians, the
+//! deformation field, the flow network's adapters, PoseNet), and the log-linear
+//! learning-rate schedule of 3DGS / Deform-GS (`get_expon_lr_func`). Groups can grow and
+//! shrink when Gaussians are cloned, split or pruned: moment buffers follow the items
+//! via [`Adam::remap`].
 
 use serde::{Deserialize, Serialize};
 
