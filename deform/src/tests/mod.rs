@@ -2,6 +2,7 @@
 //! finite differences in `f64`.
 
 mod camera_path;
+mod flow;
 
 use glam::{DQuat, DVec3};
 use scene::Pose;
