@@ -2,6 +2,7 @@
 pub mod camera_path;
 pub mod flow;
 pub mod lie;
+pub mod posenet;
 pub mod real;
 
 #[cfg(test)]
