@@ -27,6 +27,9 @@
 //! the *whole* image displacement, ego-motion included, so a motion loss built on it
 //! must not add `F_ego` again. Camera gradients are camera-right twists
 //! ([`crate::lie`]).
+//!
+//! Sums over points (the camera gradients) are added per fixed chunk in order, so the
+//! results do not depend on the number of threads.
 
 use crate::real::Real;
 use rayon::prelude::*;
@@ -276,7 +279,9 @@ pub fn ego_flow_backward<R: Real>(
             }
             acc
         })
-        .reduce(|| [R::ZERO; 6], add6);
+        .collect::<Vec<_>>()
+        .into_iter()
+        .fold([R::ZERO; 6], add6);
 }
 
 fn add6<R: Real>(a: [R; 6], b: [R; 6]) -> [R; 6] {
@@ -462,7 +467,9 @@ pub fn gaussian_flow_backward<R: Real>(
             }
             (a0, a1)
         })
-        .reduce(zero, |a, b| (add6(a.0, b.0), add6(a.1, b.1)));
+        .collect::<Vec<_>>()
+        .into_iter()
+        .fold(zero(), |a, b| (add6(a.0, b.0), add6(a.1, b.1)));
     match cams {
         GsCameras::Same(_) => {
             grad.cam0 = add6(g0, g1);

@@ -2,8 +2,10 @@
 pub mod camera_path;
 pub mod flow;
 pub mod lie;
+pub mod motion_loss;
 pub mod posenet;
 pub mod real;
+pub mod schedule;
 
 #[cfg(test)]
 mod tests;

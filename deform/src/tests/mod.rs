@@ -3,6 +3,7 @@
 
 mod camera_path;
 mod flow;
+mod motion;
 mod posenet;
 
 use glam::{DQuat, DVec3};
