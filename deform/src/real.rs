@@ -32,6 +32,7 @@ pub trait Real:
     fn sqrt(self) -> Self;
     fn exp(self) -> Self;
     fn ln(self) -> Self;
+    fn powf(self, e: Self) -> Self;
     fn abs(self) -> Self;
     fn sin(self) -> Self;
     fn cos(self) -> Self;
@@ -78,6 +79,10 @@ macro_rules! impl_real {
             #[inline(always)]
             fn ln(self) -> Self {
                 <$t>::ln(self)
+            }
+            #[inline(always)]
+            fn powf(self, e: Self) -> Self {
+                <$t>::powf(self, e)
             }
             #[inline(always)]
             fn abs(self) -> Self {

@@ -2,6 +2,7 @@
 //! finite differences in `f64`.
 
 mod camera_path;
+mod events;
 mod flow;
 mod motion;
 mod posenet;
