@@ -245,8 +245,7 @@ impl CameraPath {
             Interp::Linear => (b.translation - a.translation) / dt,
             Interp::CatmullRom => {
                 let s2 = s * s;
-                (a.translation * (6.0 * s2 - 6.0 * s) + b.translation * (-6.0 * s2 + 6.0 * s))
-                    / dt
+                (a.translation * (6.0 * s2 - 6.0 * s) + b.translation * (-6.0 * s2 + 6.0 * s)) / dt
                     + self.tangents[i] * (3.0 * s2 - 4.0 * s + 1.0)
                     + self.tangents[i + 1] * (3.0 * s2 - 2.0 * s)
             }
@@ -295,8 +294,7 @@ pub fn velocity_between_backward(
     let q = exp_so3(-0.5 * phi);
     let qt_gv = q.inverse() * g.v / h; // ∂L/∂(Q·u)·Qᵀ … i.e. Qᵀ·g_v/h
     let g_u = qt_gv;
-    let g_phi =
-        (skew(u) * right_jacobian(-0.5 * phi)).transpose() * qt_gv * 0.5 + g.w / h;
+    let g_phi = (skew(u) * right_jacobian(-0.5 * phi)).transpose() * qt_gv * 0.5 + g.w / h;
     let g_alpha = skew(u).transpose() * g_u - left_jacobian_inv(phi).transpose() * g_phi;
     let g_a = -g_u;
     let g_beta = right_jacobian_inv(phi).transpose() * g_phi;

@@ -172,8 +172,9 @@ impl IntervalCounts {
     fn locate(&self, t: f64) -> (usize, f64) {
         let bins = self.bins();
         let dt = self.t1 - self.t0;
-        if !(dt > 0.0) || !(t > self.t0) {
-            return (0, 0.0); // also a NaN t
+        let inside = dt > 0.0 && t > self.t0; // false for a NaN t
+        if !inside {
+            return (0, 0.0);
         }
         if t >= self.t1 {
             return (bins - 1, 1.0);
@@ -228,7 +229,13 @@ impl IntervalCounts {
     /// negated when `tb < ta`. With `events` (the slice the counts were built from) the
     /// counts are exact, else interpolated within the partial bins (module docs).
     /// Panics if `events` is not that slice (offset or length differ).
-    pub fn signed_counts(&self, ta: f64, tb: f64, events: Option<&EventSlice<'_>>, out: &mut [f32]) {
+    pub fn signed_counts(
+        &self,
+        ta: f64,
+        tb: f64,
+        events: Option<&EventSlice<'_>>,
+        out: &mut [f32],
+    ) {
         let n = self.width * self.height;
         assert_eq!(out.len(), n, "signed_counts: output size");
         let (la, lb) = (self.locate(ta), self.locate(tb));

@@ -132,7 +132,11 @@ pub fn pseudo_image<R: Real>(
         "pseudo_image: frames must be {ch} × {h} × {w}"
     );
     let (t0, t2) = k.span();
-    let t_e = if t_e.is_finite() { t_e.clamp(t0, t2) } else { t0 };
+    let t_e = if t_e.is_finite() {
+        t_e.clamp(t0, t2)
+    } else {
+        t0
+    };
     let frac = if t2 > t0 { (t_e - t0) / (t2 - t0) } else { 0.0 };
     let use_left = mode == PseudoMode::TwoSided || frac <= 0.5;
     let use_right = mode == PseudoMode::TwoSided || frac > 0.5;
@@ -149,7 +153,11 @@ pub fn pseudo_image<R: Real>(
     out.valid.resize(ch * n, false);
     out.n_eff.resize(ch * n, R::ZERO);
     out.log_eps = R::from_f64(s.log_eps);
-    let (eps, black, sat) = (out.log_eps, R::from_f64(s.black_level), R::from_f64(s.saturation));
+    let (eps, black, sat) = (
+        out.log_eps,
+        R::from_f64(s.black_level),
+        R::from_f64(s.saturation),
+    );
     let (c, sf) = (inp.contrast, R::from_f64(frac));
     let (lc, rc) = (&out.left_counts, &out.right_counts);
     let rows = w.max(1);
@@ -170,10 +178,9 @@ pub fn pseudo_image<R: Real>(
                     .then(|| side(inp.right[vi], -R::from_f64(rc[pi] as f64), c, eps, black))
                     .flatten();
                 let blended = match (a, b) {
-                    (Some((la, na)), Some((lb, nb))) => Some((
-                        (R::ONE - sf) * la + sf * lb,
-                        (R::ONE - sf) * na + sf * nb,
-                    )),
+                    (Some((la, na)), Some((lb, nb))) => {
+                        Some(((R::ONE - sf) * la + sf * lb, (R::ONE - sf) * na + sf * nb))
+                    }
                     (x, None) | (None, x) => x,
                 };
                 (p[j], ok[j], ne[j]) = match blended {
@@ -233,7 +240,11 @@ pub fn event_loss<R: Real>(
         dc += p.1;
         m += p.2;
     }
-    let inv = if m > 0 { R::ONE / R::from_f64(m as f64) } else { R::ZERO };
+    let inv = if m > 0 {
+        R::ONE / R::from_f64(m as f64)
+    } else {
+        R::ZERO
+    };
     if let Some(g) = grad_render {
         assert_eq!(g.len(), len, "event_loss: gradient size");
         g.par_chunks_mut(chunk).enumerate().for_each(|(r, gg)| {

@@ -175,7 +175,10 @@ pub fn ego_flow<R: Real>(
     out: &mut Flow2<R>,
 ) {
     let n = pts.u.len();
-    assert!(pts.v.len() == n && pts.inv_depth.len() == n, "ego_flow: lengths differ");
+    assert!(
+        pts.v.len() == n && pts.inv_depth.len() == n,
+        "ego_flow: lengths differ"
+    );
     out.resize(n);
     out.u
         .par_chunks_mut(CHUNK)
@@ -209,7 +212,7 @@ pub fn ego_flow_image<R: Real>(
     out: &mut Flow2<R>,
 ) {
     let n = inv_depth.len();
-    assert!(width > 0 && n % width == 0, "ego_flow_image: size");
+    assert!(width > 0 && n.is_multiple_of(width), "ego_flow_image: size");
     out.resize(n);
     out.u
         .par_chunks_mut(width)
@@ -245,7 +248,10 @@ pub fn ego_flow_backward<R: Real>(
     grad: &mut EgoGrad<R>,
 ) {
     let n = pts.u.len();
-    assert!(fwd.len() == n && g_u.len() == n && g_v.len() == n, "ego_flow_backward: lengths");
+    assert!(
+        fwd.len() == n && g_u.len() == n && g_v.len() == n,
+        "ego_flow_backward: lengths"
+    );
     grad.inv_depth.resize(n, R::ZERO);
     grad.u.resize(n, R::ZERO);
     grad.v.resize(n, R::ZERO);

@@ -95,10 +95,7 @@ pub fn left_jacobian_inv(phi: DVec3) -> DMat3 {
 
 /// Split a twist `[v, ω]` into its two halves.
 pub fn split(t: [f64; 6]) -> (DVec3, DVec3) {
-    (
-        DVec3::new(t[0], t[1], t[2]),
-        DVec3::new(t[3], t[4], t[5]),
-    )
+    (DVec3::new(t[0], t[1], t[2]), DVec3::new(t[3], t[4], t[5]))
 }
 
 /// Join two halves into a twist `[v, ω]`.

@@ -175,7 +175,8 @@ fn residual<R: Real>(inp: &MotionInputs<'_, R>, i: usize) -> (Option<[R; 2]>, us
         sv += w * inp.flow_v[j];
         sw += w;
     }
-    if !(sw > R::ZERO) {
+    let positive = sw > R::ZERO; // false for NaN
+    if !positive {
         return (None, missing);
     }
     let (mut pu, mut pv) = (inp.gs.u[i], inp.gs.v[i]);
@@ -202,14 +203,23 @@ pub fn motion_loss<R: Real>(
     let b = &inp.bindings;
     assert_eq!(b.events.len(), b.weights.len(), "motion_loss: CSR lengths");
     assert!(
-        b.offsets.last().is_none_or(|&o| o as usize <= b.events.len()),
+        b.offsets
+            .last()
+            .is_none_or(|&o| o as usize <= b.events.len()),
         "motion_loss: offsets past the events"
     );
-    assert_eq!(inp.flow_u.len(), inp.flow_v.len(), "motion_loss: flow lengths");
+    assert_eq!(
+        inp.flow_u.len(),
+        inp.flow_v.len(),
+        "motion_loss: flow lengths"
+    );
     let lens_ok = |p: &PerGaussian<'_, R>| {
         p.u.len() == n && p.v.len() == n && p.valid.is_none_or(|v| v.len() == n)
     };
-    assert!(lens_ok(&inp.gs) && inp.ego.as_ref().is_none_or(lens_ok), "motion_loss: per-Gaussian lengths");
+    assert!(
+        lens_ok(&inp.gs) && inp.ego.as_ref().is_none_or(lens_ok),
+        "motion_loss: per-Gaussian lengths"
+    );
 
     // Pass 1: ρ, |r| and counts per chunk.
     let parts: Vec<(R, R, usize, usize)> = (0..n.div_ceil(CHUNK))
@@ -248,7 +258,11 @@ pub fn motion_loss<R: Real>(
         g.ego_u
             .par_chunks_mut(CHUNK)
             .zip(g.ego_v.par_chunks_mut(CHUNK))
-            .zip(g.gs_u.par_chunks_mut(CHUNK).zip(g.gs_v.par_chunks_mut(CHUNK)))
+            .zip(
+                g.gs_u
+                    .par_chunks_mut(CHUNK)
+                    .zip(g.gs_v.par_chunks_mut(CHUNK)),
+            )
             .enumerate()
             .for_each(|(c, ((eu, ev), (gu, gv)))| {
                 for j in 0..eu.len() {

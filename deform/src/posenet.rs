@@ -161,7 +161,10 @@ impl<R: Real> PoseNet<R> {
         let (_, a) = self.hidden(t);
         std::array::from_fn(|o| {
             let row = &self.params[w2 + o * h..w2 + (o + 1) * h];
-            row.iter().zip(&a).map(|(&w, &aj)| w * aj.max(R::ZERO)).sum::<R>()
+            row.iter()
+                .zip(&a)
+                .map(|(&w, &aj)| w * aj.max(R::ZERO))
+                .sum::<R>()
                 + self.params[b2 + o]
         })
     }
@@ -169,7 +172,11 @@ impl<R: Real> PoseNet<R> {
     /// Accumulate `∂L/∂params` into `grad` (same layout as [`Self::params`]) for an
     /// upstream `g = ∂L/∂ξ` at time `t`.
     pub fn backward(&self, t: R, g: [R; 6], grad: &mut [R]) {
-        assert_eq!(grad.len(), self.params.len(), "PoseNet::backward: gradient size");
+        assert_eq!(
+            grad.len(),
+            self.params.len(),
+            "PoseNet::backward: gradient size"
+        );
         let (d, h) = (self.settings.input_dim(), self.settings.hidden);
         let (w1, b1, w2, b2) = self.layout();
         let (x, a) = self.hidden(t);

@@ -39,7 +39,10 @@ fn keys_are_interpolated_through_and_held_outside() {
     for interp in [Interp::Linear, Interp::CatmullRom] {
         let p = sample_path(interp);
         for (t, k) in p.times().iter().zip(p.poses()) {
-            assert!(pose_dist(&p.pose_at(*t), k) < 1e-12, "{interp:?} at key {t}");
+            assert!(
+                pose_dist(&p.pose_at(*t), k) < 1e-12,
+                "{interp:?} at key {t}"
+            );
         }
         assert_eq!(p.pose_at(-5.0), p.poses()[0]);
         assert_eq!(p.pose_at(9.0), *p.poses().last().unwrap());
@@ -94,10 +97,17 @@ fn velocity_is_the_time_derivative_of_pose_as_defined() {
     let c_dot = (b.translation - a.translation) / (2.0 * h);
     assert_close("ċ", &(r * vel.v).to_array(), &c_dot.to_array(), 1e-7, 1e-8);
     let rm = glam::DMat3::from_quat(r);
-    let rdot = (glam::DMat3::from_quat(b.rotation) - glam::DMat3::from_quat(a.rotation)) * (0.5 / h);
+    let rdot =
+        (glam::DMat3::from_quat(b.rotation) - glam::DMat3::from_quat(a.rotation)) * (0.5 / h);
     let want = rm * crate::lie::skew(vel.w);
     for c in 0..3 {
-        assert_close("Ṙ", &rdot.col(c).to_array(), &want.col(c).to_array(), 1e-6, 1e-8);
+        assert_close(
+            "Ṙ",
+            &rdot.col(c).to_array(),
+            &want.col(c).to_array(),
+            1e-6,
+            1e-8,
+        );
     }
 }
 

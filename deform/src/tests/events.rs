@@ -19,14 +19,27 @@ fn stream(rng: &mut Rng, n: usize) -> EventStream {
     for &ti in &t {
         let x = (rng.next_u64() % W as u64) as u16;
         let y = (rng.next_u64() % H as u64) as u16;
-        ev.push(ti, x, y, if rng.next_u64() % 3 == 0 { -1 } else { 1 });
+        ev.push(
+            ti,
+            x,
+            y,
+            if rng.next_u64().is_multiple_of(3) {
+                -1
+            } else {
+                1
+            },
+        );
     }
     ev
 }
 
 fn brute(ev: &EventStream, ta: f64, tb: f64) -> Vec<f32> {
     let mut out = vec![0.0f32; W * H];
-    let (lo, hi, s) = if ta <= tb { (ta, tb, 1.0) } else { (tb, ta, -1.0) };
+    let (lo, hi, s) = if ta <= tb {
+        (ta, tb, 1.0)
+    } else {
+        (tb, ta, -1.0)
+    };
     for i in 0..ev.len() {
         if ev.t[i] >= lo && ev.t[i] < hi {
             out[ev.y[i] as usize * W + ev.x[i] as usize] += s * ev.p[i] as f32;
@@ -52,8 +65,8 @@ fn exact_counts_equal_brute_force_and_interpolation_error_is_bounded() {
         (0.61, 0.93),
         (edge, 0.9),
         (0.5, edge),
-        (0.8, 0.6),   // reversed: negated
-        (0.3, 1.4),   // clamped to the interval
+        (0.8, 0.6), // reversed: negated
+        (0.3, 1.4), // clamped to the interval
         (0.7, 0.7),
     ];
     for &(ta, tb) in &queries {
@@ -69,17 +82,28 @@ fn exact_counts_equal_brute_force_and_interpolation_error_is_bounded() {
                 let b = (((t - 0.5) / 0.5 * 16.0).floor() as usize).min(15);
                 let (lo, hi) = (0.5 + b as f64 / 32.0, 0.5 + (b + 1) as f64 / 32.0);
                 (0..ev.len())
-                    .filter(|&j| ev.t[j] >= lo && ev.t[j] < hi && ev.y[j] as usize * W + ev.x[j] as usize == i)
+                    .filter(|&j| {
+                        ev.t[j] >= lo
+                            && ev.t[j] < hi
+                            && ev.y[j] as usize * W + ev.x[j] as usize == i
+                    })
                     .count() as f32
             };
             let bound = bin(ta) + bin(tb);
-            assert!((a - b).abs() <= bound + 1e-5, "interp [{ta}, {tb}) px {i}: {a} vs {b} (bound {bound})");
+            assert!(
+                (a - b).abs() <= bound + 1e-5,
+                "interp [{ta}, {tb}) px {i}: {a} vs {b} (bound {bound})"
+            );
         }
         let (x, y) = (4, 3);
         assert!((k.count_at(x, y, ta, tb) - out[y * W + x]).abs() < 1e-5);
     }
     k.signed_counts(0.5, edge, None, &mut out);
-    assert_eq!(out, brute(&ev, 0.5, edge), "interpolated counts are exact on bin edges");
+    assert_eq!(
+        out,
+        brute(&ev, 0.5, edge),
+        "interpolated counts are exact on bin edges"
+    );
     // The event exactly at t = 0.5 belongs to the second interval, not the first.
     let first = &all.intervals()[0];
     first.signed_counts(0.0, 0.5, Some(&sl), &mut out);
@@ -115,7 +139,12 @@ fn edge_cases_zero_events_one_pixel_equal_times() {
     // Two frames at the same time: an empty interval, zero counts, no NaN.
     let mut rng = Rng::new(1);
     let ev = stream(&mut rng, 200);
-    let all = EventCounts::build(&ev.as_slice(), &[0.0, 0.5, 0.5, 1.0], &CountSettings::default()).unwrap();
+    let all = EventCounts::build(
+        &ev.as_slice(),
+        &[0.0, 0.5, 0.5, 1.0],
+        &CountSettings::default(),
+    )
+    .unwrap();
     let z = &all.intervals()[1];
     assert_eq!(z.span(), (0.5, 0.5));
     z.signed_counts(0.5, 0.5, Some(&ev.as_slice()), &mut out);
@@ -123,6 +152,22 @@ fn edge_cases_zero_events_one_pixel_equal_times() {
     z.signed_counts(0.2, 0.9, None, &mut out);
     assert!(out.iter().all(|&v| v == 0.0));
     assert_eq!(all.interval_of(0.5), Some(2));
+    // A pseudo image on the empty interval is the left frame, in both modes.
+    let (l, r) = (vec![0.3f64; 3 * W * H], vec![0.6f64; 3 * W * H]);
+    let inp = PseudoInputs {
+        counts: z,
+        events: None,
+        left: &l,
+        right: &r,
+        channels: 3,
+        contrast: 0.2,
+    };
+    let mut p = PseudoImage::default();
+    for mode in [PseudoMode::Nearest, PseudoMode::TwoSided] {
+        pseudo_image(&inp, 0.5, mode, &PseudoSettings::default(), &mut p);
+        assert_eq!(p.data, l);
+        assert_eq!(p.valid_count(), 3 * W * H);
+    }
     assert!(EventCounts::build(&ev.as_slice(), &[1.0, 0.0], &CountSettings::default()).is_err());
     assert!(EventCounts::build(&ev.as_slice(), &[0.0, 1.0], &CountSettings { bins: 0 }).is_err());
     let one = EventCounts::build(&ev.as_slice(), &[0.3], &CountSettings::default()).unwrap();
@@ -167,25 +212,49 @@ fn pseudo_image_follows_eq_11_and_both_sides_agree_on_consistent_data() {
         let d = consistent(&mut rng, c, eps);
         let sl = d.ev.as_slice();
         let k = IntervalCounts::build(&sl, 0.0, 1.0, 32);
-        let s = PseudoSettings { log_eps: eps, black_level: 0.0, saturation: 10.0 };
-        let inp = PseudoInputs { counts: &k, events: Some(&sl), left: &d.left, right: &d.right, channels: 3, contrast: c };
+        let s = PseudoSettings {
+            log_eps: eps,
+            black_level: 0.0,
+            saturation: 10.0,
+        };
+        let inp = PseudoInputs {
+            counts: &k,
+            events: Some(&sl),
+            left: &d.left,
+            right: &d.right,
+            channels: 3,
+            contrast: c,
+        };
         let mut out = PseudoImage::default();
         for &te in &[0.0, 0.2, 0.5, 0.63, 1.0] {
             pseudo_image(&inp, te, PseudoMode::Nearest, &s, &mut out);
             let n = W * H;
-            let (from_left, cnt) = if te <= 0.5 { (true, brute(&d.ev, 0.0, te)) } else { (false, brute(&d.ev, te, 1.0)) };
+            let (from_left, cnt) = if te <= 0.5 {
+                (true, brute(&d.ev, 0.0, te))
+            } else {
+                (false, brute(&d.ev, te, 1.0))
+            };
             for v in 0..3 * n {
                 let want = if from_left {
                     (d.left[v] + eps) * (c * cnt[v % n] as f64).exp() - eps
                 } else {
                     (d.right[v] + eps) / (c * cnt[v % n] as f64).exp() - eps
                 };
-                assert!((out.data[v] - want).abs() < 1e-12 && out.valid[v], "t_e {te} value {v}");
+                assert!(
+                    (out.data[v] - want).abs() < 1e-12 && out.valid[v],
+                    "t_e {te} value {v}"
+                );
             }
             let nearest = out.data.clone();
             // On consistent data the two-sided blend equals either side.
             pseudo_image(&inp, te, PseudoMode::TwoSided, &s, &mut out);
-            assert_close(&format!("two-sided at {te}"), &out.data, &nearest, 1e-10, 1e-12);
+            assert_close(
+                &format!("two-sided at {te}"),
+                &out.data,
+                &nearest,
+                1e-10,
+                1e-12,
+            );
         }
         // At the frame times the pseudo image is the frame itself.
         pseudo_image(&inp, 0.0, PseudoMode::TwoSided, &s, &mut out);
@@ -210,7 +279,14 @@ fn masks_black_and_saturated_frames_without_nan() {
     let mut out = PseudoImage::default();
     for mode in [PseudoMode::Nearest, PseudoMode::TwoSided] {
         let s = PseudoSettings::default();
-        let inp = PseudoInputs { counts: &k, events: Some(&sl), left: &black, right: &black, channels: 3, contrast: 0.3 };
+        let inp = PseudoInputs {
+            counts: &k,
+            events: Some(&sl),
+            left: &black,
+            right: &black,
+            channels: 3,
+            contrast: 0.3,
+        };
         pseudo_image(&inp, 0.3, mode, &s, &mut out);
         assert_eq!(out.valid_count(), 0);
         assert!(out.data.iter().chain(&out.n_eff).all(|v| v.is_finite()));
@@ -220,7 +296,11 @@ fn masks_black_and_saturated_frames_without_nan() {
         assert_eq!((l.loss, l.d_contrast, l.valid), (0.0, 0.0, 0));
         assert!(g.iter().all(|&v| v == 0.0));
         // Saturated frame: exactly the pixels whose prediction exceeds 1 are masked.
-        let inp = PseudoInputs { left: &white, right: &white, ..inp };
+        let inp = PseudoInputs {
+            left: &white,
+            right: &white,
+            ..inp
+        };
         pseudo_image(&inp, 0.4, mode, &s, &mut out);
         let cnt = brute(&d.ev, 0.0, 0.4);
         let cnt_r = brute(&d.ev, 0.4, 1.0);
@@ -235,7 +315,14 @@ fn masks_black_and_saturated_frames_without_nan() {
     }
     // Black on one side only: the two-sided image falls back to the other side.
     let s = PseudoSettings::default();
-    let inp = PseudoInputs { counts: &k, events: Some(&sl), left: &black, right: &d.right, channels: 3, contrast: 0.3 };
+    let inp = PseudoInputs {
+        counts: &k,
+        events: Some(&sl),
+        left: &black,
+        right: &d.right,
+        channels: 3,
+        contrast: 0.3,
+    };
     pseudo_image(&inp, 0.2, PseudoMode::TwoSided, &s, &mut out);
     let cnt = brute(&d.ev, 0.2, 1.0);
     for v in 0..3 * n {
@@ -263,9 +350,20 @@ fn event_loss_gradients_match_finite_differences() {
         (PseudoMode::TwoSided, 0.45, 0.0),
         (PseudoMode::TwoSided, 0.7, 1e-3),
     ] {
-        let s = PseudoSettings { log_eps: eps, black_level: 0.01, saturation: 100.0 };
+        let s = PseudoSettings {
+            log_eps: eps,
+            black_level: 0.01,
+            saturation: 100.0,
+        };
         let at = |c: f64, r: &[f64], g: Option<&mut [f64]>| {
-            let inp = PseudoInputs { counts: &k, events: Some(&sl), left: &d.left, right: &right, channels: 3, contrast: c };
+            let inp = PseudoInputs {
+                counts: &k,
+                events: Some(&sl),
+                left: &d.left,
+                right: &right,
+                channels: 3,
+                contrast: c,
+            };
             let mut out = PseudoImage::default();
             pseudo_image(&inp, te, mode, &s, &mut out);
             event_loss(r, &out, g)
@@ -275,10 +373,22 @@ fn event_loss_gradients_match_finite_differences() {
         let l = at(c, &render, Some(&mut g));
         assert_eq!(l.valid, 3 * n);
         let num_c = fd(&[c], 0, 1e-6, |x| at(x[0], &render, None).loss);
-        assert_close(&format!("{mode:?} ∂L/∂C"), &[l.d_contrast], &[num_c], 1e-6, 1e-10);
+        assert_close(
+            &format!("{mode:?} ∂L/∂C"),
+            &[l.d_contrast],
+            &[num_c],
+            1e-6,
+            1e-10,
+        );
         for i in (0..3 * n).step_by(7) {
             let num = fd(&render, i, 1e-7, |x| at(c, x, None).loss);
-            assert_close(&format!("{mode:?} ∂L/∂R[{i}]"), &[g[i]], &[num], 1e-6, 1e-10);
+            assert_close(
+                &format!("{mode:?} ∂L/∂R[{i}]"),
+                &[g[i]],
+                &[num],
+                1e-6,
+                1e-10,
+            );
         }
     }
 }
@@ -289,15 +399,32 @@ fn f32_pseudo_image_agrees_with_f64() {
     let d = consistent(&mut rng, 0.2, 0.0);
     let sl = d.ev.as_slice();
     let k = IntervalCounts::build(&sl, 0.0, 1.0, 64);
-    let s = PseudoSettings { saturation: 10.0, ..Default::default() };
+    let s = PseudoSettings {
+        saturation: 10.0,
+        ..Default::default()
+    };
     let (l32, r32): (Vec<f32>, Vec<f32>) = (
         d.left.iter().map(|&v| v as f32).collect(),
         d.right.iter().map(|&v| v as f32).collect(),
     );
     let mut a = PseudoImage::<f64>::default();
     let mut b = PseudoImage::<f32>::default();
-    let inp64 = PseudoInputs { counts: &k, events: Some(&sl), left: &d.left, right: &d.right, channels: 3, contrast: 0.2 };
-    let inp32 = PseudoInputs { counts: &k, events: Some(&sl), left: &l32, right: &r32, channels: 3, contrast: 0.2f32 };
+    let inp64 = PseudoInputs {
+        counts: &k,
+        events: Some(&sl),
+        left: &d.left,
+        right: &d.right,
+        channels: 3,
+        contrast: 0.2,
+    };
+    let inp32 = PseudoInputs {
+        counts: &k,
+        events: Some(&sl),
+        left: &l32,
+        right: &r32,
+        channels: 3,
+        contrast: 0.2f32,
+    };
     pseudo_image(&inp64, 0.37, PseudoMode::TwoSided, &s, &mut a);
     pseudo_image(&inp32, 0.37, PseudoMode::TwoSided, &s, &mut b);
     for i in 0..a.data.len() {
@@ -314,13 +441,21 @@ fn srgb_conversion_is_iec_61966_2_1() {
     assert!((srgb_to_linear(0.04045f64) - 0.04045 / 12.92).abs() < 1e-15);
     for i in 0..=255 {
         let c = i as f64 / 255.0;
-        assert!((linear_to_srgb(srgb_to_linear(c)) - c).abs() < 1e-12, "code {i}");
+        assert!(
+            (linear_to_srgb(srgb_to_linear(c)) - c).abs() < 1e-12,
+            "code {i}"
+        );
         assert!((linear_to_srgb(srgb_to_linear(c as f32)) - c as f32).abs() < 1e-6);
     }
     // Continuous at the knee (the standard's constants meet within 1e-7).
     let k = 0.003_130_8f64;
     assert!((linear_to_srgb(k) - linear_to_srgb(k + 1e-12)).abs() < 1e-7);
-    let img = Image { width: 2, height: 1, channels: 3, data: vec![0.5, 0.0, 1.0, 0.2, 0.4, 0.6] };
+    let img = Image {
+        width: 2,
+        height: 1,
+        channels: 3,
+        data: vec![0.5, 0.0, 1.0, 0.2, 0.4, 0.6],
+    };
     let p = planar_linear(&img, false);
     assert_eq!(p, vec![0.5, 0.2, 0.0, 0.4, 1.0, 0.6]);
     let q = planar_linear(&img, true);

@@ -27,7 +27,10 @@ fn moving_path(interp: Interp) -> CameraPath {
         .map(|i| {
             let eye = DVec3::new(0.3 * i as f64, 0.1 * (i as f64).sin(), 4.0) + rng.vec3(0.2);
             let look = Pose::look_at(eye, rng.vec3(0.3), DVec3::Y);
-            crate::lie::perturb_camera_right(&look, [0.0, 0.0, 0.0, 0.0, 0.0, rng.uniform(-0.3, 0.3)])
+            crate::lie::perturb_camera_right(
+                &look,
+                [0.0, 0.0, 0.0, 0.0, 0.0, rng.uniform(-0.3, 0.3)],
+            )
         })
         .collect();
     CameraPath::new(&times, &poses, interp).unwrap()
@@ -94,24 +97,49 @@ fn ego_flow_backward_matches_finite_differences() {
         let (uu, vv, rr) = (&x[0..n], &x[n..2 * n], &x[2 * n..3 * n]);
         let vel: [f64; 6] = x[3 * n..].try_into().unwrap();
         let mut out = Flow2::default();
-        let pts = EgoPoints { u: uu, v: vv, inv_depth: rr };
+        let pts = EgoPoints {
+            u: uu,
+            v: vv,
+            inv_depth: rr,
+        };
         ego_flow(&pin, &vel, pts, 100.0, &mut out);
-        (0..n).map(|i| wu[i] * out.u[i] + wv[i] * out.v[i]).sum::<f64>()
+        (0..n)
+            .map(|i| wu[i] * out.u[i] + wv[i] * out.v[i])
+            .sum::<f64>()
     };
-    let x: Vec<f64> = u.iter().chain(&v).chain(&rho).chain(&vel).copied().collect();
+    let x: Vec<f64> = u
+        .iter()
+        .chain(&v)
+        .chain(&rho)
+        .chain(&vel)
+        .copied()
+        .collect();
     let num = fd_grad(&x, 1e-6, loss);
     let mut out = Flow2::default();
-    let pts = EgoPoints { u: &u, v: &v, inv_depth: &rho };
+    let pts = EgoPoints {
+        u: &u,
+        v: &v,
+        inv_depth: &rho,
+    };
     ego_flow(&pin, &vel, pts, 100.0, &mut out);
     assert_eq!(
         out.valid,
         [true, true, false, true, false, true, true],
         "validity"
     );
-    assert_eq!((out.u[2], out.v[2], out.u[4], out.v[4]), (0.0, 0.0, 0.0, 0.0));
+    assert_eq!(
+        (out.u[2], out.v[2], out.u[4], out.v[4]),
+        (0.0, 0.0, 0.0, 0.0)
+    );
     let mut g = EgoGrad::default();
     ego_flow_backward(&pin, &vel, pts, &out, &wu, &wv, &mut g);
-    let an: Vec<f64> = g.u.iter().chain(&g.v).chain(&g.inv_depth).chain(&g.velocity).copied().collect();
+    let an: Vec<f64> =
+        g.u.iter()
+            .chain(&g.v)
+            .chain(&g.inv_depth)
+            .chain(&g.velocity)
+            .copied()
+            .collect();
     assert_close("F_ego gradient", &an, &num, 1e-7, 1e-6);
 }
 
@@ -128,11 +156,25 @@ fn ego_flow_f32_agrees_with_f64_and_image_form_with_points() {
     inv[8] = 1.0 / 1e-6; // Z → 0
     let vel: [f64; 6] = std::array::from_fn(|_| rng.uniform(-1.0, 1.0));
     let mut f64out = Flow2::default();
-    ego_flow_image(&Pinhole::from_intrinsics(&k), &vel, w, &inv, 100.0, &mut f64out);
+    ego_flow_image(
+        &Pinhole::from_intrinsics(&k),
+        &vel,
+        w,
+        &inv,
+        100.0,
+        &mut f64out,
+    );
     let inv32: Vec<f32> = inv.iter().map(|&x| x as f32).collect();
     let vel32 = vel.map(|x| x as f32);
     let mut f32out = Flow2::<f32>::default();
-    ego_flow_image(&Pinhole::from_intrinsics(&k), &vel32, w, &inv32, 100.0, &mut f32out);
+    ego_flow_image(
+        &Pinhole::from_intrinsics(&k),
+        &vel32,
+        w,
+        &inv32,
+        100.0,
+        &mut f32out,
+    );
     for i in 0..w * h {
         assert_eq!(f64out.valid[i], f32out.valid[i]);
         assert!(f32out.u[i].is_finite() && f32out.v[i].is_finite());
@@ -145,7 +187,11 @@ fn ego_flow_f32_agrees_with_f64_and_image_form_with_points() {
     let us: Vec<f64> = (0..w * h).map(|i| (i % w) as f64).collect();
     let vs: Vec<f64> = (0..w * h).map(|i| (i / w) as f64).collect();
     let mut pts = Flow2::default();
-    let p = EgoPoints { u: &us, v: &vs, inv_depth: &inv };
+    let p = EgoPoints {
+        u: &us,
+        v: &vs,
+        inv_depth: &inv,
+    };
     ego_flow(&Pinhole::from_intrinsics(&k), &vel, p, 100.0, &mut pts);
     assert_eq!(pts, f64out);
 }
@@ -172,39 +218,63 @@ fn gaussian_flow_backward_matches_finite_differences() {
     let wv: Vec<f64> = (0..n).map(|_| rng.uniform(-1.0, 1.0)).collect();
     for exact in [false, true] {
         let loss = |x: &[f64]| {
-            let a: Vec<[f64; 3]> = (0..n).map(|i| [x[3 * i], x[3 * i + 1], x[3 * i + 2]]).collect();
+            let a: Vec<[f64; 3]> = (0..n)
+                .map(|i| [x[3 * i], x[3 * i + 1], x[3 * i + 2]])
+                .collect();
             let o = 3 * n;
-            let b: Vec<[f64; 3]> =
-                (0..n).map(|i| [x[o + 3 * i], x[o + 3 * i + 1], x[o + 3 * i + 2]]).collect();
+            let b: Vec<[f64; 3]> = (0..n)
+                .map(|i| [x[o + 3 * i], x[o + 3 * i + 1], x[o + 3 * i + 2]])
+                .collect();
             let e0: [f64; 6] = x[6 * n..6 * n + 6].try_into().unwrap();
             let e1: [f64; 6] = x[6 * n + 6..].try_into().unwrap();
             let c0 = ProjCam::new(&perturb_camera_right(&p0, e0), &k, 0.01);
             let c1 = ProjCam::new(&perturb_camera_right(&p1, e1), &k, 0.01);
-            let cams = if exact { GsCameras::Exact(&c0, &c1) } else { GsCameras::Same(&c0) };
+            let cams = if exact {
+                GsCameras::Exact(&c0, &c1)
+            } else {
+                GsCameras::Same(&c0)
+            };
             let mut out = Flow2::default();
             gaussian_flow(cams, &a, &b, &mut out);
-            (0..n).map(|i| wu[i] * out.u[i] + wv[i] * out.v[i]).sum::<f64>()
+            (0..n)
+                .map(|i| wu[i] * out.u[i] + wv[i] * out.v[i])
+                .sum::<f64>()
         };
-        let x: Vec<f64> = x0.iter().chain(&x1).flatten().copied().chain([0.0; 12]).collect();
+        let x: Vec<f64> = x0
+            .iter()
+            .chain(&x1)
+            .flatten()
+            .copied()
+            .chain([0.0; 12])
+            .collect();
         let num = fd_grad(&x, 1e-6, loss);
         let c0 = ProjCam::new(&p0, &k, 0.01);
         let c1 = ProjCam::new(&p1, &k, 0.01);
-        let cams = if exact { GsCameras::Exact(&c0, &c1) } else { GsCameras::Same(&c0) };
+        let cams = if exact {
+            GsCameras::Exact(&c0, &c1)
+        } else {
+            GsCameras::Same(&c0)
+        };
         let mut out = Flow2::default();
         gaussian_flow(cams, &x0, &x1, &mut out);
         assert!(!out.valid[3] && out.valid.iter().filter(|&&v| v).count() == n - 1);
         let mut g = GsGrad::default();
         gaussian_flow_backward(cams, &x0, &x1, &out, &wu, &wv, &mut g);
-        let an: Vec<f64> = g
-            .x0
-            .iter()
-            .chain(&g.x1)
-            .flatten()
-            .chain(&g.cam0)
-            .chain(&g.cam1)
-            .copied()
-            .collect();
-        assert_close(&format!("F_gs gradient (exact {exact})"), &an, &num, 1e-6, 1e-6);
+        let an: Vec<f64> =
+            g.x0.iter()
+                .chain(&g.x1)
+                .flatten()
+                .chain(&g.cam0)
+                .chain(&g.cam1)
+                .copied()
+                .collect();
+        assert_close(
+            &format!("F_gs gradient (exact {exact})"),
+            &an,
+            &num,
+            1e-6,
+            1e-6,
+        );
         assert_eq!(g.x0[3], [0.0; 3]);
     }
 }
@@ -240,7 +310,13 @@ fn gaussian_flow_forms_agree_with_projection_and_ego_motion() {
             let (px0, d0) = cam.project_world(DVec3::from_array(x0[i])).unwrap();
             let (px1, _) = cam.project_world(DVec3::from_array(x1[i])).unwrap();
             // Same camera: exactly the difference of the two projections.
-            assert_close("same", &[same.u[i], same.v[i]], &(px1 - px0).to_array(), 1e-10, 1e-12);
+            assert_close(
+                "same",
+                &[same.u[i], same.v[i]],
+                &(px1 - px0).to_array(),
+                1e-10,
+                1e-12,
+            );
             let ego = ego_flow_at(&pin, px0.x, px0.y, 1.0 / d0, &vel);
             let e = DVec2::new(exact.u[i], exact.v[i]);
             let sum = DVec2::new(same.u[i] + ego[0] * dt, same.v[i] + ego[1] * dt);
@@ -251,6 +327,13 @@ fn gaussian_flow_forms_agree_with_projection_and_ego_motion() {
     // The decomposition F_gs + F_ego·Δt is first-order exact: its relative error
     // shrinks in proportion to Δt.
     let (a, b) = (worst(1e-3), worst(1e-4));
-    assert!(a < 5e-2 && b < 5e-3, "relative errors {a:.2e} (1 ms), {b:.2e} (0.1 ms)");
-    assert!((a / b - 10.0).abs() < 1.0, "error ratio {:.2} (first order: 10)", a / b);
+    assert!(
+        a < 5e-2 && b < 5e-3,
+        "relative errors {a:.2e} (1 ms), {b:.2e} (0.1 ms)"
+    );
+    assert!(
+        (a / b - 10.0).abs() < 1.0,
+        "error ratio {:.2} (first order: 10)",
+        a / b
+    );
 }

@@ -29,7 +29,11 @@ impl Rng {
         a + (b - a) * (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
     }
     pub fn vec3(&mut self, s: f64) -> DVec3 {
-        DVec3::new(self.uniform(-s, s), self.uniform(-s, s), self.uniform(-s, s))
+        DVec3::new(
+            self.uniform(-s, s),
+            self.uniform(-s, s),
+            self.uniform(-s, s),
+        )
     }
     pub fn pose(&mut self, rot: f64, trans: f64) -> Pose {
         Pose::new(DQuat::from_scaled_axis(self.vec3(rot)), self.vec3(trans))

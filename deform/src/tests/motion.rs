@@ -58,8 +58,16 @@ fn value_on_a_hand_made_case() {
         flow_u: &flow_u,
         flow_v: &flow_v,
         flow_base: 10,
-        ego: Some(PerGaussian { u: &ego_u, v: &ego_v, valid: None }),
-        gs: PerGaussian { u: &gs_u, v: &gs_v, valid: None },
+        ego: Some(PerGaussian {
+            u: &ego_u,
+            v: &ego_v,
+            valid: None,
+        }),
+        gs: PerGaussian {
+            u: &gs_u,
+            v: &gs_v,
+            valid: None,
+        },
     };
     // Σw·f·Δt = (0.1·(10 + 15), 0.1·(−2)) = (2.5, −0.2); F_ego·Δt + F_gs = (1.5, −0.4).
     let r = [1.0f64, 0.2];
@@ -73,7 +81,11 @@ fn value_on_a_hand_made_case() {
             Norm::L2 => n * n,
         };
         let out = motion_loss(&s, &inp, None);
-        assert!((out.loss - want).abs() < 1e-12, "{norm:?}: {} vs {want}", out.loss);
+        assert!(
+            (out.loss - want).abs() < 1e-12,
+            "{norm:?}: {} vs {want}",
+            out.loss
+        );
         assert_eq!((out.bound, out.missing_events), (1, 0));
         assert!((out.mean_residual - n).abs() < 1e-12);
     }
@@ -156,7 +168,14 @@ fn gradient_matches_finite_differences_for_every_norm() {
             // invalid F_ego.
             assert_eq!(out.bound, if with_ego { 7 } else { 8 }, "{norm:?}");
             assert_eq!(out.missing_events, 1);
-            let an: Vec<f64> = g.ego_u.iter().chain(&g.ego_v).chain(&g.gs_u).chain(&g.gs_v).copied().collect();
+            let an: Vec<f64> = g
+                .ego_u
+                .iter()
+                .chain(&g.ego_v)
+                .chain(&g.gs_u)
+                .chain(&g.gs_v)
+                .copied()
+                .collect();
             assert_close(&format!("{norm:?} ego {with_ego}"), &an, &num, 1e-6, 1e-9);
             if !with_ego {
                 assert!(g.ego_u.iter().all(|&x| x == 0.0));
@@ -173,12 +192,20 @@ fn no_events_weights_and_f32() {
     let z = [0.0f32; 2];
     let inp = MotionInputs {
         dt: 0.1f32,
-        bindings: CsrBindings { offsets: &offsets, events: &[], weights: &[] },
+        bindings: CsrBindings {
+            offsets: &offsets,
+            events: &[],
+            weights: &[],
+        },
         flow_u: &[],
         flow_v: &[],
         flow_base: 0,
         ego: None,
-        gs: PerGaussian { u: &z, v: &z, valid: None },
+        gs: PerGaussian {
+            u: &z,
+            v: &z,
+            valid: None,
+        },
     };
     let mut g = MotionGrad::default();
     let out = motion_loss(&s, &inp, Some(&mut g));
@@ -186,8 +213,16 @@ fn no_events_weights_and_f32() {
     assert_eq!(g.gs_u, vec![0.0; 2]);
     // No Gaussians at all.
     let empty = MotionInputs {
-        bindings: CsrBindings { offsets: &[], events: &[], weights: &[] },
-        gs: PerGaussian { u: &[], v: &[], valid: None },
+        bindings: CsrBindings {
+            offsets: &[],
+            events: &[],
+            weights: &[],
+        },
+        gs: PerGaussian {
+            u: &[],
+            v: &[],
+            valid: None,
+        },
         ..inp
     };
     assert_eq!(motion_loss(&s, &empty, None).bound, 0);
@@ -200,14 +235,29 @@ fn no_events_weights_and_f32() {
     let run = |w: &[f32]| {
         let inp = MotionInputs {
             dt: 1.0,
-            bindings: CsrBindings { offsets: &offsets, events: &events, weights: w },
+            bindings: CsrBindings {
+                offsets: &offsets,
+                events: &events,
+                weights: w,
+            },
             flow_u: &fu,
             flow_v: &fv,
             flow_base: 0,
             ego: None,
-            gs: PerGaussian { u: &gs0, v: &gs0, valid: None },
+            gs: PerGaussian {
+                u: &gs0,
+                v: &gs0,
+                valid: None,
+            },
         };
-        motion_loss(&MotionSettings { norm: Norm::L2, ..s }, &inp, None)
+        motion_loss(
+            &MotionSettings {
+                norm: Norm::L2,
+                ..s
+            },
+            &inp,
+            None,
+        )
     };
     let a = run(&[1.0, 1.0, 0.5, 0.5]);
     assert_eq!((a.loss, a.bound), (400.0, 2));
@@ -218,9 +268,15 @@ fn no_events_weights_and_f32() {
     let c = case(&mut rng, 40);
     let x: Vec<f64> = (0..160).map(|_| rng.uniform(-3.0, 3.0)).collect();
     let x32: Vec<f32> = x.iter().map(|&v| v as f32).collect();
-    let (fu32, fv32): (Vec<f32>, Vec<f32>) =
-        (c.flow_u.iter().map(|&v| v as f32).collect(), c.flow_v.iter().map(|&v| v as f32).collect());
-    let b = CsrBindings { offsets: &c.offsets, events: &c.events, weights: &c.weights };
+    let (fu32, fv32): (Vec<f32>, Vec<f32>) = (
+        c.flow_u.iter().map(|&v| v as f32).collect(),
+        c.flow_v.iter().map(|&v| v as f32).collect(),
+    );
+    let b = CsrBindings {
+        offsets: &c.offsets,
+        events: &c.events,
+        weights: &c.weights,
+    };
     let l64 = motion_loss(
         &s,
         &MotionInputs {
@@ -229,8 +285,16 @@ fn no_events_weights_and_f32() {
             flow_u: &c.flow_u,
             flow_v: &c.flow_v,
             flow_base: 100,
-            ego: Some(PerGaussian { u: &x[0..40], v: &x[40..80], valid: None }),
-            gs: PerGaussian { u: &x[80..120], v: &x[120..], valid: None },
+            ego: Some(PerGaussian {
+                u: &x[0..40],
+                v: &x[40..80],
+                valid: None,
+            }),
+            gs: PerGaussian {
+                u: &x[80..120],
+                v: &x[120..],
+                valid: None,
+            },
         },
         None,
     );
@@ -242,8 +306,16 @@ fn no_events_weights_and_f32() {
             flow_u: &fu32,
             flow_v: &fv32,
             flow_base: 100,
-            ego: Some(PerGaussian { u: &x32[0..40], v: &x32[40..80], valid: None }),
-            gs: PerGaussian { u: &x32[80..120], v: &x32[120..], valid: None },
+            ego: Some(PerGaussian {
+                u: &x32[0..40],
+                v: &x32[40..80],
+                valid: None,
+            }),
+            gs: PerGaussian {
+                u: &x32[80..120],
+                v: &x32[120..],
+                valid: None,
+            },
         },
         None,
     );

@@ -1,5 +1,7 @@
 use super::{Rng, assert_close, fd_grad};
-use crate::camera_path::{CameraPath, CameraVelocity, Interp, velocity_between, velocity_between_backward};
+use crate::camera_path::{
+    CameraPath, CameraVelocity, Interp, velocity_between, velocity_between_backward,
+};
 use crate::lie::{perturb_camera_right, perturb_world_left, world_left_grad_to_camera_right};
 use crate::posenet::{PoseNet, PoseNetSettings, apply_correction, correction_backward};
 use glam::DVec3;
@@ -112,7 +114,9 @@ fn correction_backward_matches_finite_differences() {
         })
         .try_into()
         .unwrap();
-        let num = fd_grad(&xi, 1e-6, |x| f(&apply_correction(&pose, x.try_into().unwrap())));
+        let num = fd_grad(&xi, 1e-6, |x| {
+            f(&apply_correction(&pose, x.try_into().unwrap()))
+        });
         assert_close(
             &format!("ξ gradient, |ξ|~{scale}"),
             &correction_backward(xi, g_eps),
@@ -155,8 +159,16 @@ fn end_to_end_gradient_to_the_weights() {
     };
     let ((xa, pa), (xb, pb), (xt, pt)) = (corr_at(t - 0.5 * h), corr_at(t + 0.5 * h), corr_at(t));
     let (ga, gb) = velocity_between_backward(&pa, &pb, h, &gvel);
-    net.backward(p.normalised_time(t - 0.5 * h), correction_backward(xa, ga), &mut grad);
-    net.backward(p.normalised_time(t + 0.5 * h), correction_backward(xb, gb), &mut grad);
+    net.backward(
+        p.normalised_time(t - 0.5 * h),
+        correction_backward(xa, ga),
+        &mut grad,
+    );
+    net.backward(
+        p.normalised_time(t + 0.5 * h),
+        correction_backward(xb, gb),
+        &mut grad,
+    );
     // The pose term's gradient as the rasterizer would return it (world-left twist).
     let g_world: [f64; 6] = fd_grad(&[0.0; 6], 1e-6, |e| {
         perturb_world_left(&pt, e.try_into().unwrap())
@@ -166,6 +178,10 @@ fn end_to_end_gradient_to_the_weights() {
     .try_into()
     .unwrap();
     let g_cam = world_left_grad_to_camera_right(&pt, g_world);
-    net.backward(p.normalised_time(t), correction_backward(xt, g_cam), &mut grad);
+    net.backward(
+        p.normalised_time(t),
+        correction_backward(xt, g_cam),
+        &mut grad,
+    );
     assert_close("end-to-end PoseNet gradient", &grad, &num, 1e-5, 1e-7);
 }
