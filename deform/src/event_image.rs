@@ -33,6 +33,9 @@ use rayon::prelude::*;
 use scene::{EventSlice, Image};
 use serde::{Deserialize, Serialize};
 
+/// Values per rayon task.
+const CHUNK: usize = 8192;
+
 /// Settings of the pseudo image (serde, every field optional in files).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -160,17 +163,15 @@ pub fn pseudo_image<R: Real>(
     );
     let (c, sf) = (inp.contrast, R::from_f64(frac));
     let (lc, rc) = (&out.left_counts, &out.right_counts);
-    let rows = w.max(1);
     out.data
-        .par_chunks_mut(rows)
-        .zip(out.valid.par_chunks_mut(rows))
-        .zip(out.n_eff.par_chunks_mut(rows))
+        .par_chunks_mut(CHUNK)
+        .zip(out.valid.par_chunks_mut(CHUNK))
+        .zip(out.n_eff.par_chunks_mut(CHUNK))
         .enumerate()
         .for_each(|(r, ((p, ok), ne))| {
-            let start = r * rows; // index into the planar image
-            let pix0 = start % n;
+            let start = r * CHUNK; // index into the planar image
             for j in 0..p.len() {
-                let (vi, pi) = (start + j, pix0 + j);
+                let (vi, pi) = (start + j, (start + j) % n);
                 let a = use_left
                     .then(|| side(inp.left[vi], R::from_f64(lc[pi] as f64), c, eps, black))
                     .flatten();
@@ -216,7 +217,7 @@ pub fn event_loss<R: Real>(
 ) -> EventLoss<R> {
     let len = pseudo.data.len();
     assert_eq!(render.len(), len, "event_loss: render size");
-    let chunk = pseudo.width.max(1);
+    let chunk = CHUNK;
     let parts: Vec<(R, R, usize)> = render
         .par_chunks(chunk)
         .enumerate()
