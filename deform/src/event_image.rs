@@ -1,0 +1,302 @@
+//! Pseudo images from the event generation model (Eq. 11) and the event loss `L_event`.
+//!
+//! Between frames `I(t0)` and `I(t2)` (linear intensity, planar `C × H × W` like the
+//! rasterizer's renders), with `N(x; a, b)` the signed event count of pixel `x` over
+//! `[a, b)` ([`crate::event_counts`]) and `C` the contrast threshold:
+//!
+//! - [`PseudoMode::Nearest`] (Eq. 11): for `t_e ≤ (t0 + t2)/2`,
+//!   `P = (I(t0) + ε)·exp(C·N(t0, t_e)) − ε`; otherwise
+//!   `P = (I(t2) + ε)/exp(C·N(t_e, t2)) − ε`. With `ε = 0` (the default,
+//!   [`PseudoSettings::log_eps`]) this is the paper's formula; `ε > 0` inverts a sensor
+//!   (or `evflow`'s simulator, `ε = 1e-3`) that fires on `log(ε + I)`.
+//! - [`PseudoMode::TwoSided`] (the 2-D baseline of `degs eval`): both predictions,
+//!   blended in log space by the distance in time, `log(P + ε) = (1 − s)·log(P_left +
+//!   ε) + s·log(P_right + ε)`, `s = (t_e − t0)/(t2 − t0)`; where only one side is valid
+//!   that side is used alone.
+//!
+//! Every channel is scaled by the same per-pixel factor (events see brightness, not
+//! colour). A value is **valid** when its source frame value is at least
+//! [`PseudoSettings::black_level`] (and `I + ε > 0`: no log of zero) and the predicted
+//! value lies in `[0, saturation]` and is finite; invalid values are excluded from the
+//! loss (masked per channel). `PseudoImage::n_eff` holds `∂log(P + ε)/∂C` per value, so
+//! `∂P/∂C = (P + ε)·n_eff`.
+//!
+//! [`event_loss`]: `L_event = mean over valid values of |R − P|` (L1, Eq. 11), with its
+//! gradient w.r.t. the render (`sign(R − P)/M`, 0 where `R = P`) and w.r.t. `C`.
+//!
+//! sRGB helpers ([`srgb_to_linear`], [`linear_to_srgb`]: IEC 61966-2-1) and
+//! [`planar_linear`] convert frames stored as 8-bit sRGB before the model is applied.
+
+use crate::event_counts::IntervalCounts;
+use crate::real::Real;
+use rayon::prelude::*;
+use scene::{EventSlice, Image};
+use serde::{Deserialize, Serialize};
+
+/// Values per rayon task.
+const CHUNK: usize = 8192;
+
+/// Settings of the pseudo image (serde, every field optional in files).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PseudoSettings {
+    /// `ε` of `log(I + ε)` (0: the paper's multiplicative form).
+    pub log_eps: f64,
+    /// Frame values below this (linear) carry no usable brightness: masked.
+    pub black_level: f64,
+    /// Predicted values above this (linear) are saturated: masked.
+    pub saturation: f64,
+}
+
+impl Default for PseudoSettings {
+    fn default() -> Self {
+        PseudoSettings {
+            log_eps: 0.0,
+            black_level: 0.01,
+            saturation: 1.0,
+        }
+    }
+}
+
+/// Which frame(s) the pseudo image is predicted from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PseudoMode {
+    /// The nearer frame (Eq. 11).
+    #[default]
+    Nearest,
+    /// Both frames, blended in log space.
+    TwoSided,
+}
+
+/// The inputs of a pseudo image: the interval's counts and its two frames.
+#[derive(Clone, Copy, Debug)]
+pub struct PseudoInputs<'a, R> {
+    pub counts: &'a IntervalCounts,
+    /// The event slice the counts were built from (exact counts), or `None`
+    /// (interpolated within the partial bins).
+    pub events: Option<&'a EventSlice<'a>>,
+    /// Frame at the interval's start, linear, planar `channels × H × W`.
+    pub left: &'a [R],
+    /// Frame at the interval's end, same layout.
+    pub right: &'a [R],
+    pub channels: usize,
+    /// Contrast threshold `C` (log units per event).
+    pub contrast: R,
+}
+
+/// A pseudo image, planar `channels × H × W`, with its mask and `∂log(P + ε)/∂C`.
+/// Kept between calls, its buffers are reused.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PseudoImage<R> {
+    pub width: usize,
+    pub height: usize,
+    pub channels: usize,
+    pub data: Vec<R>,
+    pub valid: Vec<bool>,
+    pub n_eff: Vec<R>,
+    pub log_eps: R,
+    left_counts: Vec<f32>,
+    right_counts: Vec<f32>,
+}
+
+impl<R: Real> PseudoImage<R> {
+    /// Number of valid values.
+    pub fn valid_count(&self) -> usize {
+        self.valid.iter().filter(|&&v| v).count()
+    }
+}
+
+/// One side's prediction: `(log(P + ε), n)` or `None` where that side is not usable.
+#[inline(always)]
+fn side<R: Real>(i: R, n: R, c: R, eps: R, black: R) -> Option<(R, R)> {
+    let base = i + eps;
+    if i >= black && base > R::ZERO && i.is_finite() {
+        Some((base.ln() + c * n, n))
+    } else {
+        None
+    }
+}
+
+/// Eq. 11 (and its two-sided variant): the pseudo image at `t_e` (clamped to the
+/// interval) into `out`.
+pub fn pseudo_image<R: Real>(
+    inp: &PseudoInputs<'_, R>,
+    t_e: f64,
+    mode: PseudoMode,
+    s: &PseudoSettings,
+    out: &mut PseudoImage<R>,
+) {
+    let k = inp.counts;
+    let (w, h, ch) = (k.width(), k.height(), inp.channels);
+    let n = w * h;
+    assert!(
+        inp.left.len() == ch * n && inp.right.len() == ch * n,
+        "pseudo_image: frames must be {ch} × {h} × {w}"
+    );
+    let (t0, t2) = k.span();
+    let t_e = if t_e.is_finite() {
+        t_e.clamp(t0, t2)
+    } else {
+        t0
+    };
+    let frac = if t2 > t0 { (t_e - t0) / (t2 - t0) } else { 0.0 };
+    let use_left = mode == PseudoMode::TwoSided || frac <= 0.5;
+    let use_right = mode == PseudoMode::TwoSided || frac > 0.5;
+    out.left_counts.resize(n, 0.0);
+    out.right_counts.resize(n, 0.0);
+    if use_left {
+        k.signed_counts(t0, t_e, inp.events, &mut out.left_counts);
+    }
+    if use_right {
+        k.signed_counts(t_e, t2, inp.events, &mut out.right_counts);
+    }
+    (out.width, out.height, out.channels) = (w, h, ch);
+    out.data.resize(ch * n, R::ZERO);
+    out.valid.resize(ch * n, false);
+    out.n_eff.resize(ch * n, R::ZERO);
+    out.log_eps = R::from_f64(s.log_eps);
+    let (eps, black, sat) = (
+        out.log_eps,
+        R::from_f64(s.black_level),
+        R::from_f64(s.saturation),
+    );
+    let (c, sf) = (inp.contrast, R::from_f64(frac));
+    let (lc, rc) = (&out.left_counts, &out.right_counts);
+    out.data
+        .par_chunks_mut(CHUNK)
+        .zip(out.valid.par_chunks_mut(CHUNK))
+        .zip(out.n_eff.par_chunks_mut(CHUNK))
+        .enumerate()
+        .for_each(|(r, ((p, ok), ne))| {
+            let start = r * CHUNK; // index into the planar image
+            for j in 0..p.len() {
+                let (vi, pi) = (start + j, (start + j) % n);
+                let a = use_left
+                    .then(|| side(inp.left[vi], R::from_f64(lc[pi] as f64), c, eps, black))
+                    .flatten();
+                let b = use_right
+                    .then(|| side(inp.right[vi], -R::from_f64(rc[pi] as f64), c, eps, black))
+                    .flatten();
+                let blended = match (a, b) {
+                    (Some((la, na)), Some((lb, nb))) => {
+                        Some(((R::ONE - sf) * la + sf * lb, (R::ONE - sf) * na + sf * nb))
+                    }
+                    (x, None) | (None, x) => x,
+                };
+                (p[j], ok[j], ne[j]) = match blended {
+                    Some((l, nn)) => {
+                        let v = l.exp() - eps;
+                        if v.is_finite() && v >= R::ZERO && v <= sat {
+                            (v, true, nn)
+                        } else {
+                            (R::ZERO, false, R::ZERO)
+                        }
+                    }
+                    None => (R::ZERO, false, R::ZERO),
+                };
+            }
+        });
+}
+
+/// The value of `L_event`, its gradient w.r.t. `C`, and the number of valid values.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct EventLoss<R> {
+    pub loss: R,
+    pub d_contrast: R,
+    pub valid: usize,
+}
+
+/// Eq. 11: `L_event = (1/M)·Σ_valid |R − P|` for a render `R` (planar, same layout as
+/// the pseudo image); with `grad_render`, writes `∂L/∂R` (0 on masked values). No valid
+/// value gives a zero loss and zero gradients.
+pub fn event_loss<R: Real>(
+    render: &[R],
+    pseudo: &PseudoImage<R>,
+    grad_render: Option<&mut [R]>,
+) -> EventLoss<R> {
+    let len = pseudo.data.len();
+    assert_eq!(render.len(), len, "event_loss: render size");
+    let chunk = CHUNK;
+    let parts: Vec<(R, R, usize)> = render
+        .par_chunks(chunk)
+        .enumerate()
+        .map(|(r, rr)| {
+            let mut acc = (R::ZERO, R::ZERO, 0usize);
+            for (j, &x) in rr.iter().enumerate() {
+                let i = r * chunk + j;
+                if pseudo.valid[i] {
+                    let d = x - pseudo.data[i];
+                    acc.0 += d.abs();
+                    acc.1 -= d.sign0() * (pseudo.data[i] + pseudo.log_eps) * pseudo.n_eff[i];
+                    acc.2 += 1;
+                }
+            }
+            acc
+        })
+        .collect();
+    let (mut sum, mut dc, mut m) = (R::ZERO, R::ZERO, 0usize);
+    for p in parts {
+        sum += p.0;
+        dc += p.1;
+        m += p.2;
+    }
+    let inv = if m > 0 {
+        R::ONE / R::from_f64(m as f64)
+    } else {
+        R::ZERO
+    };
+    if let Some(g) = grad_render {
+        assert_eq!(g.len(), len, "event_loss: gradient size");
+        g.par_chunks_mut(chunk).enumerate().for_each(|(r, gg)| {
+            for (j, v) in gg.iter_mut().enumerate() {
+                let i = r * chunk + j;
+                *v = if pseudo.valid[i] {
+                    (render[i] - pseudo.data[i]).sign0() * inv
+                } else {
+                    R::ZERO
+                };
+            }
+        });
+    }
+    EventLoss {
+        loss: sum * inv,
+        d_contrast: dc * inv,
+        valid: m,
+    }
+}
+
+/// sRGB-encoded value in `[0, 1]` → linear (IEC 61966-2-1).
+#[inline]
+pub fn srgb_to_linear<R: Real>(c: R) -> R {
+    if c <= R::from_f64(0.04045) {
+        c / R::from_f64(12.92)
+    } else {
+        ((c + R::from_f64(0.055)) / R::from_f64(1.055)).powf(R::from_f64(2.4))
+    }
+}
+
+/// Linear value in `[0, 1]` → sRGB-encoded (IEC 61966-2-1).
+#[inline]
+pub fn linear_to_srgb<R: Real>(l: R) -> R {
+    if l <= R::from_f64(0.003_130_8) {
+        l * R::from_f64(12.92)
+    } else {
+        R::from_f64(1.055) * l.powf(R::from_f64(1.0 / 2.4)) - R::from_f64(0.055)
+    }
+}
+
+/// A `scene::Image` (interleaved) as planar `C × H × W` values, linearised from sRGB
+/// when `srgb` (frames stored as 8-bit sRGB), as is otherwise (`scene` reads PNGs as
+/// linear `code/255`).
+pub fn planar_linear(img: &Image, srgb: bool) -> Vec<f32> {
+    let (n, c) = (img.pixels(), img.channels as usize);
+    let mut out = vec![0.0f32; n * c];
+    for (k, plane) in out.chunks_mut(n.max(1)).enumerate().take(c) {
+        for (i, v) in plane.iter_mut().enumerate() {
+            let x = img.data[i * c + k];
+            *v = if srgb { srgb_to_linear(x) } else { x };
+        }
+    }
+    out
+}
