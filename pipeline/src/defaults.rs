@@ -8,16 +8,20 @@ use toml::{Table, Value};
 /// The default settings of `stage` as its binary reads them from `--config`, or None
 /// for a stage whose library this build does not know (`deform`, not written yet).
 pub fn stage_defaults(stage: &str) -> Option<Table> {
-    let value = match stage {
-        "evflow" => Value::try_from(evflow::finetune::FlowSettings::default()),
-        "gaussians" => Value::try_from(gaussians::train::TrainSettings::default()),
-        "assoc" => Value::try_from(assoc::AssocSettings::default()),
-        _ => return None,
-    };
-    match value {
-        Ok(Value::Table(t)) => Some(t),
+    match stage {
+        "evflow" => settings_table(&evflow::finetune::FlowSettings::default()),
+        "gaussians" => settings_table(&gaussians::train::TrainSettings::default()),
+        "assoc" => settings_table(&assoc::AssocSettings::default()),
         _ => None,
     }
+}
+
+/// `settings` as a TOML table, through TOML text: the text writer prints an `f32`
+/// field as the shortest decimal that reads back to the same `f32` (`0.0002`), which
+/// then parses to the `f64` of that decimal. `toml::Value::try_from` would widen the
+/// `f32` instead (`0.00019999999494757503`).
+fn settings_table<T: serde::Serialize>(settings: &T) -> Option<Table> {
+    toml::to_string(settings).ok()?.parse().ok()
 }
 
 /// Check `settings` against the stage's settings type: unknown keys and wrong types
@@ -136,6 +140,23 @@ mod tests {
             Some(&Value::Integer(3))
         );
         assert!(stage_defaults("deform").is_none());
+    }
+
+    #[test]
+    fn f32_defaults_print_as_their_shortest_decimal() {
+        let g = stage_defaults("gaussians").unwrap();
+        let densify = g["densify"].as_table().unwrap();
+        let grad = gaussians::train::TrainSettings::default()
+            .densify
+            .grad_threshold;
+        assert_eq!(
+            densify["grad_threshold"].as_float(),
+            Some(grad.to_string().parse().unwrap())
+        );
+        let e = parse("name = \"a\"\n[scene]\nsynth = \"rigid\"\n");
+        let text = show(&e).unwrap();
+        assert!(text.contains("#   grad_threshold = 0.0002\n"), "{text}");
+        assert!(!text.contains("0.000199999"), "{text}");
     }
 
     #[test]
