@@ -191,7 +191,7 @@ pub fn gc(cache: &cache::Cache, dry_run: bool) -> Result<GcReport> {
 }
 
 /// `degs plan`: the shell commands of the stages in order. Writes the settings files
-/// they read (under runs/<name>/). Cached stages are printed commented out unless `all`.
+/// they read (under `runs/<name>/`). Cached stages are printed commented out unless `all`.
 pub fn plan(exp: &Experiment, ctx: &Context, all: bool) -> Result<String> {
     let nodes = crate::runner::prepare(exp, ctx)?;
     let mut s = format!(

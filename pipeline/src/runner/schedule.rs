@@ -16,7 +16,7 @@ use std::sync::mpsc;
 pub struct Schedule<'a> {
     pub nodes: &'a [Node],
     pub ctx: &'a Context,
-    /// The experiment's name (its settings files and logs are under runs/<name>/).
+    /// The experiment's name (its settings files and logs are under `runs/<name>/`).
     pub experiment: &'a str,
     /// Stages run at the same time (at least 1).
     pub jobs: usize,

@@ -11,7 +11,8 @@ use std::process::{Command, Output};
 /// $DEGS_FAKE_REPORTS/<stage>.json as its report when that exists (as `gaussians`, copies
 /// the scene's test images as its renders), fails when its settings say `seed = 666`,
 /// sleeps when $DEGS_FAKE_SLEEP names it, meets the other stages named in
-/// $DEGS_FAKE_MEET when it is one of them (see [`MEET`]), and writes a few output files.
+/// $DEGS_FAKE_MEET when it is one of them (see [`Fixture::meeting`]), and writes a few output
+/// files.
 pub const FAKE_STAGE: &str = r#"#!/bin/sh
 stage=$(basename "$0")
 all="$*"
