@@ -1,4 +1,4 @@
-//! The content-addressed cache (DESIGN §4).
+//! The content-addressed cache (docs/DESIGN.md §4).
 //!
 //! ```text
 //! <root>/cache/<stage>/<key>/                 a finished stage output, never rewritten

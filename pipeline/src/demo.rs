@@ -2,11 +2,13 @@
 //! run every stage that is built through the runner, and end with a summary table
 //! (stage, time, cached?, key figures), an event preview and summary.json.
 
+use crate::context::Context;
 use crate::experiment::Experiment;
-use crate::graph::Context;
+use crate::process::fmt_kib;
 use crate::progress::Progress;
 use crate::record::{Action, RunRecord};
-use crate::runner::{self, RunOptions, fmt_kib};
+use crate::runner::{self, RunOptions};
+use crate::stages;
 use anyhow::{Context as _, Result};
 use scene::events::EventStream;
 use scene::image_io::{Image, write_png};
@@ -139,12 +141,13 @@ pub fn demo(opts: &DemoOptions, ctx: &Context, progress: &Progress) -> Result<De
     }
     let run_dir = ctx.cache.run_dir("demo");
     let metrics = crate::eval::eval_run(&run_dir).ok();
-    let renders = ["deform", "gaussians"].iter().find_map(|s| {
+    let renders = stages::render_stages().find_map(|s| {
         record
-            .stage(s)
+            .stage(s.name)
             .filter(|r| r.action.has_output())
             .and_then(|r| r.entry.as_ref())
-            .map(|e| e.join("renders"))
+            .zip(s.renders)
+            .map(|(e, dir)| e.join(dir))
             .filter(|r| r.is_dir())
     });
     let summary = DemoSummary {
@@ -206,38 +209,10 @@ pub fn report_figures(stage: &str, dir: &Path) -> Vec<(String, f64, String)> {
     else {
         return vec![];
     };
-    let wanted: &[(&str, &str, f64, &str)] = match stage {
-        "synth" => &[
-            ("train_frames", "train frames", 1.0, ""),
-            ("test_frames", "test frames", 1.0, ""),
-            ("events", "events", 1.0, ""),
-        ],
-        "evflow" => &[
-            ("flow_epe_px_s", "EPE", 1.0, "px/s"),
-            ("flow_err_px", "EPE", 1.0, "px"),
-            ("flow_outliers", "outliers", 100.0, "%"),
-            ("warp_gain", "warp gain", 1.0, ""),
-        ],
-        "gaussians" => &[
-            ("test/psnr_mean", "test PSNR", 1.0, "dB"),
-            ("test/ssim_mean", "SSIM", 1.0, ""),
-            ("gaussians", "Gaussians", 1.0, ""),
-        ],
-        "assoc" => &[
-            ("bound_fraction_mean", "bound", 100.0, "%"),
-            ("gaussians", "of Gaussians", 1.0, ""),
-        ],
-        _ => &[
-            ("test/psnr_mean", "test PSNR", 1.0, "dB"),
-            ("test/ssim_mean", "SSIM", 1.0, ""),
-            ("psnr", "PSNR", 1.0, "dB"),
-            ("ssim", "SSIM", 1.0, ""),
-        ],
-    };
-    wanted
+    stages::figures(stage)
         .iter()
-        .filter_map(|(path, label, scale, unit)| {
-            at(&v, path).map(|x| (label.to_string(), x * scale, unit.to_string()))
+        .filter_map(|f| {
+            at(&v, f.path).map(|x| (f.label.to_string(), x * f.scale, f.unit.to_string()))
         })
         .collect()
 }
@@ -329,7 +304,7 @@ pub fn format_summary(s: &DemoSummary) -> String {
     if let Some(p) = &s.preview {
         line("event preview:", p.display().to_string());
     }
-    for r in s.stages.iter().filter(|r| r.stage != "synth") {
+    for r in s.stages.iter().filter(|r| r.stage != stages::SYNTH) {
         if let Some(o) = &r.output {
             line(&format!("{}:", r.stage), o.display().to_string());
         }

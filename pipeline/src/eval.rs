@@ -2,6 +2,7 @@
 //! held-out test frames, flow error where the stages report it.
 
 use crate::record::RunRecord;
+use crate::stages;
 use anyhow::{Context, Result, bail};
 use rayon::prelude::*;
 use scene::image_io::{Image, read_image};
@@ -252,60 +253,11 @@ pub fn eval_run(run_dir: &Path) -> Result<Metrics> {
         .map(|f| scene.image_path(f))
         .collect();
 
-    let mut render_stage = None;
-    let mut frames = Vec::new();
-    for stage in ["deform", "gaussians"] {
-        let Some(entry) = entry_of(stage) else {
-            continue;
-        };
-        let renders = images_in(&entry.join("renders"));
-        if renders.is_empty() {
-            continue;
-        }
-        let pairs = pair_renders(&tests, &renders)
-            .with_context(|| format!("{}", entry.join("renders").display()))?;
-        frames = pairs
-            .par_iter()
-            .map(|(t, r)| {
-                let (psnr, ssim) = compare_images(t, r)?;
-                Ok(FrameMetrics {
-                    test_image: t.clone(),
-                    render: r.clone(),
-                    psnr,
-                    ssim,
-                })
-            })
-            .collect::<Result<Vec<_>>>()?;
-        render_stage = Some(stage.to_string());
-        break;
-    }
+    let (render_stage, frames) = eval_renders(&entry_of, &tests)?;
     let mean = |f: &dyn Fn(&FrameMetrics) -> f64| {
         (!frames.is_empty()).then(|| frames.iter().map(f).sum::<f64>() / frames.len() as f64)
     };
-    let mut flow = None;
-    let mut flow_source = None;
-    let gt_path = scene_dir.join("gt").join("event_flow.bin");
-    if let Some(entry) = entry_of("evflow").filter(|_| gt_path.is_file()) {
-        match flow_error(&entry.join("flow"), &gt_path) {
-            Ok(Some(f)) => {
-                flow = Some(f);
-                flow_source = Some("gt/event_flow.bin".to_string());
-            }
-            _ => {
-                let reported = std::fs::read(entry.join("report.json"))
-                    .ok()
-                    .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
-                    .and_then(|v| find_epe(&v));
-                if let Some(epe) = reported {
-                    flow = Some(FlowError {
-                        epe_px_s: epe,
-                        ..FlowError::default()
-                    });
-                    flow_source = Some("evflow report".to_string());
-                }
-            }
-        }
-    }
+    let (flow, flow_source) = eval_flow(&entry_of, &scene_dir).unzip();
     let stage_s: Vec<(String, f64)> = record
         .stages
         .iter()
@@ -328,6 +280,66 @@ pub fn eval_run(run_dir: &Path) -> Result<Metrics> {
     };
     scene::atomic::write_json_atomic(&run_dir.join("metrics.json"), &metrics)?;
     Ok(metrics)
+}
+
+/// PSNR/SSIM of the renders of the last stage in run order that has them (its name and
+/// the figures per test frame).
+fn eval_renders(
+    entry_of: &dyn Fn(&str) -> Option<PathBuf>,
+    tests: &[PathBuf],
+) -> Result<(Option<String>, Vec<FrameMetrics>)> {
+    for stage in stages::render_stages() {
+        let (Some(entry), Some(dir)) = (entry_of(stage.name), stage.renders) else {
+            continue;
+        };
+        let renders = images_in(&entry.join(dir));
+        if renders.is_empty() {
+            continue;
+        }
+        let pairs = pair_renders(tests, &renders)
+            .with_context(|| format!("{}", entry.join(dir).display()))?;
+        let frames = pairs
+            .par_iter()
+            .map(|(t, r)| {
+                let (psnr, ssim) = compare_images(t, r)?;
+                Ok(FrameMetrics {
+                    test_image: t.clone(),
+                    render: r.clone(),
+                    psnr,
+                    ssim,
+                })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        return Ok((Some(stage.name.to_string()), frames));
+    }
+    Ok((None, Vec::new()))
+}
+
+/// The flow error of the stage that writes per-event flow, against the scene's ground
+/// truth (`gt/event_flow.bin`), else the EPE its report gives; and where it came from.
+fn eval_flow(
+    entry_of: &dyn Fn(&str) -> Option<PathBuf>,
+    scene_dir: &Path,
+) -> Option<(FlowError, String)> {
+    let gt_path = scene_dir.join("gt").join("event_flow.bin");
+    if !gt_path.is_file() {
+        return None;
+    }
+    let stage = stages::STAGES.iter().find(|s| s.event_flow.is_some())?;
+    let entry = entry_of(stage.name)?;
+    let flow_dir = entry.join(stage.event_flow?);
+    if let Ok(Some(f)) = flow_error(&flow_dir, &gt_path) {
+        return Some((f, "gt/event_flow.bin".to_string()));
+    }
+    let epe = std::fs::read(entry.join("report.json"))
+        .ok()
+        .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
+        .and_then(|v| find_epe(&v))?;
+    let flow = FlowError {
+        epe_px_s: epe,
+        ..FlowError::default()
+    };
+    Some((flow, format!("{} report", stage.name)))
 }
 
 /// The table of `degs compare`.

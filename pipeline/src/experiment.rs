@@ -18,33 +18,96 @@
 //! [deform]
 //! ```
 //!
-//! Unknown keys are errors that name the key and the file. The stage tables are
-//! free-form: the stage binary validates them (and fills its own defaults).
+//! The stage tables are those of the stage registry ([`crate::stages`]). Unknown keys
+//! are errors that name the key and the file; a stage table is checked against its
+//! stage's settings type where this build links it ([`Experiment::check_stage_settings`]),
+//! and the stage binary fills its own defaults.
 
 use crate::canon;
+/// Re-exported: `synth` reads its overrides through these.
+pub use crate::overrides::{merge, parse_set};
+use crate::settings::toml_section;
+use crate::stages::{self, STAGES};
 use anyhow::{Context, Result, anyhow, bail};
 use scene::synth::{PRESETS, SynthConfig};
 use serde::Deserialize;
+use serde::de::{self, Deserializer, MapAccess, Visitor};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use std::sync::LazyLock;
 use toml::{Table, Value};
 
-/// The stages that take settings from the experiment, in run order.
-pub const SETTINGS_STAGES: [&str; 4] = ["evflow", "gaussians", "assoc", "deform"];
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
+/// The top level of an experiment file: `name`, `[scene]` and one table per stage of
+/// the registry.
 struct RawExperiment {
     name: String,
     scene: RawScene,
-    #[serde(default)]
-    evflow: Table,
-    #[serde(default)]
-    gaussians: Table,
-    #[serde(default)]
-    assoc: Table,
-    #[serde(default)]
-    deform: Table,
+    stages: BTreeMap<String, Table>,
+}
+
+/// Every top-level key an experiment file may hold.
+static TOP_LEVEL_KEYS: LazyLock<Vec<&'static str>> = LazyLock::new(|| {
+    ["name", "scene"]
+        .into_iter()
+        .chain(STAGES.iter().map(|s| s.name))
+        .collect()
+});
+
+impl<'de> Deserialize<'de> for RawExperiment {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        d.deserialize_map(RawExperimentVisitor)
+    }
+}
+
+/// A top-level key of an experiment file. An unknown key is an error of the key's own
+/// deserialisation, so that it carries the key's position in the file.
+enum TopLevelKey {
+    Name,
+    Scene,
+    Stage(String),
+}
+
+impl<'de> Deserialize<'de> for TopLevelKey {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        let key = String::deserialize(d)?;
+        match key.as_str() {
+            "name" => Ok(TopLevelKey::Name),
+            "scene" => Ok(TopLevelKey::Scene),
+            k if stages::find(k).is_some() => Ok(TopLevelKey::Stage(key)),
+            k => Err(de::Error::unknown_field(k, &TOP_LEVEL_KEYS[..])),
+        }
+    }
+}
+
+struct RawExperimentVisitor;
+
+impl<'de> Visitor<'de> for RawExperimentVisitor {
+    type Value = RawExperiment;
+
+    fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str("an experiment: `name`, [scene] and stage tables")
+    }
+
+    fn visit_map<A: MapAccess<'de>>(
+        self,
+        mut map: A,
+    ) -> std::result::Result<RawExperiment, A::Error> {
+        let (mut name, mut scene, mut stages) = (None, None, BTreeMap::new());
+        while let Some(key) = map.next_key::<TopLevelKey>()? {
+            match key {
+                TopLevelKey::Name => name = Some(map.next_value()?),
+                TopLevelKey::Scene => scene = Some(map.next_value()?),
+                TopLevelKey::Stage(stage) => {
+                    stages.insert(stage, map.next_value::<Table>()?);
+                }
+            }
+        }
+        Ok(RawExperiment {
+            name: name.ok_or_else(|| de::Error::missing_field("name"))?,
+            scene: scene.ok_or_else(|| de::Error::missing_field("scene"))?,
+            stages,
+        })
+    }
 }
 
 #[derive(Deserialize)]
@@ -58,7 +121,7 @@ struct RawScene {
 /// Where the scene comes from.
 #[derive(Clone, Debug, PartialEq)]
 pub enum SceneSource {
-    /// An existing scene directory (DESIGN §3 layout).
+    /// An existing scene directory (docs/DESIGN.md §3 layout).
     Dir(PathBuf),
     /// A synthetic scene, built by the `synth` stage.
     Synth(Box<SynthConfig>),
@@ -71,7 +134,7 @@ pub struct Experiment {
     /// The file it was read from (None when built in code, e.g. by `degs demo`).
     pub file: Option<PathBuf>,
     pub scene: SceneSource,
-    /// Settings of each stage of [`SETTINGS_STAGES`] (empty table when not given).
+    /// Settings of each stage of [`STAGES`] (empty table when not given).
     pub stages: BTreeMap<String, Table>,
 }
 
@@ -112,15 +175,13 @@ impl Experiment {
                 PRESETS.join(", ")
             ),
         };
-        let mut stages = BTreeMap::new();
-        for (name, table) in [
-            ("evflow", raw.evflow),
-            ("gaussians", raw.gaussians),
-            ("assoc", raw.assoc),
-            ("deform", raw.deform),
-        ] {
-            stages.insert(name.to_string(), canon::canonical_table(&table));
-        }
+        let stages = STAGES
+            .iter()
+            .map(|s| {
+                let table = raw.stages.get(s.name).cloned().unwrap_or_default();
+                (s.name.to_string(), canon::canonical_table(&table))
+            })
+            .collect();
         Ok(Experiment {
             name: raw.name,
             file: Some(path.to_path_buf()),
@@ -131,9 +192,9 @@ impl Experiment {
 
     /// An experiment on a synthetic scene with default stage settings.
     pub fn synthetic(name: &str, cfg: SynthConfig) -> Experiment {
-        let stages = SETTINGS_STAGES
+        let stages = STAGES
             .iter()
-            .map(|s| (s.to_string(), Table::new()))
+            .map(|s| (s.name.to_string(), Table::new()))
             .collect();
         Experiment {
             name: name.to_string(),
@@ -141,6 +202,31 @@ impl Experiment {
             scene: SceneSource::Synth(Box::new(cfg)),
             stages,
         }
+    }
+
+    /// Read an experiment file and check every stage table against its stage's
+    /// settings (see [`Experiment::check_stage_settings`]).
+    pub fn load_checked(path: &Path) -> Result<Experiment> {
+        let exp = Self::load(path)?;
+        exp.check_stage_settings()?;
+        Ok(exp)
+    }
+
+    /// Check every stage table against its stage's settings type, so that a typo in
+    /// `[gaussians]` is an error naming the file, the stage and the key before any
+    /// stage runs.
+    pub fn check_stage_settings(&self) -> Result<()> {
+        for stage in STAGES {
+            if let Err(e) = stage.check_settings(&self.settings(stage.name)) {
+                let file = self
+                    .file
+                    .as_deref()
+                    .map(|f| format!("{}: ", f.display()))
+                    .unwrap_or_default();
+                bail!("{file}[{}]: {e}", stage.name);
+            }
+        }
+        Ok(())
     }
 
     /// Settings of `stage` (empty when the experiment has none).
@@ -152,12 +238,12 @@ impl Experiment {
     /// (`degs config show` adds each stage's defaults as comments).
     pub fn to_toml(&self) -> String {
         let mut out = self.scene_toml();
-        for stage in SETTINGS_STAGES {
+        for stage in STAGES.iter().map(|s| s.name) {
             out += &format!(
                 "\n# {stage}: keys not set here take the defaults of the `{stage}` binary \
                  (its resolved settings land in the cache entry's settings.toml)\n"
             );
-            out += &crate::defaults::stage_section(stage, &self.settings(stage));
+            out += &toml_section(stage, &self.settings(stage));
         }
         out
     }
@@ -227,49 +313,6 @@ pub fn synth_config(preset: &str, overrides: &Table) -> std::result::Result<Synt
         .map_err(|e: toml::de::Error| e.message().trim().to_string())?;
     cfg.validate()?;
     Ok(cfg)
-}
-
-/// Merge `over` into `base`: nested tables merge, other values replace.
-pub fn merge(base: &mut Table, over: &Table) {
-    for (k, v) in over {
-        match (base.get_mut(k), v) {
-            (Some(Value::Table(b)), Value::Table(o)) => merge(b, o),
-            _ => {
-                base.insert(k.clone(), v.clone());
-            }
-        }
-    }
-}
-
-/// Parse `--set key.path=value` into a nested table. The value is read as TOML
-/// (`3`, `0.5`, `true`, `[1, 2]`, `"text"`), else taken as a bare string.
-pub fn parse_set(assignments: &[String]) -> std::result::Result<Table, String> {
-    let mut out = Table::new();
-    for a in assignments {
-        let (key, raw) = a
-            .split_once('=')
-            .ok_or_else(|| format!("--set {a:?}: expected key=value"))?;
-        let key = key.trim();
-        if key.is_empty() || key.split('.').any(str::is_empty) {
-            return Err(format!("--set {a:?}: empty key"));
-        }
-        let value = format!("v = {}", raw.trim())
-            .parse::<Table>()
-            .ok()
-            .and_then(|mut t| t.remove("v"))
-            .unwrap_or_else(|| Value::String(raw.trim().to_string()));
-        let parts: Vec<&str> = key.split('.').collect();
-        let mut nested = value;
-        for p in parts[1..].iter().rev() {
-            let mut t = Table::new();
-            t.insert(p.to_string(), nested);
-            nested = Value::Table(t);
-        }
-        let mut one = Table::new();
-        one.insert(parts[0].to_string(), nested);
-        merge(&mut out, &one);
-    }
-    Ok(out)
 }
 
 #[cfg(test)]
@@ -358,6 +401,26 @@ mod tests {
         .unwrap();
         let again = parse(&e.to_toml()).unwrap();
         assert_eq!(again.stages, e.stages);
+    }
+
+    #[test]
+    fn unknown_stage_keys_are_named() {
+        let e =
+            parse("name = \"a\"\n[scene]\nsynth = \"rigid\"\n[gaussians]\niters = 10\n").unwrap();
+        let msg = e.check_stage_settings().unwrap_err().to_string();
+        assert!(
+            msg.contains("iters") && msg.contains("[gaussians]") && msg.contains("/exp/a.toml"),
+            "{msg}"
+        );
+        let e =
+            parse("name = \"a\"\n[scene]\nsynth = \"rigid\"\n[assoc]\nk = \"three\"\n").unwrap();
+        assert!(e.check_stage_settings().is_err());
+        let e = parse(
+            "name = \"a\"\n[scene]\nsynth = \"rigid\"\n[gaussians]\niterations = 10\n\
+             [gaussians.field]\nwidth = 32\n[deform]\nanything = 1\n",
+        )
+        .unwrap();
+        e.check_stage_settings().unwrap();
     }
 
     #[test]

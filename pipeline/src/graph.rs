@@ -6,61 +6,16 @@
 //!          └───────────────────────────────┴───────────┘
 //! ```
 //! A stage's key is blake3 of its name, the hash of its binary, its canonical
-//! settings and the keys of its inputs (DESIGN §4).
+//! settings and the keys of its inputs (docs/DESIGN.md §4).
 
 use crate::cache::{BinaryHashes, Cache, dir_fingerprint};
 use crate::canon;
+use crate::context::Context;
 use crate::experiment::{Experiment, SceneSource};
+use crate::stages::{self, STAGES};
 use anyhow::Result;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use toml::Table;
-
-/// One stage: its name, the verb its binary takes (`evflow finetune`, `gaussians
-/// train`; none for `assoc`) and the inputs it needs as (node name, command-line flag).
-pub struct StageDef {
-    pub name: &'static str,
-    pub verb: Option<&'static str>,
-    pub needs: &'static [(&'static str, &'static str)],
-    /// The cargo package that builds the binary (for "how to build it" messages).
-    pub package: &'static str,
-}
-
-/// The external stages in run order (node 0 is the scene: `synth` or a directory).
-pub const STAGES: [StageDef; 4] = [
-    StageDef {
-        name: "evflow",
-        verb: Some("finetune"),
-        package: "evflow",
-        needs: &[("scene", "--scene")],
-    },
-    StageDef {
-        name: "gaussians",
-        verb: Some("train"),
-        package: "gaussians",
-        needs: &[("scene", "--scene")],
-    },
-    StageDef {
-        name: "assoc",
-        verb: None,
-        package: "assoc",
-        needs: &[("scene", "--scene"), ("gaussians", "--model")],
-    },
-    StageDef {
-        name: "deform",
-        // Not written yet: set its verb here when the crate lands.
-        verb: None,
-        package: "deform",
-        needs: &[
-            ("scene", "--scene"),
-            ("gaussians", "--model"),
-            ("evflow", "--flows"),
-            ("assoc", "--assoc"),
-        ],
-    },
-];
-
-/// Every node name, in run order.
-pub const NODE_NAMES: [&str; 5] = ["synth", "evflow", "gaussians", "assoc", "deform"];
 
 /// What a node is.
 #[derive(Clone, Debug)]
@@ -99,50 +54,6 @@ pub struct Node {
     pub unavailable: Option<String>,
 }
 
-/// Where to find things.
-#[derive(Clone, Debug)]
-pub struct Context {
-    pub cache: Cache,
-    /// Look for stage binaries only here (tests, custom builds).
-    pub stage_dir: Option<PathBuf>,
-    /// The `degs` executable (runs the built-in synth stage).
-    pub degs: PathBuf,
-}
-
-impl Context {
-    pub fn new(cache: Cache, stage_dir: Option<PathBuf>) -> Result<Context> {
-        let degs = std::env::current_exe()?;
-        Ok(Context {
-            cache,
-            stage_dir,
-            degs,
-        })
-    }
-}
-
-/// The binary of `stage`: in `stage_dir` when given (only there), else next to the
-/// running `degs`, else on `PATH`.
-pub fn find_stage_binary(stage: &str, stage_dir: Option<&Path>, degs: &Path) -> Option<PathBuf> {
-    let is_exe = |p: &Path| {
-        use std::os::unix::fs::PermissionsExt;
-        p.metadata()
-            .map(|m| m.is_file() && m.permissions().mode() & 0o111 != 0)
-            .unwrap_or(false)
-    };
-    if let Some(d) = stage_dir {
-        let p = d.join(stage);
-        return is_exe(&p).then_some(p);
-    }
-    let beside = degs.parent().map(|d| d.join(stage));
-    if let Some(p) = beside.filter(|p| is_exe(p)) {
-        return Some(p);
-    }
-    let path = std::env::var_os("PATH")?;
-    std::env::split_paths(&path)
-        .map(|d| d.join(stage))
-        .find(|p| is_exe(p))
-}
-
 fn key_of(stage: &str, binary_hash: &str, settings: &Table, inputs: &[(&str, &str)]) -> String {
     let mut h = blake3::Hasher::new();
     for part in [
@@ -165,10 +76,10 @@ fn key_of(stage: &str, binary_hash: &str, settings: &Table, inputs: &[(&str, &st
 
 /// Resolve the experiment into nodes with keys (hashing binaries as needed).
 pub fn resolve(exp: &Experiment, ctx: &Context, hashes: &mut BinaryHashes) -> Result<Vec<Node>> {
-    let mut nodes = Vec::with_capacity(5);
+    let mut nodes = Vec::with_capacity(STAGES.len() + 1);
     nodes.push(match &exp.scene {
         SceneSource::Dir(dir) => Node {
-            stage: "scene".into(),
+            stage: stages::SCENE.into(),
             kind: NodeKind::SceneDir(dir.clone()),
             verb: None,
             binary: None,
@@ -184,11 +95,11 @@ pub fn resolve(exp: &Experiment, ctx: &Context, hashes: &mut BinaryHashes) -> Re
                 _ => Table::new(),
             };
             let binary_hash = hashes.hash(&ctx.degs)?;
-            let key = key_of("synth", &binary_hash, &settings, &[]);
+            let key = key_of(stages::SYNTH, &binary_hash, &settings, &[]);
             Node {
-                stage: "synth".into(),
+                stage: stages::SYNTH.into(),
                 kind: NodeKind::Synth,
-                verb: Some("synth"),
+                verb: Some(stages::SYNTH),
                 binary: Some(ctx.degs.clone()),
                 binary_hash: Some(binary_hash),
                 settings,
@@ -198,17 +109,17 @@ pub fn resolve(exp: &Experiment, ctx: &Context, hashes: &mut BinaryHashes) -> Re
             }
         }
     });
-    for def in &STAGES {
+    for def in STAGES {
         let inputs: Vec<Input> = def
-            .needs
+            .inputs
             .iter()
-            .map(|(name, flag)| Input {
-                flag,
-                node: node_index(name),
+            .map(|input| Input {
+                flag: input.flag,
+                node: stages::node_index(input.node).unwrap_or(0),
             })
             .collect();
         let settings = exp.settings(def.name);
-        let binary = find_stage_binary(def.name, ctx.stage_dir.as_deref(), &ctx.degs);
+        let binary = ctx.stage_binary(def.binary);
         let binary_hash = match &binary {
             Some(b) => Some(hashes.hash(b)?),
             None => None,
@@ -218,23 +129,24 @@ pub fn resolve(exp: &Experiment, ctx: &Context, hashes: &mut BinaryHashes) -> Re
             .find(|i| nodes[i.node].key.is_none())
             .map(|i| format!("needs {}, which is not built yet", nodes[i.node].stage));
         let unavailable = match (&binary, blocked) {
-            (None, _) => Some(not_built_message(def, ctx.stage_dir.as_deref())),
+            (None, _) => Some(def.not_built_message(ctx.stage_dir.as_deref())),
             (Some(_), b) => b,
         };
         let key = match (&binary_hash, &unavailable) {
             (Some(bh), None) => {
+                let file_hash = match &def.key_file {
+                    Some(file) => match (file.path)(&settings) {
+                        Some(path) => Some((file.name, hashes.hash(&path)?)),
+                        None => None,
+                    },
+                    None => None,
+                };
                 let mut in_keys: Vec<(&str, &str)> = inputs
                     .iter()
                     .map(|i| (i.flag, nodes[i.node].key.as_deref().unwrap_or("")))
                     .collect();
-                // The flow network's base weights are an input like any other: replacing
-                // the shipped file (or pointing `weights` elsewhere) re-runs evflow.
-                let weights = match def.name {
-                    "evflow" => base_weights_hash(&settings, hashes)?,
-                    _ => None,
-                };
-                if let Some(w) = &weights {
-                    in_keys.push(("weights", w));
+                if let Some((name, hash)) = &file_hash {
+                    in_keys.push((name, hash));
                 }
                 Some(key_of(def.name, bh, &settings, &in_keys))
             }
@@ -253,54 +165,6 @@ pub fn resolve(exp: &Experiment, ctx: &Context, hashes: &mut BinaryHashes) -> Re
         });
     }
     Ok(nodes)
-}
-
-/// Content hash of the evflow base weights these settings resolve to (`weights = FILE`,
-/// else `$EVFLOW_WEIGHTS`, else the shipped file); `None` when none can be found (the
-/// stage then fails with its own message).
-fn base_weights_hash(settings: &Table, hashes: &mut BinaryHashes) -> Result<Option<String>> {
-    let explicit = settings
-        .get("weights")
-        .and_then(|v| v.as_str())
-        .map(std::path::PathBuf::from);
-    match evflow::finetune::resolve_weights(explicit.as_deref()) {
-        Ok(path) if path.is_file() => Ok(Some(hashes.hash(&path)?)),
-        _ => Ok(None),
-    }
-}
-
-/// Why a stage cannot run when its binary is missing, and how to build it.
-pub fn not_built_message(def: &StageDef, stage_dir: Option<&Path>) -> String {
-    let place = match stage_dir {
-        Some(d) => format!("in {}", d.display()),
-        None => "next to degs or on PATH".into(),
-    };
-    format!(
-        "not built yet: no `{}` binary {place} (build it with `cargo build --release -p {}`)",
-        def.name, def.package
-    )
-}
-
-/// The definition of an external stage by name.
-pub fn stage_def(name: &str) -> Option<&'static StageDef> {
-    STAGES.iter().find(|d| d.name == name)
-}
-
-/// Index of a node by name ("scene" and "synth" are node 0).
-pub fn node_index(name: &str) -> usize {
-    match name {
-        "scene" | "synth" => 0,
-        other => NODE_NAMES.iter().position(|n| *n == other).unwrap_or(0),
-    }
-}
-
-/// Parse a user-given stage name (for `--until` / `--force`).
-pub fn parse_stage(name: &str) -> Result<usize> {
-    if name == "scene" || NODE_NAMES.contains(&name) {
-        Ok(node_index(name))
-    } else {
-        anyhow::bail!("unknown stage {name:?} (stages: {})", NODE_NAMES.join(", "))
-    }
 }
 
 /// `i` and every node it (transitively) needs.
@@ -339,47 +203,6 @@ pub fn output_dir(nodes: &[Node], i: usize, cache: &Cache) -> Option<PathBuf> {
     }
 }
 
-/// Path of the settings file a node is run with.
-pub fn settings_path(cache: &Cache, exp: &str, stage: &str) -> PathBuf {
-    cache.run_dir(exp).join(format!("{stage}.settings.toml"))
-}
-
-/// The command line of node `i`, writing to `out` with settings from `config`.
-pub fn command(nodes: &[Node], i: usize, cache: &Cache, out: &Path, config: &Path) -> Vec<String> {
-    let n = &nodes[i];
-    let bin = n
-        .binary
-        .as_ref()
-        .map(|b| b.display().to_string())
-        .unwrap_or_else(|| n.stage.clone());
-    let mut args = vec![bin];
-    if let Some(verb) = n.verb {
-        args.push(verb.into());
-    }
-    for input in &n.inputs {
-        args.push(input.flag.into());
-        let dir = output_dir(nodes, input.node, cache).unwrap_or_default();
-        args.push(dir.display().to_string());
-    }
-    args.push("--out".into());
-    args.push(out.display().to_string());
-    args.push("--config".into());
-    args.push(config.display().to_string());
-    args
-}
-
-/// Quote a word for a POSIX shell.
-pub fn shell_quote(s: &str) -> String {
-    if !s.is_empty()
-        && s.chars()
-            .all(|c| c.is_ascii_alphanumeric() || "-_./=:+,@%".contains(c))
-    {
-        s.to_string()
-    } else {
-        format!("'{}'", s.replace('\'', "'\\''"))
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -395,19 +218,5 @@ mod tests {
         assert_ne!(base, key_of("s", "b", &Table::new(), &[("--scene", "k")]));
         assert_ne!(base, key_of("s", "b", &t, &[("--scene", "k2")]));
         assert_ne!(base, key_of("s", "b", &t, &[("--model", "k")]));
-    }
-
-    #[test]
-    fn quoting() {
-        assert_eq!(shell_quote("a/b.toml"), "a/b.toml");
-        assert_eq!(shell_quote("it's here"), "'it'\\''s here'");
-        assert_eq!(shell_quote(""), "''");
-    }
-
-    #[test]
-    fn stage_names() {
-        assert_eq!(parse_stage("scene").unwrap(), 0);
-        assert_eq!(parse_stage("deform").unwrap(), 4);
-        assert!(parse_stage("deformx").is_err());
     }
 }

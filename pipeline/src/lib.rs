@@ -1,19 +1,27 @@
-//! degs: experiment files, the staged runner with its content-addressed cache
-//! (DESIGN §4), status / gc / plan, synthetic scenes, evaluation and the demo.
+//! degs: experiment files, the stage registry, the staged runner with its
+//! content-addressed cache (docs/DESIGN.md §4), status / gc / plan, synthetic scenes,
+//! evaluation and the demo.
 //!
-//! The `degs` binary is a thin clap layer over these modules; tests and other tools
-//! can call them directly.
+//! The `degs` binary is a thin layer over [`cli`] (its command line) and [`commands`]
+//! (what each sub-command does); tests and other tools can call the modules directly.
 
 pub mod cache;
 pub mod canon;
-pub mod defaults;
+pub mod cli;
+pub mod command_line;
+pub mod commands;
+pub mod config_show;
+pub mod context;
 pub mod demo;
 pub mod eval;
 pub mod experiment;
 pub mod graph;
+pub mod overrides;
 pub mod process;
 pub mod progress;
 pub mod record;
 pub mod runner;
+pub mod settings;
+pub mod stages;
 pub mod status;
 pub mod synth;

@@ -124,6 +124,15 @@ fn wait4(pid: libc::pid_t) -> (libc::c_int, Option<libc::rusage>) {
     }
 }
 
+/// "123 MiB" from KiB.
+pub fn fmt_kib(kib: Option<u64>) -> String {
+    match kib {
+        None => "-".into(),
+        Some(k) if k >= 1 << 20 => format!("{:.2} GiB", k as f64 / (1u64 << 20) as f64),
+        Some(k) => format!("{:.1} MiB", k as f64 / 1024.0),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

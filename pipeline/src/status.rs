@@ -2,8 +2,10 @@
 
 use crate::cache::{self, BinaryHashes, Verdict};
 use crate::canon;
+use crate::command_line::{command, settings_path, shell_quote};
+use crate::context::Context;
 use crate::experiment::Experiment;
-use crate::graph::{self, Context, Node, NodeKind};
+use crate::graph::{self, Node, NodeKind};
 use crate::record::{Action, RunRecord, StageRecord};
 use anyhow::Result;
 use std::collections::BTreeSet;
@@ -189,7 +191,7 @@ pub fn gc(cache: &cache::Cache, dry_run: bool) -> Result<GcReport> {
 }
 
 /// `degs plan`: the shell commands of the stages in order. Writes the settings files
-/// they read (under runs/<name>/). Cached stages are printed commented out unless `all`.
+/// they read (under `runs/<name>/`). Cached stages are printed commented out unless `all`.
 pub fn plan(exp: &Experiment, ctx: &Context, all: bool) -> Result<String> {
     let nodes = crate::runner::prepare(exp, ctx)?;
     let mut s = format!(
@@ -211,10 +213,10 @@ pub fn plan(exp: &Experiment, ctx: &Context, all: bool) -> Result<String> {
         }
         let key = n.key.as_deref().unwrap_or_default();
         let out = ctx.cache.entry(&n.stage, key);
-        let config = graph::settings_path(&ctx.cache, &exp.name, &n.stage);
-        let cmd: Vec<String> = graph::command(&nodes, i, &ctx.cache, &out, &config)
+        let config = settings_path(&ctx.cache, &exp.name, &n.stage);
+        let cmd: Vec<String> = command(&nodes, i, &ctx.cache, &out, &config)
             .iter()
-            .map(|a| graph::shell_quote(a))
+            .map(|a| shell_quote(a))
             .collect();
         let cached = out.is_dir() && cache::verify(&out, false) == Verdict::Ok;
         let prefix = if cached && !all { "# cached: " } else { "" };

@@ -27,7 +27,7 @@ fn demo(f: &Fixture, out: &Path, reports: &Path) -> Output {
         .env("DEGS_FAKE_LOG", &f.log)
         .env("DEGS_FAKE_REPORTS", reports)
         .env_remove("DEGS_FAKE_SLEEP")
-        .env_remove("DEGS_FAKE_PAUSE");
+        .env_remove("DEGS_FAKE_MEET");
     c.output().unwrap()
 }
 

@@ -41,8 +41,11 @@ fn second_run_runs_no_stage() {
         assert_eq!(first["stages"][i]["key"], second["stages"][i]["key"]);
     }
     // the record carries what the entry cost when it was built
-    assert!(second["stages"][2]["built_wall_s"].as_f64().unwrap() > 0.0);
-    assert!(second["stages"][2]["peak_rss_kib"].as_u64().unwrap() > 0);
+    let built = &second["stages"][2];
+    assert_eq!(built["built_wall_s"], first["stages"][2]["wall_s"]);
+    assert_eq!(built["wall_s"], 0.0, "nothing ran the second time");
+    assert!(built["peak_rss_kib"].as_u64().unwrap() > 0);
+    assert_eq!(built["peak_rss_kib"], first["stages"][2]["peak_rss_kib"]);
     // the stage got the canonical settings and wrote into its entry
     let entry = first["stages"][2]["entry"].as_str().unwrap();
     let settings = fs::read_to_string(format!("{entry}/settings.toml")).unwrap();
@@ -65,7 +68,7 @@ fn stages_get_their_verbs_inputs_and_settings_file() {
             .lines()
             .find(|l| l.starts_with(&format!("start {stage} ")))
             .unwrap();
-        line.split(' ').skip(3).map(str::to_string).collect()
+        line.split(' ').skip(2).map(str::to_string).collect()
     };
     let rec = f.record("a");
     let entry = |i: usize| rec["stages"][i]["entry"].as_str().unwrap().to_string();
@@ -367,30 +370,48 @@ fn until_and_force_behave_like_make() {
 
 #[test]
 fn independent_stages_run_in_parallel_with_j2() {
+    // evflow and gaussians each wait (up to 60 s) until the other has started: the run
+    // succeeds only when they run at the same time
     let f = Fixture::new();
     let exp = f.experiment("a", "");
     let out = f
-        .command(&["run", exp.to_str().unwrap(), "-j", "2"])
-        .env("DEGS_FAKE_PAUSE", "1")
+        .meeting(
+            &["run", exp.to_str().unwrap(), "-j", "2"],
+            "evflow gaussians",
+            600,
+        )
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", stderr(&out));
-    let log = fs::read_to_string(&f.log).unwrap();
-    let time = |kind: &str, stage: &str| -> u128 {
-        log.lines()
-            .find(|l| l.starts_with(&format!("{kind} {stage} ")))
-            .unwrap()
-            .split(' ')
-            .nth(2)
-            .unwrap()
-            .parse()
-            .unwrap()
-    };
-    // evflow and gaussians overlap; assoc starts after gaussians ended
-    assert!(time("start", "evflow") < time("end", "gaussians"));
-    assert!(time("start", "gaussians") < time("end", "evflow"));
-    assert!(time("start", "assoc") >= time("end", "gaussians"));
-    assert!(time("start", "deform") >= time("end", "evflow"));
+    assert!(
+        out.status.success(),
+        "evflow and gaussians did not run at the same time with -j 2: {}",
+        stderr(&out)
+    );
+    // evflow and gaussians overlap; assoc starts after gaussians ended, deform after
+    // evflow ended
+    let at = |prefix: &str| f.log_position(prefix);
+    assert!(at("start evflow ") < at("end gaussians"));
+    assert!(at("start gaussians ") < at("end evflow"));
+    assert!(at("start assoc ") > at("end gaussians"));
+    assert!(at("start deform ") > at("end evflow"));
+
+    // the same meeting with -j 1: the first of the two waits in vain and fails
+    let f = Fixture::new();
+    let exp = f.experiment("a", "");
+    let out = f
+        .meeting(
+            &["run", exp.to_str().unwrap(), "-j", "1"],
+            "evflow gaussians",
+            5,
+        )
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(
+        stderr(&out).contains("evflow waited in vain for gaussians"),
+        "{}",
+        stderr(&out)
+    );
 }
 
 #[test]

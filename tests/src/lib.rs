@@ -1,1 +1,119 @@
-//! End-to-end tests live in `tests/`; this library is empty on purpose.
+//! Shared fixtures of the end-to-end tests in `tests/`: the real binaries of this
+//! build, a scratch directory for experiment files and the cache, and `degs` commands
+//! over them.
+//!
+//! The binaries are not `CARGO_BIN_EXE_*` across packages: they are found next to the
+//! test executable (`target/<profile>/deps/…` → `target/<profile>/`).
+
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// The binaries an end-to-end run needs.
+pub const BINARIES: [&str; 4] = ["degs", "evflow", "gaussians", "assoc"];
+
+/// The directory holding this build's binaries: `target/<profile>/`.
+pub fn bin_dir() -> PathBuf {
+    let exe = std::env::current_exe().expect("path of the test executable");
+    let dir = exe.parent().expect("the test executable's directory");
+    let dir = if dir.ends_with("deps") {
+        dir.parent().unwrap_or(dir)
+    } else {
+        dir
+    };
+    dir.to_path_buf()
+}
+
+/// The binary `name` of this build; panics naming the command that builds them all
+/// when it is missing.
+pub fn binary(name: &str) -> PathBuf {
+    let path = bin_dir().join(name);
+    assert!(
+        path.is_file(),
+        "{} is missing: build the binaries first (`cargo build --workspace --bins`, \
+         which `cargo test --workspace` does)",
+        path.display()
+    );
+    path
+}
+
+/// A scratch directory with a cache root; `degs` commands run against it and look for
+/// stage binaries only next to `degs`.
+pub struct Workspace {
+    pub dir: tempfile::TempDir,
+    pub cache: PathBuf,
+}
+
+impl Default for Workspace {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Workspace {
+    pub fn new() -> Workspace {
+        for b in BINARIES {
+            binary(b);
+        }
+        let dir = tempfile::tempdir().expect("a scratch directory");
+        let cache = dir.path().join("degs-cache");
+        Workspace { dir, cache }
+    }
+
+    /// Write `text` as the experiment file `<name>.toml`.
+    pub fn experiment(&self, name: &str, text: &str) -> PathBuf {
+        let path = self.dir.path().join(format!("{name}.toml"));
+        fs::write(&path, text).expect("write the experiment file");
+        path
+    }
+
+    /// `degs ARGS --cache <cache> --stages <bin dir>`, with no environment that would
+    /// point it elsewhere.
+    pub fn degs(&self, args: &[&str]) -> Output {
+        Command::new(binary("degs"))
+            .args(args)
+            .arg("--cache")
+            .arg(&self.cache)
+            .arg("--stages")
+            .arg(bin_dir())
+            .env_remove("DEGS_CACHE")
+            .env_remove("DEGS_STAGE_DIR")
+            .env_remove("EVFLOW_WEIGHTS")
+            .output()
+            .expect("start degs")
+    }
+
+    /// `runs/<name>/run.json` of the last run of experiment `name`.
+    pub fn run_record(&self, name: &str) -> serde_json::Value {
+        read_json(&self.cache.join("runs").join(name).join("run.json"))
+    }
+}
+
+/// The record of `stage` in a run record.
+pub fn stage_record<'a>(record: &'a serde_json::Value, stage: &str) -> &'a serde_json::Value {
+    record["stages"]
+        .as_array()
+        .and_then(|s| s.iter().find(|s| s["stage"] == stage))
+        .unwrap_or_else(|| panic!("no stage {stage} in the run record: {record}"))
+}
+
+/// The cache entry (output directory) a run record names for `stage`.
+pub fn entry(record: &serde_json::Value, stage: &str) -> PathBuf {
+    let s = stage_record(record, stage);
+    PathBuf::from(
+        s["entry"]
+            .as_str()
+            .unwrap_or_else(|| panic!("{stage} has no entry: {s}")),
+    )
+}
+
+/// A JSON file, parsed.
+pub fn read_json(path: &Path) -> serde_json::Value {
+    let bytes = fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_slice(&bytes).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// stderr of a finished command, as text.
+pub fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}

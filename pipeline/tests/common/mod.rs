@@ -9,8 +9,10 @@ use std::process::{Command, Output};
 /// A shell script that behaves like a stage: takes an optional verb (`finetune`,
 /// `train`), checks its inputs, records its invocation in $DEGS_FAKE_LOG, writes
 /// $DEGS_FAKE_REPORTS/<stage>.json as its report when that exists (as `gaussians`, copies
-/// the scene's test images as its renders), fails when its settings say `seed = 666` and sleeps when
-/// $DEGS_FAKE_SLEEP names it, and writes a few output files.
+/// the scene's test images as its renders), fails when its settings say `seed = 666`,
+/// sleeps when $DEGS_FAKE_SLEEP names it, meets the other stages named in
+/// $DEGS_FAKE_MEET when it is one of them (see [`Fixture::meeting`]), and writes a few output
+/// files.
 pub const FAKE_STAGE: &str = r#"#!/bin/sh
 stage=$(basename "$0")
 all="$*"
@@ -30,7 +32,7 @@ while [ $# -gt 0 ]; do
   esac
 done
 [ -n "$out" ] && [ -f "$config" ] || { echo "error: need --out and --config" >&2; exit 2; }
-echo "start $stage $(date +%s%N) $all" >> "$DEGS_FAKE_LOG"
+echo "start $stage $all" >> "$DEGS_FAKE_LOG"
 echo "$stage: reading $config" >&2
 if grep -q '^seed = 666' "$config"; then
   echo "progress line before the failure" >&2
@@ -42,7 +44,19 @@ if [ "$DEGS_FAKE_SLEEP" = "$stage" ]; then
   echo partial > "$out/partial.txt"
   sleep 30
 fi
-if [ -n "$DEGS_FAKE_PAUSE" ]; then sleep "$DEGS_FAKE_PAUSE"; fi
+case " $DEGS_FAKE_MEET " in *" $stage "*)
+  touch "$DEGS_FAKE_MEET_DIR/$stage"
+  for other in $DEGS_FAKE_MEET; do
+    waited=0
+    while [ ! -e "$DEGS_FAKE_MEET_DIR/$other" ]; do
+      if [ "$waited" -ge "$DEGS_FAKE_MEET_TRIES" ]; then
+        echo "error: $stage waited in vain for $other to start: they did not run at the same time" >&2
+        exit 4
+      fi
+      sleep 0.1; waited=$((waited+1))
+    done
+  done ;;
+esac
 cp "$config" "$out/settings.toml"
 echo "$stage output" > "$out/result.txt"
 if [ -n "$DEGS_FAKE_REPORTS" ] && [ -f "$DEGS_FAKE_REPORTS/$stage.json" ]; then
@@ -56,7 +70,7 @@ if [ "$stage" = gaussians ] && [ -d "$scene/images" ]; then
     cp "$f" "$out/renders/$(printf %04d $i).png"; i=$((i+1))
   done
 fi
-echo "end $stage $(date +%s%N)" >> "$DEGS_FAKE_LOG"
+echo "end $stage" >> "$DEGS_FAKE_LOG"
 "#;
 
 pub struct Fixture {
@@ -110,7 +124,21 @@ impl Fixture {
             .arg(&self.stages)
             .env("DEGS_FAKE_LOG", &self.log)
             .env_remove("DEGS_FAKE_SLEEP")
-            .env_remove("DEGS_FAKE_PAUSE");
+            .env_remove("DEGS_FAKE_MEET");
+        c
+    }
+
+    /// `command` with the stages named in `stages` meeting: each leaves a marker in
+    /// a directory of the fixture when it starts and waits until the others' markers
+    /// are there, at most `max_wait_tenths` × 0.1 s; then it fails saying whom it
+    /// waited for. They all succeed only when they run at the same time.
+    pub fn meeting(&self, args: &[&str], stages: &str, max_wait_tenths: u32) -> Command {
+        let dir = self.dir.path().join("meet");
+        fs::create_dir_all(&dir).unwrap();
+        let mut c = self.command(args);
+        c.env("DEGS_FAKE_MEET", stages)
+            .env("DEGS_FAKE_MEET_DIR", dir)
+            .env("DEGS_FAKE_MEET_TRIES", max_wait_tenths.to_string());
         c
     }
 
@@ -167,6 +195,16 @@ impl Fixture {
             .find(|s| s["stage"] == stage)
             .unwrap();
         s["key"].as_str().unwrap().to_string()
+    }
+
+    /// Position of the first line of the invocation log that starts with `prefix`
+    /// (`start evflow `, `end gaussians`): lines are appended as stages start and end.
+    pub fn log_position(&self, prefix: &str) -> usize {
+        fs::read_to_string(&self.log)
+            .unwrap_or_default()
+            .lines()
+            .position(|l| l.starts_with(prefix))
+            .unwrap_or_else(|| panic!("no line starting with {prefix:?} in the log"))
     }
 
     /// Stage names in the order they were started.

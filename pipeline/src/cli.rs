@@ -1,0 +1,223 @@
+//! The `degs` command line (clap): every sub-command with its flags and help text.
+//! What each does is in [`crate::commands`].
+// The doc comments below are the help text clap prints, written for a terminal.
+#![allow(rustdoc::broken_intra_doc_links, rustdoc::invalid_html_tags)]
+
+use crate::cache::Cache;
+use crate::context::Context;
+use anyhow::{Result, anyhow};
+use clap::{Args, Parser, Subcommand};
+use std::path::PathBuf;
+
+/// Reconstruct a dynamic scene as 3D Gaussians from events + sparse RGB frames.
+///
+/// degs chains the stage binaries (synth → evflow, gaussians → assoc → deform) like
+/// make: each stage's output is cached under a key made of its binary, its settings
+/// and its inputs' keys, so re-running resumes where it stopped and experiments share
+/// work. Start with `degs demo`.
+#[derive(Parser)]
+#[command(name = "degs", version, about, long_about)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Args, Clone)]
+pub struct Where {
+    /// Cache root: holds cache/<stage>/<key>/ and runs/<name>/ [env: DEGS_CACHE]
+    /// [default: ./degs-cache]
+    #[arg(long, value_name = "DIR")]
+    pub cache: Option<PathBuf>,
+    /// Look for stage binaries only in DIR (default: next to degs, then PATH)
+    /// [env: DEGS_STAGE_DIR]
+    #[arg(long, value_name = "DIR")]
+    pub stages: Option<PathBuf>,
+}
+
+impl Where {
+    pub fn context(&self) -> Result<Context> {
+        let root = self
+            .cache
+            .clone()
+            .or_else(|| std::env::var_os("DEGS_CACHE").map(PathBuf::from))
+            .unwrap_or_else(|| PathBuf::from("degs-cache"));
+        let stages = self
+            .stages
+            .clone()
+            .or_else(|| std::env::var_os("DEGS_STAGE_DIR").map(PathBuf::from));
+        Context::new(Cache::new(root), stages)
+    }
+
+    /// A run directory given as a path or as an experiment name.
+    pub fn run_dir(&self, run: &str) -> Result<PathBuf> {
+        let p = PathBuf::from(run);
+        if p.join("run.json").exists() {
+            return Ok(p);
+        }
+        let by_name = self.context()?.cache.run_dir(run);
+        if by_name.join("run.json").exists() {
+            Ok(by_name)
+        } else {
+            Err(anyhow!(
+                "{run}: no run.json there nor at {}",
+                by_name.display()
+            ))
+        }
+    }
+}
+
+#[derive(Subcommand)]
+pub enum Command {
+    /// Run an experiment: every stage not already cached, in dependency order.
+    Run {
+        /// Experiment file (TOML: name, [scene], [evflow], [gaussians], [assoc], [deform])
+        experiment: PathBuf,
+        #[command(flatten)]
+        place: Where,
+        /// Stop after this stage (runs only it and what it needs)
+        #[arg(long, value_name = "STAGE")]
+        until: Option<String>,
+        /// Re-run this stage and everything after it even when cached (repeatable)
+        #[arg(long, value_name = "STAGE")]
+        force: Vec<String>,
+        /// Stages to run at the same time (evflow and gaussians are independent)
+        #[arg(short = 'j', long, default_value_t = 1)]
+        jobs: usize,
+        /// Re-hash every cached file (default: only files whose size or mtime changed)
+        #[arg(long)]
+        verify: bool,
+        /// No progress lines
+        #[arg(short, long)]
+        quiet: bool,
+    },
+    /// Experiment files.
+    Config {
+        #[command(subcommand)]
+        command: ConfigCommand,
+    },
+    /// Write a synthetic scene directory with ground truth (depth, flow, per-event flow).
+    Synth {
+        /// Preset: static, rigid, nonrigid, fast
+        #[arg(long, default_value = "rigid")]
+        preset: String,
+        /// A full settings file instead of a preset (as written by `degs run`/`plan`)
+        #[arg(long, value_name = "FILE")]
+        config: Option<PathBuf>,
+        /// Override a setting, e.g. --set width=64 --set camera.sway_hz=0.5
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+        /// Output scene directory (replaced atomically)
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Each stage of an experiment: cached / stale (and what changed) / missing /
+    /// failed (with its error) / tampered / not available.
+    Status {
+        experiment: PathBuf,
+        #[command(flatten)]
+        place: Where,
+        /// Re-hash every cached file
+        #[arg(long)]
+        verify: bool,
+    },
+    /// Print the shell commands of the stages in order (for Slurm, Snakemake, …).
+    /// Writes the settings files they read under runs/<name>/.
+    Plan {
+        experiment: PathBuf,
+        #[command(flatten)]
+        place: Where,
+        /// Also print cached stages uncommented
+        #[arg(long)]
+        all: bool,
+    },
+    /// Remove cache entries that no runs/*/run.json refers to.
+    Gc {
+        #[command(flatten)]
+        place: Where,
+        /// Only list what would be removed
+        #[arg(long)]
+        dry_run: bool,
+    },
+    /// Event files.
+    Events {
+        #[command(subcommand)]
+        command: EventsCommand,
+    },
+    /// Synthesise the default scene (preset rigid at 96x96), write an experiment file
+    /// for it (OUT/demo.toml: 1500 warm-up iterations and 1 LoCM epoch so it runs in
+    /// minutes on two cores) and run every stage that is built; ends with a summary
+    /// table (time, cached?, key figures), where the renders are, summary.json and
+    /// events_preview.png. Running it again reuses every cached stage.
+    Demo {
+        /// Where everything goes (cache, runs, demo.toml, summary)
+        #[arg(long, default_value = "degs-demo")]
+        out: PathBuf,
+        /// Look for stage binaries only in DIR [env: DEGS_STAGE_DIR]
+        #[arg(long, value_name = "DIR")]
+        stages: Option<PathBuf>,
+        /// Synthetic preset: static, rigid, nonrigid, fast
+        #[arg(long, default_value = "rigid")]
+        preset: String,
+        /// Override a scene setting, e.g. --set width=128 --set height=128
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+        /// Warm-up iterations of the gaussians stage
+        #[arg(long, default_value_t = crate::demo::DEMO_GAUSSIANS_ITERATIONS)]
+        iterations: u32,
+        /// LoCM fine-tuning epochs of the evflow stage
+        #[arg(long, default_value_t = crate::demo::DEMO_EVFLOW_EPOCHS)]
+        epochs: usize,
+        /// Use every stage's default settings (3500 iterations, 3 epochs) instead
+        #[arg(long, conflicts_with_all = ["iterations", "epochs"])]
+        full: bool,
+        /// Stages to run at the same time
+        #[arg(short = 'j', long, default_value_t = 2)]
+        jobs: usize,
+    },
+    /// PSNR/SSIM of the final renders against the scene's test images (and the flow
+    /// EPE the evflow stage reports where the scene has ground truth) → metrics.json.
+    Eval {
+        /// A run directory (<cache>/runs/<name>) or an experiment name
+        run: String,
+        #[command(flatten)]
+        place: Where,
+    },
+    /// Evaluate several runs and print them side by side.
+    Compare {
+        /// Run directories or experiment names
+        #[arg(required = true)]
+        runs: Vec<String>,
+        #[command(flatten)]
+        place: Where,
+    },
+}
+
+#[derive(Subcommand)]
+pub enum EventsCommand {
+    /// Convert an event file between formats, chosen by extension: .txt (ECD `t x y p`),
+    /// .npz (x, y, t in µs, p), .evs (degs columnar binary), .aedat4 (read only).
+    /// The output is written atomically; a bad input gives one line naming the file.
+    Convert {
+        input: PathBuf,
+        output: PathBuf,
+        /// Sensor size WxH for formats that do not store it (text, npz)
+        #[arg(long, value_name = "WxH")]
+        sensor: Option<String>,
+        /// .npz input only: the stored x, y are pixel coordinates times this factor;
+        /// they are divided by it and rounded to the nearest pixel
+        #[arg(long, value_name = "FACTOR")]
+        coord_scale: Option<f64>,
+        /// .npz input from HS-ERGB, which stores x and y multiplied by 32: the same as
+        /// --coord-scale 32
+        #[arg(long, conflicts_with = "coord_scale")]
+        hsergb: bool,
+    },
+}
+
+#[derive(Subcommand)]
+pub enum ConfigCommand {
+    /// Print the resolved experiment: every synthetic-scene setting, each stage's own
+    /// keys and, commented out under them, every default of that stage. Unknown stage
+    /// keys are errors naming the key.
+    Show { experiment: PathBuf },
+}

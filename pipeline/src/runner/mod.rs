@@ -1,0 +1,140 @@
+//! `degs run`: resolve keys, reuse cached entries, run the rest as processes (in
+//! parallel where the graph allows), seal their outputs and record the run.
+//!
+//! [`run`] is [`prepare`] (keys, settings files), then the cache check (what is
+//! already there: `cache_check`), then the scheduling of the rest (`schedule`; each
+//! stage process: `stage_process`), then the final run record.
+
+mod cache_check;
+mod schedule;
+mod stage_process;
+mod state;
+
+use crate::cache::BinaryHashes;
+use crate::canon;
+use crate::command_line::settings_path;
+use crate::context::Context;
+use crate::experiment::Experiment;
+use crate::graph::{self, Node, NodeKind};
+use crate::progress::Progress;
+use crate::record::{Action, RunRecord, StageRecord, now_unix};
+use anyhow::Result;
+use cache_check::Request;
+use schedule::Schedule;
+use state::State;
+use std::fs;
+use std::time::Instant;
+
+/// Options of `degs run`.
+#[derive(Clone, Debug, Default)]
+pub struct RunOptions {
+    /// Run only this node and what it needs.
+    pub until: Option<usize>,
+    /// Run these nodes (and what depends on them) even when cached.
+    pub force: Vec<usize>,
+    /// Stages run at the same time (at least 1).
+    pub jobs: usize,
+    /// Re-hash every cached file instead of trusting unchanged size + mtime.
+    pub verify_full: bool,
+}
+
+/// Write the settings file of every runnable node; return the resolved nodes.
+pub fn prepare(exp: &Experiment, ctx: &Context) -> Result<Vec<Node>> {
+    ctx.cache.remove_stale_temps()?;
+    let mut hashes = BinaryHashes::load(&ctx.cache);
+    let nodes = graph::resolve(exp, ctx, &mut hashes)?;
+    hashes.save(&ctx.cache)?;
+    for n in &nodes {
+        if matches!(n.kind, NodeKind::SceneDir(_)) || n.binary.is_none() {
+            continue;
+        }
+        let path = settings_path(&ctx.cache, &exp.name, &n.stage);
+        let text = canon::to_toml(&n.settings);
+        if fs::read_to_string(&path).ok().as_deref() != Some(text.as_str()) {
+            scene::atomic::write_bytes_atomic(&path, text.as_bytes())?;
+        }
+    }
+    Ok(nodes)
+}
+
+fn base_record(n: &Node, i: usize, nodes: &[Node], ctx: &Context) -> StageRecord {
+    StageRecord {
+        stage: n.stage.clone(),
+        action: Action::Pending,
+        key: n.key.clone(),
+        binary: n.binary.clone(),
+        binary_hash: n.binary_hash.clone(),
+        settings: canon::to_json(&n.settings),
+        inputs: n
+            .inputs
+            .iter()
+            .map(|x| {
+                let key = nodes[x.node].key.clone().unwrap_or_default();
+                (x.flag.trim_start_matches('-').to_string(), key)
+            })
+            .collect(),
+        entry: graph::output_dir(nodes, i, &ctx.cache),
+        wall_s: 0.0,
+        built_wall_s: None,
+        peak_rss_kib: None,
+        exit_status: None,
+        error: None,
+        log: None,
+    }
+}
+
+/// Run the experiment. Returns the run record (also written to `runs/<name>/run.json`);
+/// a failed stage is recorded there, not returned as an error.
+pub fn run(
+    exp: &Experiment,
+    ctx: &Context,
+    opts: &RunOptions,
+    progress: &Progress,
+) -> Result<RunRecord> {
+    let started = Instant::now();
+    let nodes = prepare(exp, ctx)?;
+    let mut record = RunRecord {
+        experiment: exp.name.clone(),
+        experiment_file: exp.file.clone(),
+        cache_root: ctx.cache.root.clone(),
+        status: "running".into(),
+        started_unix: now_unix(),
+        wall_s: 0.0,
+        jobs: opts.jobs.max(1),
+        stages: nodes
+            .iter()
+            .enumerate()
+            .map(|(i, nd)| base_record(nd, i, &nodes, ctx))
+            .collect(),
+    };
+    let record_path = ctx.cache.run_record(&exp.name);
+    let mut save = |record: &mut RunRecord| -> Result<()> {
+        record.wall_s = started.elapsed().as_secs_f64();
+        record.write(&record_path)
+    };
+
+    let request = Request {
+        until: opts.until,
+        force: &opts.force,
+        verify_full: opts.verify_full,
+    };
+    let mut states = cache_check::check(&nodes, &request, &mut record.stages, progress)?;
+    let schedule = Schedule {
+        nodes: &nodes,
+        ctx,
+        experiment: &exp.name,
+        jobs: opts.jobs,
+        progress,
+    };
+    schedule::run_waiting(&schedule, &mut states, &mut record, &mut save)?;
+
+    for (rec, st) in record.stages.iter_mut().zip(&states) {
+        if let State::Done(a) = st.state {
+            rec.action = a;
+        }
+    }
+    let failed = record.stages.iter().any(|s| s.action == Action::Failed);
+    record.status = if failed { "failed" } else { "ok" }.into();
+    save(&mut record)?;
+    Ok(record)
+}
