@@ -93,7 +93,7 @@ fn demo_runs_every_built_stage_and_summarises_it() {
     assert!(
         d.contains("unavailable")
             && d.contains("not built yet")
-            && d.contains("cargo build --release -p deform"),
+            && d.contains("cargo build --release -p degs-deform"),
         "{d}"
     );
     // renders are the test images here, so eval gives the PSNR cap and SSIM 1
@@ -149,7 +149,7 @@ fn demo_without_evflow_says_how_to_build_it_and_skips_what_needs_it() {
     let table = stdout(&o);
     let e = row(&table, "evflow");
     assert!(
-        e.contains("unavailable") && e.contains("cargo build --release -p evflow"),
+        e.contains("unavailable") && e.contains("cargo build --release -p degs-evflow"),
         "{e}"
     );
     assert!(row(&table, "gaussians").contains(" ran "), "{table}");

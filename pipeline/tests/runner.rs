@@ -432,7 +432,7 @@ fn missing_stage_binaries_are_reported_not_fatal() {
     );
     let st = stdout(&f.degs(&["status", exp.to_str().unwrap()]));
     assert!(st.contains("not built yet"), "{st}");
-    assert!(st.contains("cargo build --release -p assoc"), "{st}");
+    assert!(st.contains("cargo build --release -p degs-assoc"), "{st}");
     assert!(
         st.lines()
             .any(|l| l.starts_with("deform") && l.contains("needs assoc")),
