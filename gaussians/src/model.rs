@@ -4,8 +4,9 @@
 //! ([`ModelInfo`]: SH degree, background, Gaussian count, per-Gaussian dynamic flags).
 
 use crate::field::{self, Mlp};
-use crate::raster::TileRasterizer;
-use crate::train::{self, Frame, Rasterizer, Splats, Trainer};
+use crate::raster::{Rasterizer, RenderedImage, TileRasterizer};
+use crate::splats::Splats;
+use crate::train::{self, Trainer};
 use scene::error::{Error, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -189,7 +190,7 @@ impl Model {
     }
 
     /// Render colour, depth and alpha at a camera and normalised time.
-    pub fn render(&self, cam: &scene::Camera, t: f32) -> Frame {
+    pub fn render(&self, cam: &scene::Camera, t: f32) -> RenderedImage {
         TileRasterizer
             .render(&self.at(t), cam, self.info.sh_degree, self.info.background)
             .0

@@ -2,7 +2,7 @@
 //! errors (naming the file) for bad input.
 
 use gaussians::ply;
-use gaussians::train::Splats;
+use gaussians::{Gaussian, Splats};
 use std::path::Path;
 
 /// Deterministic awkward floats: negative zero, subnormals, large and tiny values.
@@ -21,18 +21,17 @@ fn value(i: usize, k: usize) -> f32 {
 
 fn splats(n: usize, degree: u32) -> Splats {
     let nr = (degree as usize + 1).pow(2) - 1;
-    let mut s = Splats::default();
-    for i in 0..n {
-        s.means.push(std::array::from_fn(|k| value(i, k)));
-        s.log_scales.push(std::array::from_fn(|k| value(i, 10 + k)));
-        s.rotations.push(std::array::from_fn(|k| value(i, 20 + k)));
-        s.opacity_logits.push(value(i, 30));
-        s.sh_dc.push(std::array::from_fn(|k| value(i, 40 + k)));
-        s.sh_rest.push(std::array::from_fn(|k| {
-            if k < 3 * nr { value(i, 50 + k) } else { 0.0 }
-        }));
-    }
-    s
+    (0..n)
+        .map(|i| Gaussian {
+            mean: std::array::from_fn(|k| value(i, k)),
+            log_scale: std::array::from_fn(|k| value(i, 10 + k)),
+            rotation: std::array::from_fn(|k| value(i, 20 + k)),
+            opacity_logit: value(i, 30),
+            sh_dc: std::array::from_fn(|k| value(i, 40 + k)),
+            sh_rest: std::array::from_fn(|k| if k < 3 * nr { value(i, 50 + k) } else { 0.0 }),
+            dynamic: true,
+        })
+        .collect()
 }
 
 fn bits(s: &Splats) -> Vec<u32> {

@@ -4,9 +4,9 @@
 
 mod raster_common;
 
+use gaussians::SplatGrads;
 use gaussians::raster::reference::{self, Gaussians64};
 use gaussians::raster::{TileRasterizer, simd};
-use gaussians::train::SplatGrads;
 use glam::DVec3;
 use raster_common::*;
 

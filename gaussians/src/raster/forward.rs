@@ -3,9 +3,10 @@
 //! order), then composite each tile front to back (DEGS Eq. 1) in parallel.
 
 use super::project::{CamSetup, project};
+use super::rasterizer::RenderedImage;
 use super::simd::{self, F4, Lanes, Mask};
 use super::{RenderState, T_MIN, TILE, eval_alpha};
-use crate::train::{Frame, Splats};
+use crate::splats::Splats;
 use rayon::prelude::*;
 
 /// Visible projected Gaussians in depth order (struct of arrays).
@@ -288,7 +289,7 @@ pub(crate) fn render(
     cam: &CamSetup,
     sh_degree: u32,
     background: [f32; 3],
-) -> (Frame, RenderState) {
+) -> (RenderedImage, RenderState) {
     let (w, h) = (cam.width, cam.height);
     let (proj, radius) = project_all(s, cam, sh_degree);
     let tiles = bin(&proj, w, h);
@@ -297,7 +298,7 @@ pub(crate) fn render(
         .map(|t| tile_forward(&proj, tiles.of(t), tiles.rect(t, w, h)))
         .collect();
     let np = w * h;
-    let mut f = Frame {
+    let mut f = RenderedImage {
         width: w,
         height: h,
         rgb: vec![0.0; 3 * np],

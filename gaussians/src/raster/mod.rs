@@ -27,11 +27,13 @@ pub mod project;
 pub mod reference;
 pub mod sh;
 
+mod rasterizer;
 pub mod simd;
 
 pub use forward::Projected;
+pub use rasterizer::{Rasterizer, RenderedImage};
 
-use crate::train::{Frame, Rasterizer, SplatGrads, Splats};
+use crate::splats::{SplatGrads, Splats};
 use glam::{DQuat, DVec3};
 use project::CamSetup;
 use scene::{Camera, Pose};
@@ -128,7 +130,7 @@ impl TileRasterizer {
         cam: &Camera,
         sh_degree: u32,
         background: [f32; 3],
-    ) -> (Frame, RenderState) {
+    ) -> (RenderedImage, RenderState) {
         forward::render(s, &CamSetup::new(cam), sh_degree.min(3), background)
     }
 
@@ -157,7 +159,7 @@ impl Rasterizer for TileRasterizer {
         cam: &Camera,
         sh_degree: u32,
         background: [f32; 3],
-    ) -> (Frame, RenderState) {
+    ) -> (RenderedImage, RenderState) {
         self.render_full(s, cam, sh_degree, background)
     }
 

@@ -6,7 +6,7 @@
 //! Colour from SH at the world-space view direction, `+0.5`, clamped at 0.
 
 use super::{ALPHA_MIN, CULL_OPACITY, LOW_PASS, NEAR, SIGMA_CUTOFF, sh};
-use crate::train::Splats;
+use crate::splats::Splats;
 use glam::{Mat3, Vec3};
 use scene::Camera;
 

@@ -3,7 +3,7 @@
 
 use super::{ALPHA_MAX, ALPHA_MIN, CULL_OPACITY, LOW_PASS, NEAR, SIGMA_CUTOFF, T_MIN};
 use super::{project::jacobian_limits, sh};
-use crate::train::Splats;
+use crate::splats::Splats;
 use glam::{DMat3, DQuat, DVec3};
 use scene::Camera;
 
@@ -33,7 +33,7 @@ impl From<&Splats> for Gaussians64 {
 
 /// Planar RGB `3×H×W`, depth and alpha `H×W`.
 #[derive(Clone, Debug, Default)]
-pub struct RefFrame {
+pub struct RenderedImage64 {
     pub width: usize,
     pub height: usize,
     pub rgb: Vec<f64>,
@@ -109,7 +109,12 @@ fn splat2(g: &Gaussians64, i: usize, cam: &Camera, sh_degree: u32) -> Option<Spl
 }
 
 /// Render `g` from `cam`.
-pub fn render(g: &Gaussians64, cam: &Camera, sh_degree: u32, background: [f64; 3]) -> RefFrame {
+pub fn render(
+    g: &Gaussians64,
+    cam: &Camera,
+    sh_degree: u32,
+    background: [f64; 3],
+) -> RenderedImage64 {
     let (w, h) = (
         cam.intrinsics.width as usize,
         cam.intrinsics.height as usize,
@@ -120,7 +125,7 @@ pub fn render(g: &Gaussians64, cam: &Camera, sh_degree: u32, background: [f64; 3
         .collect();
     splats.sort_by(|a, b| a.1.depth.total_cmp(&b.1.depth).then(a.0.cmp(&b.0)));
     let np = w * h;
-    let mut f = RefFrame {
+    let mut f = RenderedImage64 {
         width: w,
         height: h,
         rgb: vec![0.0; 3 * np],

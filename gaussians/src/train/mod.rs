@@ -3,7 +3,7 @@
 //! after a static phase a deformation field `F(γ(x), γ(t))` (Deform-GS).
 //!
 //! The rasterizer is reached through the [`Rasterizer`] trait so the loop can be tested
-//! on its own; [`Splats`] holds the trainable parameters as struct of arrays.
+//! on its own; [`Splats`] holds the trainable parameters.
 
 pub mod init;
 pub mod settings;
@@ -13,71 +13,10 @@ use crate::densify::{self, Geometry, GradStats};
 use crate::field::{self, Deformation, Mlp};
 use crate::metrics;
 use crate::optim::{Adam, ExpSchedule};
+use crate::raster::{Rasterizer, RenderedImage};
+use crate::splats::{SplatGrads, Splats};
 use scene::Camera;
 pub use settings::TrainSettings;
-
-/// Trainable Gaussians (raw: log-scale, logit opacity, quaternion w-first; SH DC and
-/// rest stored apart as 3DGS `features_dc` / `features_rest`, rest coefficient-major:
-/// `rest[i][(k−1)·3 + c]` for k = 1..16).
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct Splats {
-    pub means: Vec<[f32; 3]>,
-    pub log_scales: Vec<[f32; 3]>,
-    pub rotations: Vec<[f32; 4]>,
-    pub opacity_logits: Vec<f32>,
-    pub sh_dc: Vec<[f32; 3]>,
-    pub sh_rest: Vec<[f32; 45]>,
-    /// Per Gaussian: deformed by the field (used when `TrainSettings::dynamic_only`).
-    pub dynamic: Vec<bool>,
-}
-
-impl Splats {
-    pub fn len(&self) -> usize {
-        self.means.len()
-    }
-    pub fn is_empty(&self) -> bool {
-        self.means.is_empty()
-    }
-}
-
-/// A rendered image (planar RGB `3 × H × W`, depth and alpha `H × W`).
-#[derive(Clone, Debug, Default)]
-pub struct Frame {
-    pub width: usize,
-    pub height: usize,
-    pub rgb: Vec<f32>,
-    pub depth: Vec<f32>,
-    pub alpha: Vec<f32>,
-}
-
-/// Gradients from the rasterizer, per Gaussian, plus densification statistics.
-#[derive(Clone, Debug, Default)]
-pub struct SplatGrads {
-    pub means: Vec<[f32; 3]>,
-    pub log_scales: Vec<[f32; 3]>,
-    pub rotations: Vec<[f32; 4]>,
-    pub opacity_logits: Vec<f32>,
-    pub sh_dc: Vec<[f32; 3]>,
-    pub sh_rest: Vec<[f32; 45]>,
-    /// ‖∂L/∂(projected mean)‖ in NDC units as 3DGS (for densification).
-    pub screen_grad_norm: Vec<f32>,
-    /// Screen radius in pixels (0 = not rendered).
-    pub radius: Vec<f32>,
-}
-
-/// A differentiable renderer.
-pub trait Rasterizer: Sync {
-    type State;
-    fn render(
-        &self,
-        s: &Splats,
-        cam: &Camera,
-        sh_degree: u32,
-        background: [f32; 3],
-    ) -> (Frame, Self::State);
-    /// Backward from the gradient of the loss w.r.t. the planar RGB image.
-    fn backward(&self, s: &Splats, cam: &Camera, state: &Self::State, d_rgb: &[f32]) -> SplatGrads;
-}
 
 /// A training view: camera, normalised time, planar RGB target.
 #[derive(Clone, Debug)]
@@ -202,7 +141,7 @@ impl Trainer {
     }
 
     /// Render the model at a camera and time.
-    pub fn render<R: Rasterizer>(&self, r: &R, cam: &Camera, t: f32) -> Frame {
+    pub fn render<R: Rasterizer>(&self, r: &R, cam: &Camera, t: f32) -> RenderedImage {
         let (s, _) = self.deformed(t);
         r.render(&s, cam, self.sh_degree(), self.settings.background)
             .0
@@ -358,7 +297,7 @@ impl Trainer {
 pub fn field_indices(splats: &Splats, dynamic_only: bool) -> Option<Vec<usize>> {
     dynamic_only.then(|| {
         (0..splats.len())
-            .filter(|&i| splats.dynamic.get(i).copied().unwrap_or(true))
+            .filter(|&i| splats.is_dynamic(i))
             .collect()
     })
 }
