@@ -6,7 +6,7 @@
 use crate::field::{self, Mlp};
 use crate::raster::{Rasterizer, RenderedImage, TileRasterizer};
 use crate::splats::Splats;
-use crate::train::{self, Trainer};
+use crate::train::Trainer;
 use scene::error::{Error, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -183,8 +183,8 @@ impl Model {
         match &self.field {
             None => self.splats.clone(),
             Some(mlp) => {
-                let (d, _) = train::field_deltas(mlp, &self.splats, t, self.info.dynamic_only);
-                train::apply_field(&self.splats, &d)
+                let (d, _) = field::splat_deltas(mlp, &self.splats, t, self.info.dynamic_only);
+                field::deform_splats(&self.splats, &d)
             }
         }
     }

@@ -4,10 +4,10 @@
 //! shared writes; the pairs are then summed per Gaussian and chained through the
 //! projection in parallel. The camera gradient is reduced in f64.
 
-use super::forward::{Plane, lane_bits, row_span};
+use super::alpha::{ALPHA_MAX, eval_alpha};
+use super::forward::{Plane, RenderState, TILE, lane_bits, row_span};
 use super::project::{ScreenGrad, project, project_backward};
 use super::simd::{self, F4, Lanes, Mask};
-use super::{ALPHA_MAX, RenderState, TILE, eval_alpha};
 use crate::splats::{SplatGrads, Splats};
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;

@@ -1,7 +1,7 @@
 //! A plain f64 renderer for tests: every Gaussian at every pixel, one global depth
 //! sort, no tiles, the same cut-offs as [`super::TileRasterizer`]. Slow by design.
 
-use super::{ALPHA_MAX, ALPHA_MIN, CULL_OPACITY, LOW_PASS, NEAR, SIGMA_CUTOFF, T_MIN};
+use super::alpha::{ALPHA_MAX, ALPHA_MIN, CULL_OPACITY, LOW_PASS, NEAR, SIGMA_CUTOFF, T_MIN};
 use super::{project::jacobian_limits, sh};
 use crate::splats::Splats;
 use glam::{DMat3, DQuat, DVec3};
@@ -49,6 +49,7 @@ struct Splat2 {
     depth: f64,
 }
 
+// Eq. 2: Σ = R S Sᵀ Rᵀ, then Σ₂ = J W Σ Wᵀ Jᵀ (+ low-pass).
 fn splat2(g: &Gaussians64, i: usize, cam: &Camera, sh_degree: u32) -> Option<Splat2> {
     let k = &cam.intrinsics;
     let opacity = 1.0 / (1.0 + (-g.opacity_logits[i]).exp());
@@ -109,6 +110,7 @@ fn splat2(g: &Gaussians64, i: usize, cam: &Camera, sh_degree: u32) -> Option<Spl
 }
 
 /// Render `g` from `cam`.
+// Eq. 1: C = Σᵢ cᵢ αᵢ Πⱼ₍ⱼ<ᵢ₎ (1 − αⱼ) over the depth-sorted Gaussians.
 pub fn render(
     g: &Gaussians64,
     cam: &Camera,

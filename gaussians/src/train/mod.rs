@@ -10,7 +10,7 @@ pub mod settings;
 pub mod stereo;
 
 use crate::densify::{self, Geometry, GradStats};
-use crate::field::{self, Deformation, Mlp};
+use crate::field::{self, Mlp};
 use crate::metrics;
 use crate::optim::{Adam, ExpSchedule};
 use crate::raster::{Rasterizer, RenderedImage};
@@ -112,32 +112,18 @@ impl Trainer {
             return (self.splats.clone(), None);
         }
         let (d, cache) = self.field_deltas(t);
-        (apply_field(&self.splats, &d), Some((d, cache)))
-    }
-
-    /// Indices the field is evaluated on: all, or the dynamic ones when `dynamic_only`.
-    fn field_indices(&self) -> Option<Vec<usize>> {
-        field_indices(&self.splats, self.settings.dynamic_only)
+        (field::deform_splats(&self.splats, &d), Some((d, cache)))
     }
 
     /// Field deltas for every Gaussian at time `t`.
     fn field_deltas(&self, t: f32) -> (field::Deltas, field::MlpCache<f32>) {
-        field_deltas(&self.field, &self.splats, t, self.settings.dynamic_only)
+        field::splat_deltas(&self.field, &self.splats, t, self.settings.dynamic_only)
     }
 
     /// Field parameter gradients from the gradients of all Gaussians' deltas.
     fn field_backward(&self, cache: &field::MlpCache<f32>, g: &field::Deltas) -> Vec<f32> {
-        match self.field_indices() {
-            None => Deformation::backward(&self.field, cache, g),
-            Some(idx) => {
-                let sub = field::Deltas {
-                    dx: idx.iter().map(|&i| g.dx[i]).collect(),
-                    dq: idx.iter().map(|&i| g.dq[i]).collect(),
-                    ds: idx.iter().map(|&i| g.ds[i]).collect(),
-                };
-                Deformation::backward(&self.field, cache, &sub)
-            }
-        }
+        let dynamic_only = self.settings.dynamic_only;
+        field::splat_deltas_backward(&self.field, &self.splats, dynamic_only, cache, g)
     }
 
     /// Render the model at a camera and time.
@@ -289,51 +275,6 @@ impl Trainer {
             let n = self.splats.len();
             self.adam.reset_items(3, 0..n);
         }
-    }
-}
-
-/// Indices the field is evaluated on: all (`None`), or the dynamic ones when
-/// `dynamic_only` (missing flags count as dynamic).
-pub fn field_indices(splats: &Splats, dynamic_only: bool) -> Option<Vec<usize>> {
-    dynamic_only.then(|| {
-        (0..splats.len())
-            .filter(|&i| splats.is_dynamic(i))
-            .collect()
-    })
-}
-
-/// Field deltas for every Gaussian at time `t` (zero for static-flagged ones when
-/// `dynamic_only`; the field then runs on the dynamic subset only).
-pub fn field_deltas(
-    mlp: &Mlp<f32>,
-    splats: &Splats,
-    t: f32,
-    dynamic_only: bool,
-) -> (field::Deltas, field::MlpCache<f32>) {
-    match field_indices(splats, dynamic_only) {
-        None => Deformation::forward(mlp, &splats.means, &[t]),
-        Some(idx) => {
-            let sub: Vec<[f32; 3]> = idx.iter().map(|&i| splats.means[i]).collect();
-            let (ds, cache) = Deformation::forward(mlp, &sub, &[t]);
-            let mut d = field::Deltas::zeros(splats.len());
-            for (k, &i) in idx.iter().enumerate() {
-                d.dx[i] = ds.dx[k];
-                d.dq[i] = ds.dq[k];
-                d.ds[i] = ds.ds[k];
-            }
-            (d, cache)
-        }
-    }
-}
-
-/// The Gaussians deformed by `deltas` (Deform-GS: after activation).
-pub fn apply_field(splats: &Splats, deltas: &field::Deltas) -> Splats {
-    let g = field::apply_deltas(&splats.means, &splats.log_scales, &splats.rotations, deltas);
-    Splats {
-        means: g.means,
-        log_scales: g.log_scales,
-        rotations: g.rotations,
-        ..splats.clone()
     }
 }
 
