@@ -8,7 +8,6 @@
 
 pub mod densify;
 pub mod field;
-pub mod metrics;
 pub mod model;
 pub mod optim;
 pub mod ply;

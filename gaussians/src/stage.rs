@@ -6,7 +6,6 @@
 //! frame, 0 where alpha < 0.5; NNNN = train frame index), `renders/NNNN.png` (every
 //! test frame), `settings.toml` (resolved settings) and `report.json`.
 
-use crate::metrics;
 use crate::model::Model;
 use crate::raster::TileRasterizer;
 use crate::splats::Splats;
@@ -16,6 +15,7 @@ use scene::atomic::{AtomicDir, write_bytes_atomic, write_json_atomic};
 use scene::error::{Error, Result};
 use scene::image_io::{Image, read_image, write_exr_depth, write_png};
 use scene::manifest::{Manifest, Scene};
+use scene::metrics;
 use scene::report::{Phases, peak_rss_mib};
 use serde::Serialize;
 use std::path::{Path, PathBuf};

@@ -11,11 +11,11 @@ pub mod stereo;
 
 use crate::densify::{self, Geometry, GradStats};
 use crate::field::{self, Mlp};
-use crate::metrics;
 use crate::optim::{Adam, ExpSchedule};
 use crate::raster::{Rasterizer, RenderedImage};
 use crate::splats::{SplatGrads, Splats};
 use scene::Camera;
+use scene::metrics;
 pub use settings::TrainSettings;
 
 /// A training view: camera, normalised time, planar RGB target.
