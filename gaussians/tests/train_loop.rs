@@ -300,11 +300,13 @@ fn run_stops_on_the_flag_and_counts_phases() {
     });
     assert!(sum.interrupted);
     assert_eq!((sum.iterations, seen), (25, 25));
-    assert!(sum.static_seconds > 0.0 && sum.deform_seconds > 0.0);
+    // 10 static iterations, then the field is on.
+    assert_eq!((sum.static_steps, sum.deform_steps), (10, 15));
     stop.store(false, Ordering::Relaxed);
     let sum = t.run(&Additive, &views, &stop, |_| {});
     assert!(!sum.interrupted);
     assert_eq!(sum.iterations, 40);
+    assert_eq!((sum.static_steps, sum.deform_steps), (0, 15));
 }
 
 /// With the default zero head, switching the field on leaves the model exactly as the

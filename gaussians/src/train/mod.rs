@@ -278,10 +278,14 @@ impl Trainer {
     }
 }
 
-/// Wall time per phase and how the run ended (for `report.json`).
+/// Steps and wall time per phase and how the run ended (for `report.json`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct RunSummary {
+    /// The trainer's iteration count at the end of the run.
     pub iterations: u32,
+    /// Steps this run took before / after the field was switched on.
+    pub static_steps: u32,
+    pub deform_steps: u32,
     pub static_seconds: f64,
     pub deform_seconds: f64,
     pub interrupted: bool,
@@ -310,8 +314,10 @@ impl Trainer {
             let info = self.step(r, views);
             let dt = t0.elapsed().as_secs_f64();
             if info.field_on {
+                sum.deform_steps += 1;
                 sum.deform_seconds += dt;
             } else {
+                sum.static_steps += 1;
                 sum.static_seconds += dt;
             }
             sum.final_loss = info.loss;
