@@ -1,6 +1,6 @@
-//! Gaussians as PLY in the exact layout of the original 3DGS code (DESIGN §3): one
-//! `vertex` element of float32 properties `x y z nx ny nz f_dc_0..2 f_rest_* opacity
-//! scale_0..2 rot_0..3`, binary little-endian. `f_rest` is channel-major in the file (all
+//! Gaussians as PLY in the exact layout of the original 3DGS code (`docs/DESIGN.md`
+//! §3): one `vertex` element of float32 properties `x y z nx ny nz f_dc_0..2 f_rest_*
+//! opacity scale_0..2 rot_0..3`, binary little-endian. `f_rest` is channel-major in the file (all
 //! red coefficients 1..15, then green, then blue); [`Splats::sh_rest`] is
 //! coefficient-major. Degree d has `3·((d+1)² − 1)` `f_rest` fields. Stored raw: logit
 //! opacity, log scale, w-first unnormalised quaternion; normals zero.

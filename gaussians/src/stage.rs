@@ -1,5 +1,6 @@
-//! The `gaussians` stage (DESIGN §4): `train` (the RGB warm-up, or the RGB-only baseline
-//! with more iterations) and `render` (a saved model at the frames of a scene split).
+//! The `gaussians` stage (`docs/DESIGN.md` §4): `train` (the RGB warm-up, or the
+//! RGB-only baseline with more iterations) and `render` (a saved model at the frames of
+//! a scene split).
 //!
 //! Outputs are written into a temp directory renamed at the end ([`AtomicDir`]):
 //! the model ([`Model::save`]), `depth/NNNN.exr` (alpha-normalised depth at every train

@@ -1,4 +1,4 @@
-//! RGB-only training of a dynamic Gaussian model (DEGS warm-up, DESIGN §5):
+//! RGB-only training of a dynamic Gaussian model (DEGS warm-up, `docs/DESIGN.md` §5):
 //! canonical Gaussians optimised with Adam under L1 (+ D-SSIM), densified as 3DGS, and
 //! after a static phase a deformation field `F(γ(x), γ(t))` (Deform-GS).
 //!
