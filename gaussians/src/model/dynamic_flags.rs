@@ -23,7 +23,7 @@ pub fn write(path: &Path, flags: &[bool]) -> Result<()> {
     scene::atomic::write_bytes_atomic(path, &data)
 }
 
-/// Read the flags of `n` Gaussians written by [`write`]; errors name the file (missing,
+/// Read the flags of `n` Gaussians written by [`write()`]; errors name the file (missing,
 /// not safetensors, truncated, wrong tensor, dtype or length, a byte other than 0/1).
 pub fn read(path: &Path, n: usize) -> Result<Vec<bool>> {
     let data = std::fs::read(path).at(path)?;

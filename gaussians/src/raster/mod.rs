@@ -2,7 +2,7 @@
 //!
 //! [`TileRasterizer`] renders colour (SH up to degree 3), alpha-blended camera depth and
 //! accumulated alpha, and back-propagates gradients of all three to every Gaussian
-//! parameter and to the camera pose. [`reference`] is a plain f64 renderer with the same
+//! parameter and to the camera pose. [`reference`](mod@reference) is a plain f64 renderer with the same
 //! cut-offs, used by the tests.
 //!
 //! Cut-offs (shared with the reference): near plane `d > 0.01`, low-pass `0.3 px²` on
