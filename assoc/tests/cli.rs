@@ -9,7 +9,7 @@ use std::process::{Command, Output};
 
 use assoc::read_assoc;
 use gaussians::model::{Model, ModelInfo};
-use gaussians::train::Splats;
+use gaussians::{Gaussian, Splats};
 use glam::DVec3;
 use scene::formats::write_evs;
 use scene::image_io::{Image, read_exr_depth, write_exr_depth, write_png};
@@ -32,13 +32,8 @@ fn plane_model() -> Model {
     let mut s = Splats::default();
     for j in -8..=8 {
         for i in -12..=12 {
-            s.means.push([i as f32 * 0.1, j as f32 * 0.1, 0.0]);
-            s.log_scales.push([0.06f32.ln(); 3]);
-            s.rotations.push([1.0, 0.0, 0.0, 0.0]);
-            s.opacity_logits.push(4.0);
-            s.sh_dc.push([0.5; 3]);
-            s.sh_rest.push([0.0; 45]);
-            s.dynamic.push(false);
+            let mean = [i as f32 * 0.1, j as f32 * 0.1, 0.0];
+            s.push(Gaussian::isotropic(mean, 0.06f32.ln(), 4.0, [0.5; 3]));
         }
     }
     let info = ModelInfo {

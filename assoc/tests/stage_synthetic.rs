@@ -6,7 +6,7 @@
 
 use assoc::{AssocSettings, associate_frame, read_assoc};
 use gaussians::model::{Model, ModelInfo};
-use gaussians::train::Splats;
+use gaussians::{Gaussian, Splats};
 use glam::DVec2;
 use scene::Scene;
 use scene::image_io::{read_exr_depth, write_exr_depth};
@@ -24,13 +24,12 @@ fn surface_model(cfg: &SynthConfig) -> Model {
                 continue;
             };
             let p = hit.world;
-            s.means.push([p.x as f32, p.y as f32, p.z as f32]);
-            s.log_scales.push([(1.5 * hit.depth / fx).ln() as f32; 3]);
-            s.rotations.push([1.0, 0.0, 0.0, 0.0]);
-            s.opacity_logits.push(3.0);
-            s.sh_dc.push([0.5; 3]);
-            s.sh_rest.push([0.0; 45]);
-            s.dynamic.push(true);
+            let mean = [p.x as f32, p.y as f32, p.z as f32];
+            let log_scale = (1.5 * hit.depth / fx).ln() as f32;
+            s.push(Gaussian {
+                dynamic: true,
+                ..Gaussian::isotropic(mean, log_scale, 3.0, [0.5; 3])
+            });
         }
     }
     let info = ModelInfo {

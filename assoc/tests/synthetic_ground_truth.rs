@@ -7,7 +7,7 @@
 
 use assoc::{AssocSettings, associate_frame, lift_events};
 use gaussians::raster::TileRasterizer;
-use gaussians::train::Splats;
+use gaussians::{Gaussian, Splats};
 use glam::{DVec2, DVec3};
 use scene::synth::gt::NOISE_ID;
 use scene::synth::{Hit, SynthConfig, SynthWorld};
@@ -24,15 +24,10 @@ fn surface_gaussians(world: &SynthWorld, t0: f64) -> (Splats, Vec<u16>) {
                 continue;
             };
             let p = hit.world;
-            s.means.push([p.x as f32, p.y as f32, p.z as f32]);
+            let mean = [p.x as f32, p.y as f32, p.z as f32];
             // σ ≈ 1 px at the hit's depth: neighbours (2 px apart) overlap smoothly.
             let sigma = (1.0 * hit.depth / fx).ln() as f32;
-            s.log_scales.push([sigma; 3]);
-            s.rotations.push([1.0, 0.0, 0.0, 0.0]);
-            s.opacity_logits.push(3.0);
-            s.sh_dc.push([0.5; 3]);
-            s.sh_rest.push([0.0; 45]);
-            s.dynamic.push(false);
+            s.push(Gaussian::isotropic(mean, sigma, 3.0, [0.5; 3]));
             ids.push(hit.object as u16 + 1);
         }
     }

@@ -7,7 +7,7 @@
 //! model), opacity ≈ 0.3–0.9.
 
 use gaussians::raster::TileRasterizer;
-use gaussians::train::Splats;
+use gaussians::{Gaussian, Splats};
 use glam::DVec3;
 use scene::{Camera, Intrinsics, Pose};
 use std::time::Instant;
@@ -28,27 +28,17 @@ fn scene(n: usize) -> Splats {
     let mut r = Rng(n as u64);
     let spacing = 2.0 / (n as f32).cbrt();
     let ls = (0.5 * spacing).ln();
-    let mut s = Splats::default();
-    for _ in 0..n {
-        s.means
-            .push([r.f(-1.0, 1.0), r.f(-1.0, 1.0), r.f(-1.0, 1.0)]);
-        s.log_scales.push([
-            ls + r.f(-0.5, 0.5),
-            ls + r.f(-0.5, 0.5),
-            ls + r.f(-0.5, 0.5),
-        ]);
-        s.rotations.push([
-            r.f(-1.0, 1.0),
-            r.f(-1.0, 1.0),
-            r.f(-1.0, 1.0),
-            r.f(-1.0, 1.0),
-        ]);
-        s.opacity_logits.push(r.f(-1.0, 2.0));
-        s.sh_dc
-            .push([r.f(-1.0, 1.0), r.f(-1.0, 1.0), r.f(-1.0, 1.0)]);
-        s.sh_rest.push(std::array::from_fn(|_| r.f(-0.2, 0.2)));
-    }
-    s
+    (0..n)
+        .map(|_| Gaussian {
+            mean: std::array::from_fn(|_| r.f(-1.0, 1.0)),
+            log_scale: std::array::from_fn(|_| ls + r.f(-0.5, 0.5)),
+            rotation: std::array::from_fn(|_| r.f(-1.0, 1.0)),
+            opacity_logit: r.f(-1.0, 2.0),
+            sh_dc: std::array::from_fn(|_| r.f(-1.0, 1.0)),
+            sh_rest: std::array::from_fn(|_| r.f(-0.2, 0.2)),
+            dynamic: true,
+        })
+        .collect()
 }
 
 fn camera(size: u32) -> Camera {

@@ -1,11 +1,21 @@
-//! gaussians
+//! `gaussians`: a dynamic 3D Gaussian model (canonical [`Splats`] + deformation
+//! [`field`]), its differentiable CPU [`raster`]izer and the RGB warm-up that trains it
+//! ([`train`], run as a stage by [`stage`]).
+//!
+//! The core types other crates build on are re-exported here: [`Splats`] /
+//! [`Gaussian`] (the parameters), [`SplatGrads`] (their gradients), the [`Rasterizer`]
+//! trait, the [`RenderedImage`] it returns and the CPU [`TileRasterizer`].
+
 pub mod densify;
 pub mod field;
-pub mod metrics;
 pub mod model;
 pub use scene::optim;
 pub mod ply;
 pub mod progress;
 pub mod raster;
+pub mod splats;
 pub mod stage;
 pub mod train;
+
+pub use raster::{Rasterizer, RenderedImage, TileRasterizer};
+pub use splats::{Gaussian, SplatGrads, Splats};

@@ -17,9 +17,9 @@ struct Cli {
 enum Verb {
     /// Train canonical Gaussians + deformation field on a scene's RGB frames (the DEGS
     /// warm-up; with more iterations, the RGB-only baseline). Writes point_cloud.ply,
-    /// model.json, field.safetensors, depth/NNNN.exr (train frames), renders/NNNN.png
-    /// (test frames) and report.json (test PSNR/SSIM, time per phase). Ctrl-C stops
-    /// at the next iteration and still writes a usable model.
+    /// dynamic.safetensors, model.json, field.safetensors, depth/NNNN.exr (train
+    /// frames), renders/NNNN.png (test frames) and report.json (test PSNR/SSIM, time
+    /// per phase). Ctrl-C stops at the next iteration and still writes a usable model.
     Train(TrainArgs),
     /// Render a saved model at the frames of a scene split, with PSNR/SSIM.
     Render {

@@ -1,6 +1,6 @@
-//! Gaussians as PLY in the exact layout of the original 3DGS code (DESIGN §3): one
-//! `vertex` element of float32 properties `x y z nx ny nz f_dc_0..2 f_rest_* opacity
-//! scale_0..2 rot_0..3`, binary little-endian. `f_rest` is channel-major in the file (all
+//! Gaussians as PLY in the exact layout of the original 3DGS code (`docs/DESIGN.md`
+//! §3): one `vertex` element of float32 properties `x y z nx ny nz f_dc_0..2 f_rest_*
+//! opacity scale_0..2 rot_0..3`, binary little-endian. `f_rest` is channel-major in the file (all
 //! red coefficients 1..15, then green, then blue); [`Splats::sh_rest`] is
 //! coefficient-major. Degree d has `3·((d+1)² − 1)` `f_rest` fields. Stored raw: logit
 //! opacity, log scale, w-first unnormalised quaternion; normals zero.
@@ -8,7 +8,7 @@
 //! Parsing uses `ply-rs-bw` with a typed element ([`Vertex`]), not the generic map.
 
 use crate::raster::sh::num_coeffs;
-use crate::train::Splats;
+use crate::splats::{Gaussian, Splats};
 use ply_rs_bw::parser::{Parser, Reader};
 use ply_rs_bw::ply::{
     Addable, ElementDef, Encoding, Ply, PropertyAccess, PropertyAccessResult, PropertyDef,
@@ -230,7 +230,7 @@ pub fn parse(path: &Path, bytes: &[u8]) -> Result<(Splats, u32)> {
         )));
     }
     let nr = num_coeffs(degree) - 1;
-    let mut s = Splats::default();
+    let mut s = Splats::with_capacity(verts.len());
     for (i, Vertex(v)) in verts.iter().enumerate() {
         if let Some(k) = v.iter().position(|x| !x.is_finite()) {
             let name = property_names(3)
@@ -242,20 +242,24 @@ pub fn parse(path: &Path, bytes: &[u8]) -> Result<(Splats, u32)> {
                 v[k]
             )));
         }
-        s.means.push([v[0], v[1], v[2]]);
-        s.sh_dc.push([v[6], v[7], v[8]]);
-        let mut rest = [0.0f32; 45];
+        let mut sh_rest = [0.0f32; 45];
         for c in 0..3 {
             for j in 0..nr {
-                rest[j * 3 + c] = v[9 + c * nr + j];
+                sh_rest[j * 3 + c] = v[9 + c * nr + j];
             }
         }
-        s.sh_rest.push(rest);
-        s.opacity_logits.push(v[OPACITY]);
-        s.log_scales.push([v[SCALE], v[SCALE + 1], v[SCALE + 2]]);
-        s.rotations
-            .push([v[ROT], v[ROT + 1], v[ROT + 2], v[ROT + 3]]);
+        s.push(Gaussian {
+            mean: [v[0], v[1], v[2]],
+            log_scale: [v[SCALE], v[SCALE + 1], v[SCALE + 2]],
+            rotation: [v[ROT], v[ROT + 1], v[ROT + 2], v[ROT + 3]],
+            opacity_logit: v[OPACITY],
+            sh_dc: [v[6], v[7], v[8]],
+            sh_rest,
+            dynamic: true,
+        });
     }
+    // The PLY carries no dynamic flags: none (every Gaussian counts as dynamic).
+    s.dynamic.clear();
     Ok((s, degree))
 }
 

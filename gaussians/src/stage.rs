@@ -1,20 +1,22 @@
-//! The `gaussians` stage (DESIGN §4): `train` (the RGB warm-up, or the RGB-only baseline
-//! with more iterations) and `render` (a saved model at the frames of a scene split).
+//! The `gaussians` stage (`docs/DESIGN.md` §4): `train` (the RGB warm-up, or the
+//! RGB-only baseline with more iterations) and `render` (a saved model at the frames of
+//! a scene split).
 //!
 //! Outputs are written into a temp directory renamed at the end ([`AtomicDir`]):
 //! the model ([`Model::save`]), `depth/NNNN.exr` (alpha-normalised depth at every train
 //! frame, 0 where alpha < 0.5; NNNN = train frame index), `renders/NNNN.png` (every
 //! test frame), `settings.toml` (resolved settings) and `report.json`.
 
-use crate::metrics;
 use crate::model::Model;
 use crate::raster::TileRasterizer;
+use crate::splats::Splats;
 use crate::train::settings::Init;
-use crate::train::{Frame, StepInfo, TrainSettings, Trainer, View, init};
+use crate::train::{StepInfo, TrainSettings, Trainer, View, init};
 use scene::atomic::{AtomicDir, write_bytes_atomic, write_json_atomic};
 use scene::error::{Error, Result};
 use scene::image_io::{Image, read_image, write_exr_depth, write_png};
 use scene::manifest::{Manifest, Scene};
+use scene::metrics;
 use scene::report::{Phases, peak_rss_mib};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -207,32 +209,6 @@ fn input_hashes(scene: &Scene, init_ply: Option<&Path>) -> Result<Vec<InputHash>
     Ok(out)
 }
 
-/// Interleaved 8-bit-ready image of a planar frame.
-pub fn frame_image(f: &Frame) -> Image {
-    let n = f.width * f.height;
-    let mut data = Vec::with_capacity(3 * n);
-    for p in 0..n {
-        for c in 0..3 {
-            data.push(f.rgb[c * n + p].clamp(0.0, 1.0));
-        }
-    }
-    Image {
-        width: f.width as u32,
-        height: f.height as u32,
-        channels: 3,
-        data,
-    }
-}
-
-/// Alpha-normalised depth (`depth / alpha`; 0 where alpha < 0.5).
-pub fn normalised_depth(f: &Frame) -> Vec<f32> {
-    f.depth
-        .iter()
-        .zip(&f.alpha)
-        .map(|(&d, &a)| if a >= 0.5 { d / a } else { 0.0 })
-        .collect()
-}
-
 /// Render `model` at every view, write `renders/NNNN.png` (when `renders` is set) and
 /// return PSNR/SSIM against the views' images.
 fn evaluate(
@@ -250,7 +226,7 @@ fn evaluate(
     for (i, v) in views.iter().enumerate() {
         let f = model.render(&v.camera, v.time);
         if let Some(dir) = renders {
-            write_png(dir.join(format!("{i:04}.png")), &frame_image(&f))?;
+            write_png(dir.join(format!("{i:04}.png")), &f.rgb_image())?;
         }
         ev.psnr.push(metrics::psnr_u8(&f.rgb, &v.rgb));
         ev.ssim
@@ -283,7 +259,7 @@ fn write_depths(model: &Model, views: &[View], dir: &Path) -> Result<()> {
             dir.join(format!("{i:04}.exr")),
             f.width as u32,
             f.height as u32,
-            &normalised_depth(&f),
+            &f.normalised_depth(),
         )?;
     }
     Ok(())
@@ -295,7 +271,7 @@ fn initial_splats(
     settings: &TrainSettings,
     views: &[View],
     ply: Option<&Path>,
-) -> Result<(crate::train::Splats, usize)> {
+) -> Result<(Splats, usize)> {
     match ply {
         Some(p) => {
             let (mut s, _) = crate::ply::read(p)?;

@@ -2,7 +2,7 @@
 //! errors (naming the file) for bad input.
 
 use gaussians::ply;
-use gaussians::train::Splats;
+use gaussians::{Gaussian, Splats};
 use std::path::Path;
 
 /// Deterministic awkward floats: negative zero, subnormals, large and tiny values.
@@ -21,18 +21,17 @@ fn value(i: usize, k: usize) -> f32 {
 
 fn splats(n: usize, degree: u32) -> Splats {
     let nr = (degree as usize + 1).pow(2) - 1;
-    let mut s = Splats::default();
-    for i in 0..n {
-        s.means.push(std::array::from_fn(|k| value(i, k)));
-        s.log_scales.push(std::array::from_fn(|k| value(i, 10 + k)));
-        s.rotations.push(std::array::from_fn(|k| value(i, 20 + k)));
-        s.opacity_logits.push(value(i, 30));
-        s.sh_dc.push(std::array::from_fn(|k| value(i, 40 + k)));
-        s.sh_rest.push(std::array::from_fn(|k| {
-            if k < 3 * nr { value(i, 50 + k) } else { 0.0 }
-        }));
-    }
-    s
+    (0..n)
+        .map(|i| Gaussian {
+            mean: std::array::from_fn(|k| value(i, k)),
+            log_scale: std::array::from_fn(|k| value(i, 10 + k)),
+            rotation: std::array::from_fn(|k| value(i, 20 + k)),
+            opacity_logit: value(i, 30),
+            sh_dc: std::array::from_fn(|k| value(i, 40 + k)),
+            sh_rest: std::array::from_fn(|k| if k < 3 * nr { value(i, 50 + k) } else { 0.0 }),
+            dynamic: true,
+        })
+        .collect()
 }
 
 fn bits(s: &Splats) -> Vec<u32> {
@@ -223,7 +222,8 @@ fn write_refuses_non_finite_and_leaves_the_old_file() {
 
 /// An independent reader (Python `plyfile`) opens our file with the exact 3DGS property
 /// list and values. The interpreter is `$DEGS_PYTHON` (`.ci/run` makes a venv with
-/// plyfile) or `python3`; skipped (with a note) where neither has plyfile.
+/// plyfile) or `python3`. Without plyfile the test fails, unless `DEGS_SKIP_PLYFILE=1`
+/// opts out (then it says it skipped).
 #[test]
 fn plyfile_reads_our_output() {
     let python = std::env::var("DEGS_PYTHON").unwrap_or_else(|_| "python3".into());
@@ -232,8 +232,16 @@ fn plyfile_reads_our_output() {
         .output()
         .is_ok_and(|o| o.status.success());
     if !ok {
-        eprintln!("python3 with plyfile not available: skipped");
-        return;
+        let skip = std::env::var("DEGS_SKIP_PLYFILE").is_ok_and(|v| v == "1");
+        if skip {
+            eprintln!("SKIPPED: `{python}` cannot import plyfile and DEGS_SKIP_PLYFILE=1");
+            return;
+        }
+        panic!(
+            "`{python}` cannot import plyfile, the independent PLY reader this test needs. \
+             Install it (`{python} -m pip install plyfile`, or `pip install plyfile`), point \
+             DEGS_PYTHON at an interpreter that has it, or opt out with DEGS_SKIP_PLYFILE=1"
+        );
     }
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("py.ply");

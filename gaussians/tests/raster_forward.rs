@@ -4,7 +4,7 @@ mod raster_common;
 
 use gaussians::raster::TileRasterizer;
 use gaussians::raster::reference::{self, Gaussians64};
-use gaussians::train::{Rasterizer, Splats};
+use gaussians::{Rasterizer, Splats};
 use glam::DVec3;
 use raster_common::*;
 

@@ -10,7 +10,7 @@ mod raster_common;
 
 use gaussians::raster::reference::{self, Gaussians64};
 use gaussians::raster::{TileRasterizer, apply_twist};
-use gaussians::train::{SplatGrads, Splats};
+use gaussians::{SplatGrads, Splats};
 use glam::DVec3;
 use raster_common::*;
 use scene::Camera;

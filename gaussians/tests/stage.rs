@@ -3,13 +3,17 @@
 use gaussians::model::Model;
 use gaussians::stage::{self, Split, TrainArgs};
 use gaussians::train::TrainSettings;
-use scene::synth::SynthConfig;
+use scene::synth::{SynthConfig, SynthWorld};
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
 
 /// The static preset at 40×40 with few frames and coarse textures (features a few
 /// pixels wide at this size).
 fn tiny_scene(dir: &Path) {
+    stage::write_rgb_synthetic_scene(&tiny_config(), dir).unwrap();
+}
+
+fn tiny_config() -> SynthConfig {
     let mut cfg = SynthConfig::preset("static").unwrap();
     for o in &mut cfg.objects {
         o.texture.cell *= 4.0;
@@ -20,7 +24,25 @@ fn tiny_scene(dir: &Path) {
     cfg.train_fps = 5.0;
     cfg.test_frames = 3;
     cfg.supersample = 1;
-    stage::write_rgb_synthetic_scene(&cfg, dir).unwrap();
+    cfg
+}
+
+/// Median of `|d − d_true| / d_true` over the pixels where both depths are valid (> 0),
+/// and how many such pixels there are. The true depth is the synthetic scene's exact
+/// depth at the pixel centre, what the full scene writer stores as
+/// `gt/train/depth_NNNN.exr`.
+fn median_relative_depth_error(depth: &[f32], truth: &[f32]) -> (f64, usize) {
+    let mut rel: Vec<f64> = depth
+        .iter()
+        .zip(truth)
+        .filter(|&(&d, &t)| d > 0.0 && t > 0.0)
+        .map(|(&d, &t)| ((d - t) / t).abs() as f64)
+        .collect();
+    rel.sort_by(f64::total_cmp);
+    (
+        rel.get(rel.len() / 2).copied().unwrap_or(f64::INFINITY),
+        rel.len(),
+    )
 }
 
 fn tiny_settings(dir: &Path) -> std::path::PathBuf {
@@ -41,6 +63,13 @@ fn tiny_settings(dir: &Path) -> std::path::PathBuf {
     std::fs::write(&p, s.to_toml()).unwrap();
     p
 }
+
+/// Bound on the median relative error of the warm-up's depth maps on the tiny scene.
+/// Measured 0.123 over all train frames (0.107–0.143 per frame; seed 1, 400 iterations,
+/// AVX-512 kernels), mostly a bias towards the camera (signed median −0.109), while
+/// Gaussians placed on the true surfaces render within 1 %: the error is the short
+/// warm-up's, not the rasterizer's. Margin for other CPUs' kernels and float order.
+const MAX_MEDIAN_DEPTH_ERROR: f64 = 0.2;
 
 #[test]
 fn trains_writes_every_output_and_reloads_identically() {
@@ -73,16 +102,30 @@ fn trains_writes_every_output_and_reloads_identically() {
     );
     assert!(o.model.field.is_some());
 
-    // depth at every train frame, right size, finite, mostly covered
+    // depth at every train frame, right size, finite, mostly covered, and close to the
+    // scene's exact depth
     let sc = scene::Scene::open(&scene_dir).unwrap();
     assert_eq!(r.train_frames, sc.train.frames.len());
-    for i in 0..sc.train.frames.len() {
+    let world = SynthWorld::new(&tiny_config()).unwrap();
+    let mut all = (Vec::new(), Vec::new());
+    for (i, frame) in sc.train.frames.iter().enumerate() {
         let (w, h, d) =
             scene::image_io::read_exr_depth(out.join("depth").join(format!("{i:04}.exr"))).unwrap();
         assert_eq!((w, h), (40, 40));
         assert!(d.iter().all(|v| v.is_finite() && *v >= 0.0));
         assert!(d.iter().filter(|&&v| v > 0.0).count() > 800);
+        let truth = world.render_frame(frame.timestamp).depth;
+        let (err, n) = median_relative_depth_error(&d, &truth);
+        eprintln!("train frame {i}: median relative depth error {err:.4} over {n} pixels");
+        all.0.extend(d);
+        all.1.extend(truth);
     }
+    let (err, n) = median_relative_depth_error(&all.0, &all.1);
+    eprintln!("all train frames: median relative depth error {err:.4} over {n} pixels");
+    assert!(
+        err < MAX_MEDIAN_DEPTH_ERROR,
+        "median relative depth error {err}"
+    );
     for i in 0..3 {
         assert!(out.join("renders").join(format!("{i:04}.png")).is_file());
     }

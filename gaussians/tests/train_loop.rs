@@ -3,7 +3,8 @@
 //! differences), so the loop is tested independently of the tile rasterizer.
 
 use gaussians::train::init::{SH_C0, camera_bounds, camera_extent, random_splats};
-use gaussians::train::{Frame, Rasterizer, SplatGrads, Splats, TrainSettings, Trainer, View};
+use gaussians::train::{TrainSettings, Trainer, View};
+use gaussians::{Rasterizer, RenderedImage, SplatGrads, Splats};
 use glam::DVec3;
 use scene::{Camera, Intrinsics, Pose};
 
@@ -40,7 +41,7 @@ fn project(cam: &Camera, m: [f32; 3], ls: [f32; 3]) -> Option<([f32; 2], f32, [[
 
 impl Rasterizer for Additive {
     type State = ();
-    fn render(&self, s: &Splats, cam: &Camera, _sh: u32, bg: [f32; 3]) -> (Frame, ()) {
+    fn render(&self, s: &Splats, cam: &Camera, _sh: u32, bg: [f32; 3]) -> (RenderedImage, ()) {
         let mut rgb = vec![0.0f32; 3 * W * H];
         for c in 0..3 {
             rgb[c * W * H..(c + 1) * W * H].fill(bg[c]);
@@ -62,7 +63,7 @@ impl Rasterizer for Additive {
             }
         }
         (
-            Frame {
+            RenderedImage {
                 width: W,
                 height: H,
                 rgb,
@@ -74,16 +75,7 @@ impl Rasterizer for Additive {
     }
     fn backward(&self, s: &Splats, cam: &Camera, _: &(), d: &[f32]) -> SplatGrads {
         let n = s.len();
-        let mut g = SplatGrads {
-            means: vec![[0.0; 3]; n],
-            log_scales: vec![[0.0; 3]; n],
-            rotations: vec![[0.0; 4]; n],
-            opacity_logits: vec![0.0; n],
-            sh_dc: vec![[0.0; 3]; n],
-            sh_rest: vec![[0.0; 45]; n],
-            screen_grad_norm: vec![0.0; n],
-            radius: vec![0.0; n],
-        };
+        let mut g = SplatGrads::zeros(n);
         for i in 0..n {
             let Some((mu, r, jac)) = project(cam, s.means[i], s.log_scales[i]) else {
                 continue;
@@ -308,11 +300,13 @@ fn run_stops_on_the_flag_and_counts_phases() {
     });
     assert!(sum.interrupted);
     assert_eq!((sum.iterations, seen), (25, 25));
-    assert!(sum.static_seconds > 0.0 && sum.deform_seconds > 0.0);
+    // 10 static iterations, then the field is on.
+    assert_eq!((sum.static_steps, sum.deform_steps), (10, 15));
     stop.store(false, Ordering::Relaxed);
     let sum = t.run(&Additive, &views, &stop, |_| {});
     assert!(!sum.interrupted);
     assert_eq!(sum.iterations, 40);
+    assert_eq!((sum.static_steps, sum.deform_steps), (0, 15));
 }
 
 /// With the default zero head, switching the field on leaves the model exactly as the

@@ -52,23 +52,23 @@ fn to_u8_levels(img: &Image) -> Vec<f32> {
 }
 
 /// PSNR (dB) of two 8-bit images given as 0–255 levels; `f64::INFINITY` when equal.
-/// The formula is `gaussians::metrics::psnr_u8`'s (levels ÷ 255 quantise back to the
+/// The formula is `scene::metrics::psnr_u8`'s (levels ÷ 255 quantise back to the
 /// same levels), so `degs eval` and the `gaussians` report agree.
 pub fn psnr_u8(a: &[f32], b: &[f32]) -> f64 {
     let unit = |x: &[f32]| x.iter().map(|v| v / 255.0).collect::<Vec<f32>>();
-    gaussians::metrics::psnr_u8(&unit(a), &unit(b))
+    scene::metrics::psnr_u8(&unit(a), &unit(b))
 }
 
-/// Mean SSIM of interleaved images given as 0–255 levels: `gaussians::metrics::ssim_u8`
+/// Mean SSIM of interleaved images given as 0–255 levels: `scene::metrics::ssim_u8`
 /// (11×11 Gaussian window, σ = 1.5, K1 = 0.01, K2 = 0.03, zero-padded windows averaged
 /// over every pixel and channel, as the 3DGS/Deform-GS evaluation computes it), so
 /// `degs eval` and the `gaussians` report give the same figure for the same renders.
 pub fn ssim_u8(a: &[f32], b: &[f32], width: usize, height: usize, channels: usize) -> f64 {
     let planar = |x: &[f32]| {
         let unit: Vec<f32> = x.iter().map(|v| v / 255.0).collect();
-        gaussians::metrics::interleaved_to_planar(&unit, width, height, channels)
+        scene::metrics::interleaved_to_planar(&unit, width, height, channels)
     };
-    gaussians::metrics::ssim_u8(&planar(a), &planar(b), width, height)
+    scene::metrics::ssim_u8(&planar(a), &planar(b), width, height)
 }
 
 /// PSNR of identical images is reported as this (dB), so means and JSON stay finite.

@@ -1,6 +1,7 @@
 //! `scene` — the shared data layer of degs (DESIGN §2–§3): camera model, scene
-//! manifest, event streams and their readers/writers, image and EXR helpers, atomic
-//! outputs, and analytic synthetic scenes with ground truth.
+//! manifest, event streams and their readers/writers, image and EXR helpers, image
+//! metrics (PSNR, SSIM) and the losses built on them, atomic outputs, and analytic
+//! synthetic scenes with ground truth.
 
 pub mod atomic;
 pub mod camera;
@@ -14,6 +15,7 @@ pub use events::{EventSlice, EventStream};
 pub mod formats;
 pub mod image_io;
 pub mod manifest;
+pub mod metrics;
 pub mod optim;
 pub mod report;
 pub mod synth;

@@ -1,7 +1,8 @@
 //! `field.safetensors` (weights, tensors `layers.{i}.weight` `[in, out]` and
 //! `layers.{i}.bias`; the last layer is the 10-output head) + `field.json` (settings).
 
-use super::{FieldSettings, Mlp};
+use super::mlp::Mlp;
+use super::settings::FieldSettings;
 use safetensors::{Dtype, SafeTensors, tensor::TensorView};
 use scene::error::{Error, Result};
 use std::path::Path;

@@ -4,8 +4,8 @@
 //! `D / 2` when `D ≥ 5` (Deform-GS: after layer 4 of 8), one linear head of 10 outputs
 //! (δx 3, δq 4, δs 3; equal to three separate heads), no output activation.
 
-use super::FieldSettings;
 use super::linalg::{Real, View, matmul};
+use super::settings::FieldSettings;
 use rand::{RngExt, SeedableRng};
 
 /// Number of head outputs: δx (3), δq (4), δs (3).

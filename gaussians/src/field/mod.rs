@@ -1,208 +1,23 @@
 //! Deformation field (DEGS Eq. 3, after Deform-GS): an MLP maps the encoded canonical
 //! position and time to `(δx, δq, δs)`, applied after activation:
 //! `μ' = μ + δx`, `s' = exp(log s) + δs`, `q' = q/‖q‖ + δq` (the rasterizer renormalises).
+//!
+//! [`settings`] (hyper-parameters) ← [`mlp`] (the network, on [`linalg`]) ← [`io`]
+//! (`field.safetensors`); [`deltas`] (the output and its application to one Gaussian's
+//! parameters) ← [`on_splats`] (the field evaluated on [`crate::Splats`], restricted to
+//! the dynamic ones when asked).
 
+pub mod deltas;
 pub mod io;
 pub mod linalg;
 pub mod mlp;
+pub mod on_splats;
+pub mod settings;
 
+pub use deltas::{
+    DeformMlp, Deformation, Deformed, DeltaGrads, Deltas, MIN_SCALE, apply_deltas,
+    apply_deltas_backward,
+};
 pub use mlp::{HEAD_OUT, Mlp, MlpCache};
-use serde::{Deserialize, Serialize};
-
-/// Field hyper-parameters (saved as `field.json`).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct FieldSettings {
-    /// Hidden layers D.
-    pub depth: usize,
-    /// Hidden width W.
-    pub width: usize,
-    /// Positional-encoding frequencies for x (Deform-GS: 10 → 63 dims).
-    pub pos_freqs: usize,
-    /// Positional-encoding frequencies for t (Deform-GS synthetic: 6 → 13 dims).
-    pub time_freqs: usize,
-    /// Initialisation seed.
-    pub seed: u64,
-    /// Start the output head at zero (weights and bias), so the field is the identity
-    /// when it is switched on and the static phase's model is not disturbed. Off: the
-    /// PyTorch/Deform-GS default init, whose random head moves every Gaussian by
-    /// ~0.1–0.3 units and perturbs its scale and rotation at the switch.
-    pub zero_head_init: bool,
-}
-
-impl Default for FieldSettings {
-    fn default() -> Self {
-        FieldSettings {
-            depth: 4,
-            width: 64,
-            pos_freqs: 10,
-            time_freqs: 6,
-            seed: 0,
-            zero_head_init: true,
-        }
-    }
-}
-
-/// Per-Gaussian deltas, struct of arrays.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct Deltas {
-    pub dx: Vec<[f32; 3]>,
-    pub dq: Vec<[f32; 4]>,
-    pub ds: Vec<[f32; 3]>,
-}
-
-impl Deltas {
-    pub fn zeros(n: usize) -> Self {
-        Deltas {
-            dx: vec![[0.0; 3]; n],
-            dq: vec![[0.0; 4]; n],
-            ds: vec![[0.0; 3]; n],
-        }
-    }
-    pub fn len(&self) -> usize {
-        self.dx.len()
-    }
-    pub fn is_empty(&self) -> bool {
-        self.dx.is_empty()
-    }
-    fn from_rows(rows: &[f32]) -> Self {
-        let n = rows.len() / HEAD_OUT;
-        let mut d = Deltas::zeros(n);
-        for (i, r) in rows.chunks(HEAD_OUT).enumerate() {
-            d.dx[i] = [r[0], r[1], r[2]];
-            d.dq[i] = [r[3], r[4], r[5], r[6]];
-            d.ds[i] = [r[7], r[8], r[9]];
-        }
-        d
-    }
-    fn to_rows(&self) -> Vec<f32> {
-        let mut rows = Vec::with_capacity(self.len() * HEAD_OUT);
-        for i in 0..self.len() {
-            rows.extend_from_slice(&self.dx[i]);
-            rows.extend_from_slice(&self.dq[i]);
-            rows.extend_from_slice(&self.ds[i]);
-        }
-        rows
-    }
-}
-
-/// A learnable deformation field.
-pub trait Deformation: Send + Sync {
-    type Cache;
-    /// Deltas for positions `x` at times `t` (length 1 = same time for all, or `x.len()`).
-    fn forward(&self, x: &[[f32; 3]], t: &[f32]) -> (Deltas, Self::Cache);
-    /// Parameter gradients from the deltas' gradients (no gradient into x: detached).
-    fn backward(&self, cache: &Self::Cache, grads: &Deltas) -> Vec<f32>;
-    fn params(&self) -> &[f32];
-    fn params_mut(&mut self) -> &mut [f32];
-}
-
-/// The Deform-GS MLP in f32.
-pub type DeformMlp = Mlp<f32>;
-
-impl Deformation for Mlp<f32> {
-    type Cache = MlpCache<f32>;
-    fn forward(&self, x: &[[f32; 3]], t: &[f32]) -> (Deltas, Self::Cache) {
-        let (rows, cache) = Mlp::forward(self, x, t);
-        (Deltas::from_rows(&rows), cache)
-    }
-    fn backward(&self, cache: &Self::Cache, grads: &Deltas) -> Vec<f32> {
-        Mlp::backward(self, cache, &grads.to_rows())
-    }
-    fn params(&self) -> &[f32] {
-        &self.params
-    }
-    fn params_mut(&mut self) -> &mut [f32] {
-        &mut self.params
-    }
-}
-
-/// Smallest activated scale after adding δs (keeps the log finite).
-pub const MIN_SCALE: f32 = 1e-6;
-
-/// Deformed Gaussian parameters in the rasterizer's raw form (log-scale, raw quaternion
-/// w-first), for the Gaussians listed.
-#[derive(Clone, Debug, Default)]
-pub struct Deformed {
-    pub means: Vec<[f32; 3]>,
-    pub log_scales: Vec<[f32; 3]>,
-    pub rotations: Vec<[f32; 4]>,
-}
-
-/// Apply deltas: `μ' = μ + δx`, `log s' = ln(max(exp(log s) + δs, 1e-6))`,
-/// `q' = q/‖q‖ + δq`.
-pub fn apply_deltas(
-    means: &[[f32; 3]],
-    log_scales: &[[f32; 3]],
-    rotations: &[[f32; 4]],
-    d: &Deltas,
-) -> Deformed {
-    let n = means.len();
-    let mut out = Deformed {
-        means: Vec::with_capacity(n),
-        log_scales: Vec::with_capacity(n),
-        rotations: Vec::with_capacity(n),
-    };
-    for i in 0..n {
-        let m = means[i];
-        out.means
-            .push([m[0] + d.dx[i][0], m[1] + d.dx[i][1], m[2] + d.dx[i][2]]);
-        let ls = log_scales[i];
-        out.log_scales.push(std::array::from_fn(|k| {
-            (ls[k].exp() + d.ds[i][k]).max(MIN_SCALE).ln()
-        }));
-        let q = rotations[i];
-        let norm = q.iter().map(|v| v * v).sum::<f32>().sqrt().max(1e-12);
-        out.rotations
-            .push(std::array::from_fn(|k| q[k] / norm + d.dq[i][k]));
-    }
-    out
-}
-
-/// Gradients of the canonical parameters and of the deltas, from the gradients of the
-/// deformed ones (`g_*`, as returned by the rasterizer's backward).
-pub struct DeltaGrads {
-    pub means: Vec<[f32; 3]>,
-    pub log_scales: Vec<[f32; 3]>,
-    pub rotations: Vec<[f32; 4]>,
-    pub deltas: Deltas,
-}
-
-/// Backward of [`apply_deltas`].
-pub fn apply_deltas_backward(
-    log_scales: &[[f32; 3]],
-    rotations: &[[f32; 4]],
-    d: &Deltas,
-    g_means: &[[f32; 3]],
-    g_log_scales: &[[f32; 3]],
-    g_rotations: &[[f32; 4]],
-) -> DeltaGrads {
-    let n = log_scales.len();
-    let mut out = DeltaGrads {
-        means: g_means.to_vec(),
-        log_scales: vec![[0.0; 3]; n],
-        rotations: vec![[0.0; 4]; n],
-        deltas: Deltas::zeros(n),
-    };
-    for i in 0..n {
-        out.deltas.dx[i] = g_means[i];
-        for k in 0..3 {
-            let e = log_scales[i][k].exp();
-            let s = e + d.ds[i][k];
-            if s > MIN_SCALE {
-                // d ln(s)/dδs = 1/s ; d ln(s)/d log s = exp(log s)/s
-                out.deltas.ds[i][k] = g_log_scales[i][k] / s;
-                out.log_scales[i][k] = g_log_scales[i][k] * e / s;
-            }
-        }
-        out.deltas.dq[i] = g_rotations[i];
-        // d(q/‖q‖)/dq = (I − n nᵀ)/‖q‖
-        let q = rotations[i];
-        let norm = q.iter().map(|v| v * v).sum::<f32>().sqrt().max(1e-12);
-        let nq: [f32; 4] = std::array::from_fn(|k| q[k] / norm);
-        let g = g_rotations[i];
-        let dot: f32 = (0..4).map(|k| g[k] * nq[k]).sum();
-        out.rotations[i] = std::array::from_fn(|k| (g[k] - dot * nq[k]) / norm);
-    }
-    out
-}
+pub use on_splats::{deform_splats, evaluated_indices, splat_deltas, splat_deltas_backward};
+pub use settings::FieldSettings;

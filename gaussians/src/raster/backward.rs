@@ -4,11 +4,11 @@
 //! shared writes; the pairs are then summed per Gaussian and chained through the
 //! projection in parallel. The camera gradient is reduced in f64.
 
-use super::forward::{Plane, lane_bits, row_span};
+use super::alpha::{ALPHA_MAX, eval_alpha};
+use super::forward::{Plane, RenderState, TILE, lane_bits, row_span};
 use super::project::{ScreenGrad, project, project_backward};
 use super::simd::{self, F4, Lanes, Mask};
-use super::{ALPHA_MAX, RenderState, TILE, eval_alpha};
-use crate::train::{SplatGrads, Splats};
+use crate::splats::{SplatGrads, Splats};
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 use scene::Camera;
@@ -199,14 +199,8 @@ pub(crate) fn backward(
 
     let n = s.len();
     let mut g = SplatGrads {
-        means: vec![[0.0; 3]; n],
-        log_scales: vec![[0.0; 3]; n],
-        rotations: vec![[0.0; 4]; n],
-        opacity_logits: vec![0.0; n],
-        sh_dc: vec![[0.0; 3]; n],
-        sh_rest: vec![[0.0; 45]; n],
-        screen_grad_norm: vec![0.0; n],
         radius: st.radius.clone(),
+        ..SplatGrads::zeros(n)
     };
     let cam32 = &st.cam;
     let (half_w, half_h) = (0.5 * w as f32, 0.5 * h as f32);

@@ -2,11 +2,45 @@
 //! them into 16×16 tiles (a stable counting sort, so every tile list stays in depth
 //! order), then composite each tile front to back (DEGS Eq. 1) in parallel.
 
+use super::alpha::{T_MIN, eval_alpha};
 use super::project::{CamSetup, project};
+use super::rasterizer::RenderedImage;
 use super::simd::{self, F4, Lanes, Mask};
-use super::{RenderState, T_MIN, TILE, eval_alpha};
-use crate::train::{Frame, Splats};
+use crate::splats::Splats;
 use rayon::prelude::*;
+
+/// Tile side in pixels.
+pub const TILE: usize = 16;
+
+/// Everything the backward needs from a forward pass.
+pub struct RenderState {
+    pub(crate) cam: CamSetup,
+    pub(crate) sh_degree: u32,
+    pub(crate) background: [f32; 3],
+    pub(crate) n: usize,
+    pub(crate) proj: Projected,
+    pub(crate) tiles: Tiles,
+    pub(crate) radius: Vec<f32>,
+    pub(crate) t_final: Vec<f32>,
+    /// Per pixel: number of entries of its tile list processed up to and including the
+    /// last one that contributed.
+    pub(crate) last: Vec<u32>,
+}
+
+impl RenderState {
+    /// The visible Gaussians in depth order.
+    pub fn projected(&self) -> &Projected {
+        &self.proj
+    }
+    /// Screen radius per input Gaussian (0 = culled).
+    pub fn radius(&self) -> &[f32] {
+        &self.radius
+    }
+    /// Number of (Gaussian, tile) pairs composited.
+    pub fn pairs(&self) -> usize {
+        self.tiles.list.len()
+    }
+}
 
 /// Visible projected Gaussians in depth order (struct of arrays).
 #[derive(Clone, Debug, Default)]
@@ -211,6 +245,7 @@ fn tile_forward_avx512(p: &Projected, list: &[u32], r: [usize; 4]) -> TileOut {
 
 /// Gaussian-outer, then for each row of the Gaussian's box the lane chunks that meet
 /// its ellipse; per lane branch-free (masked lanes get α = 0).
+// Eq. 1: C = Σᵢ cᵢ αᵢ Πⱼ₍ⱼ<ᵢ₎ (1 − αⱼ), front to back (depth and alpha alike).
 #[inline(always)]
 fn tile_forward_lanes<V: Lanes>(p: &Projected, list: &[u32], r: [usize; 4]) -> TileOut {
     let mut o = TileOut {
@@ -288,7 +323,7 @@ pub(crate) fn render(
     cam: &CamSetup,
     sh_degree: u32,
     background: [f32; 3],
-) -> (Frame, RenderState) {
+) -> (RenderedImage, RenderState) {
     let (w, h) = (cam.width, cam.height);
     let (proj, radius) = project_all(s, cam, sh_degree);
     let tiles = bin(&proj, w, h);
@@ -297,7 +332,7 @@ pub(crate) fn render(
         .map(|t| tile_forward(&proj, tiles.of(t), tiles.rect(t, w, h)))
         .collect();
     let np = w * h;
-    let mut f = Frame {
+    let mut f = RenderedImage {
         width: w,
         height: h,
         rgb: vec![0.0; 3 * np],

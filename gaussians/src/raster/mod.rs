@@ -2,7 +2,7 @@
 //!
 //! [`TileRasterizer`] renders colour (SH up to degree 3), alpha-blended camera depth and
 //! accumulated alpha, and back-propagates gradients of all three to every Gaussian
-//! parameter and to the camera pose. [`reference`] is a plain f64 renderer with the same
+//! parameter and to the camera pose. [`reference`](mod@reference) is a plain f64 renderer with the same
 //! cut-offs, used by the tests.
 //!
 //! Cut-offs (shared with the reference): near plane `d > 0.01`, low-pass `0.3 px²` on
@@ -21,54 +21,23 @@
 // Index loops mirror the math; negated comparisons deliberately reject NaN.
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
+mod alpha;
 mod backward;
 mod forward;
 pub mod project;
+mod rasterizer;
 pub mod reference;
 pub mod sh;
-
 pub mod simd;
 
-pub use forward::Projected;
+pub use alpha::{ALPHA_MAX, ALPHA_MIN, CULL_OPACITY, LOW_PASS, NEAR, SIGMA_CUTOFF, T_MIN};
+pub use forward::{Projected, RenderState, TILE};
+pub use rasterizer::{Rasterizer, RenderedImage};
 
-use crate::train::{Frame, Rasterizer, SplatGrads, Splats};
+use crate::splats::{SplatGrads, Splats};
 use glam::{DQuat, DVec3};
 use project::CamSetup;
 use scene::{Camera, Pose};
-use simd::{Lanes, Mask};
-
-/// Tile side in pixels.
-pub const TILE: usize = 16;
-/// Gaussians with camera depth at or below this are culled.
-pub const NEAR: f32 = 0.01;
-/// Added to the diagonal of every 2-D covariance (pixels²).
-pub const LOW_PASS: f32 = 0.3;
-/// Gaussians are evaluated inside `dᵀΣ⁻¹d ≤ SIGMA_CUTOFF²`.
-pub const SIGMA_CUTOFF: f32 = 3.0;
-/// Largest alpha of one Gaussian at one pixel.
-pub const ALPHA_MAX: f32 = 0.99;
-/// Contributions below this alpha are skipped.
-pub const ALPHA_MIN: f32 = 1.0 / 255.0;
-/// Gaussians less opaque than this cannot reach `ALPHA_MIN` and are culled.
-pub const CULL_OPACITY: f32 = 1.0 / 255.0;
-/// A pixel stops compositing before its transmittance would drop below this.
-pub const T_MIN: f32 = 1e-4;
-
-/// `(α, raw)` of a Gaussian with `conic` and opacity `op` at a few pixels with offsets
-/// `(dx, dy)` = pixel − mean; `α = 0` outside the 3σ ellipse or where `α < ALPHA_MIN`;
-/// `raw = o·G` before the clamp at `ALPHA_MAX` (the clamp stops the gradient). Forward
-/// and backward call this same function, so their decisions agree bit for bit.
-#[inline(always)]
-pub(crate) fn eval_alpha<V: Lanes>(conic: [f32; 3], op: f32, dx: V, dy: V) -> (V, V) {
-    let s = V::splat;
-    let maha = (s(conic[0]) * dx + s(2.0 * conic[1]) * dy) * dx + s(conic[2]) * dy * dy;
-    let raw = s(op) * simd::fast_exp(s(-0.5) * maha);
-    let alpha = raw.min(s(ALPHA_MAX));
-    let ok = maha
-        .le(s(SIGMA_CUTOFF * SIGMA_CUTOFF))
-        .and(s(ALPHA_MIN).le(alpha));
-    (alpha.and(ok), raw)
-}
 
 /// Apply a twist `δ = (v, ω)` to a camera-to-world pose by left perturbation (see the
 /// module docs): `R' = exp([ω]×)·R`, `t' = exp([ω]×)·t + v`.
@@ -79,36 +48,6 @@ pub fn apply_twist(pose: &Pose, twist: [f64; 6]) -> Pose {
     Pose {
         rotation: (dq * pose.rotation).normalize(),
         translation: dq * pose.translation + v,
-    }
-}
-
-/// Everything the backward needs from a forward pass.
-pub struct RenderState {
-    pub(crate) cam: CamSetup,
-    pub(crate) sh_degree: u32,
-    pub(crate) background: [f32; 3],
-    pub(crate) n: usize,
-    pub(crate) proj: Projected,
-    pub(crate) tiles: forward::Tiles,
-    pub(crate) radius: Vec<f32>,
-    pub(crate) t_final: Vec<f32>,
-    /// Per pixel: number of entries of its tile list processed up to and including the
-    /// last one that contributed.
-    pub(crate) last: Vec<u32>,
-}
-
-impl RenderState {
-    /// The visible Gaussians in depth order.
-    pub fn projected(&self) -> &Projected {
-        &self.proj
-    }
-    /// Screen radius per input Gaussian (0 = culled).
-    pub fn radius(&self) -> &[f32] {
-        &self.radius
-    }
-    /// Number of (Gaussian, tile) pairs composited.
-    pub fn pairs(&self) -> usize {
-        self.tiles.list.len()
     }
 }
 
@@ -128,7 +67,7 @@ impl TileRasterizer {
         cam: &Camera,
         sh_degree: u32,
         background: [f32; 3],
-    ) -> (Frame, RenderState) {
+    ) -> (RenderedImage, RenderState) {
         forward::render(s, &CamSetup::new(cam), sh_degree.min(3), background)
     }
 
@@ -157,7 +96,7 @@ impl Rasterizer for TileRasterizer {
         cam: &Camera,
         sh_degree: u32,
         background: [f32; 3],
-    ) -> (Frame, RenderState) {
+    ) -> (RenderedImage, RenderState) {
         self.render_full(s, cam, sh_degree, background)
     }
 

@@ -5,8 +5,9 @@
 //! signs because `v = cy − fy·y/d`), `Σ₂ = J W Σ Wᵀ Jᵀ + 0.3·I`, conic `Σ₂⁻¹`.
 //! Colour from SH at the world-space view direction, `+0.5`, clamped at 0.
 
-use super::{ALPHA_MIN, CULL_OPACITY, LOW_PASS, NEAR, SIGMA_CUTOFF, sh};
-use crate::train::Splats;
+use super::alpha::{ALPHA_MIN, CULL_OPACITY, LOW_PASS, NEAR, SIGMA_CUTOFF};
+use super::sh;
+use crate::splats::Splats;
 use glam::{Mat3, Vec3};
 use scene::Camera;
 
@@ -173,6 +174,7 @@ pub fn reach(opacity: f32) -> f32 {
 
 /// Project Gaussian `i`; `None` when it is culled (behind the near plane, degenerate,
 /// transparent, or its 3σ ellipse misses the image).
+// Eq. 2: Σ = R S Sᵀ Rᵀ, then its 2-D projection Σ₂ = J W Σ Wᵀ Jᵀ (+ low-pass).
 #[inline]
 pub fn project(s: &Splats, i: usize, cam: &CamSetup, sh_degree: u32) -> Option<Geo> {
     let opacity = 1.0 / (1.0 + (-s.opacity_logits[i]).exp());

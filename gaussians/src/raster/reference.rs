@@ -1,9 +1,9 @@
 //! A plain f64 renderer for tests: every Gaussian at every pixel, one global depth
 //! sort, no tiles, the same cut-offs as [`super::TileRasterizer`]. Slow by design.
 
-use super::{ALPHA_MAX, ALPHA_MIN, CULL_OPACITY, LOW_PASS, NEAR, SIGMA_CUTOFF, T_MIN};
+use super::alpha::{ALPHA_MAX, ALPHA_MIN, CULL_OPACITY, LOW_PASS, NEAR, SIGMA_CUTOFF, T_MIN};
 use super::{project::jacobian_limits, sh};
-use crate::train::Splats;
+use crate::splats::Splats;
 use glam::{DMat3, DQuat, DVec3};
 use scene::Camera;
 
@@ -33,7 +33,7 @@ impl From<&Splats> for Gaussians64 {
 
 /// Planar RGB `3×H×W`, depth and alpha `H×W`.
 #[derive(Clone, Debug, Default)]
-pub struct RefFrame {
+pub struct RenderedImage64 {
     pub width: usize,
     pub height: usize,
     pub rgb: Vec<f64>,
@@ -49,6 +49,7 @@ struct Splat2 {
     depth: f64,
 }
 
+// Eq. 2: Σ = R S Sᵀ Rᵀ, then Σ₂ = J W Σ Wᵀ Jᵀ (+ low-pass).
 fn splat2(g: &Gaussians64, i: usize, cam: &Camera, sh_degree: u32) -> Option<Splat2> {
     let k = &cam.intrinsics;
     let opacity = 1.0 / (1.0 + (-g.opacity_logits[i]).exp());
@@ -109,7 +110,13 @@ fn splat2(g: &Gaussians64, i: usize, cam: &Camera, sh_degree: u32) -> Option<Spl
 }
 
 /// Render `g` from `cam`.
-pub fn render(g: &Gaussians64, cam: &Camera, sh_degree: u32, background: [f64; 3]) -> RefFrame {
+// Eq. 1: C = Σᵢ cᵢ αᵢ Πⱼ₍ⱼ<ᵢ₎ (1 − αⱼ) over the depth-sorted Gaussians.
+pub fn render(
+    g: &Gaussians64,
+    cam: &Camera,
+    sh_degree: u32,
+    background: [f64; 3],
+) -> RenderedImage64 {
     let (w, h) = (
         cam.intrinsics.width as usize,
         cam.intrinsics.height as usize,
@@ -120,7 +127,7 @@ pub fn render(g: &Gaussians64, cam: &Camera, sh_degree: u32, background: [f64; 3
         .collect();
     splats.sort_by(|a, b| a.1.depth.total_cmp(&b.1.depth).then(a.0.cmp(&b.0)));
     let np = w * h;
-    let mut f = RefFrame {
+    let mut f = RenderedImage64 {
         width: w,
         height: h,
         rgb: vec![0.0; 3 * np],

@@ -439,17 +439,23 @@ pub fn set_wide(enabled: bool) {
     WIDE.store(enabled, std::sync::atomic::Ordering::Relaxed);
 }
 
-/// True when the 16-lane kernels should run.
+/// Whether this CPU can run the 16-lane kernels (x86_64 with AVX-512F).
 #[inline]
-pub fn use_wide() -> bool {
+pub fn wide_available() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
-        WIDE.load(std::sync::atomic::Ordering::Relaxed) && is_x86_feature_detected!("avx512f")
+        is_x86_feature_detected!("avx512f")
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
         false
     }
+}
+
+/// True when the 16-lane kernels should run: allowed ([`set_wide`]) and available.
+#[inline]
+pub fn use_wide() -> bool {
+    WIDE.load(std::sync::atomic::Ordering::Relaxed) && wide_available()
 }
 
 #[cfg(test)]

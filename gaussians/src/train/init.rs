@@ -2,7 +2,7 @@
 //! synthetic init: random points, random colours, opacity 0.1, identity rotation), and
 //! the scene extent (1.1 × the largest camera-centre distance from their mean).
 
-use super::Splats;
+use crate::splats::{Gaussian, Splats};
 use glam::DVec3;
 use rand::{RngExt, SeedableRng};
 use scene::Camera;
@@ -100,19 +100,15 @@ pub fn random_splats(n: usize, centre: DVec3, half: f64, seed: u64) -> Splats {
     let spacing = 0.55 * ((2.0 * half).powi(3) / n.max(1) as f64).cbrt();
     let ls = (spacing as f32).ln();
     let opacity = (0.1f32 / 0.9).ln();
-    let mut s = Splats::default();
+    let mut s = Splats::with_capacity(n);
     for _ in 0..n {
         let p: [f32; 3] =
             std::array::from_fn(|k| (centre[k] + half * rng.random_range(-1.0..1.0)) as f32);
-        s.means.push(p);
-        s.log_scales.push([ls; 3]);
-        s.rotations.push([1.0, 0.0, 0.0, 0.0]);
-        s.opacity_logits.push(opacity);
-        s.sh_dc.push(std::array::from_fn(|_| {
-            (rng.random_range(0.0f32..1.0) - 0.5) / SH_C0
-        }));
-        s.sh_rest.push([0.0; 45]);
-        s.dynamic.push(true);
+        let sh_dc = std::array::from_fn(|_| (rng.random_range(0.0f32..1.0) - 0.5) / SH_C0);
+        s.push(Gaussian {
+            dynamic: true,
+            ..Gaussian::isotropic(p, ls, opacity, sh_dc)
+        });
     }
     s
 }
@@ -156,15 +152,12 @@ pub fn frustum_splats(
         );
         let depth = rng.random_range(near_frac * d..far_frac * d);
         let p = cam.unproject_world(px, depth);
-        s.means.push([p.x as f32, p.y as f32, p.z as f32]);
-        s.log_scales.push([ls; 3]);
-        s.rotations.push([1.0, 0.0, 0.0, 0.0]);
-        s.opacity_logits.push(opacity);
-        s.sh_dc.push(std::array::from_fn(|_| {
-            (rng.random_range(0.0f32..1.0) - 0.5) / SH_C0
-        }));
-        s.sh_rest.push([0.0; 45]);
-        s.dynamic.push(true);
+        let mean = [p.x as f32, p.y as f32, p.z as f32];
+        let sh_dc = std::array::from_fn(|_| (rng.random_range(0.0f32..1.0) - 0.5) / SH_C0);
+        s.push(Gaussian {
+            dynamic: true,
+            ..Gaussian::isotropic(mean, ls, opacity, sh_dc)
+        });
     }
     s
 }
@@ -228,13 +221,11 @@ pub fn stereo_splats(
     let opacity = (0.1f32 / 0.9).ln();
     for p in pts {
         let scale = 0.5 * p.depth / p.focal * px_spacing;
-        s.means.push(p.position);
-        s.log_scales.push([scale.max(1e-6).ln(); 3]);
-        s.rotations.push([1.0, 0.0, 0.0, 0.0]);
-        s.opacity_logits.push(opacity);
-        s.sh_dc.push(p.colour.map(|c| (c - 0.5) / SH_C0));
-        s.sh_rest.push([0.0; 45]);
-        s.dynamic.push(true);
+        let sh_dc = p.colour.map(|c| (c - 0.5) / SH_C0);
+        s.push(Gaussian {
+            dynamic: true,
+            ..Gaussian::isotropic(p.position, scale.max(1e-6).ln(), opacity, sh_dc)
+        });
     }
     (s, found)
 }

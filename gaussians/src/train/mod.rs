@@ -1,83 +1,22 @@
-//! RGB-only training of a dynamic Gaussian model (DEGS warm-up, DESIGN §5):
+//! RGB-only training of a dynamic Gaussian model (DEGS warm-up, `docs/DESIGN.md` §5):
 //! canonical Gaussians optimised with Adam under L1 (+ D-SSIM), densified as 3DGS, and
 //! after a static phase a deformation field `F(γ(x), γ(t))` (Deform-GS).
 //!
 //! The rasterizer is reached through the [`Rasterizer`] trait so the loop can be tested
-//! on its own; [`Splats`] holds the trainable parameters as struct of arrays.
+//! on its own; [`Splats`] holds the trainable parameters.
 
 pub mod init;
 pub mod settings;
 pub mod stereo;
 
 use crate::densify::{self, Geometry, GradStats};
-use crate::field::{self, Deformation, Mlp};
-use crate::metrics;
+use crate::field::{self, Mlp};
 use crate::optim::{Adam, ExpSchedule};
+use crate::raster::{Rasterizer, RenderedImage};
+use crate::splats::{SplatGrads, Splats};
 use scene::Camera;
+use scene::metrics;
 pub use settings::TrainSettings;
-
-/// Trainable Gaussians (raw: log-scale, logit opacity, quaternion w-first; SH DC and
-/// rest stored apart as 3DGS `features_dc` / `features_rest`, rest coefficient-major:
-/// `rest[i][(k−1)·3 + c]` for k = 1..16).
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct Splats {
-    pub means: Vec<[f32; 3]>,
-    pub log_scales: Vec<[f32; 3]>,
-    pub rotations: Vec<[f32; 4]>,
-    pub opacity_logits: Vec<f32>,
-    pub sh_dc: Vec<[f32; 3]>,
-    pub sh_rest: Vec<[f32; 45]>,
-    /// Per Gaussian: deformed by the field (used when `TrainSettings::dynamic_only`).
-    pub dynamic: Vec<bool>,
-}
-
-impl Splats {
-    pub fn len(&self) -> usize {
-        self.means.len()
-    }
-    pub fn is_empty(&self) -> bool {
-        self.means.is_empty()
-    }
-}
-
-/// A rendered image (planar RGB `3 × H × W`, depth and alpha `H × W`).
-#[derive(Clone, Debug, Default)]
-pub struct Frame {
-    pub width: usize,
-    pub height: usize,
-    pub rgb: Vec<f32>,
-    pub depth: Vec<f32>,
-    pub alpha: Vec<f32>,
-}
-
-/// Gradients from the rasterizer, per Gaussian, plus densification statistics.
-#[derive(Clone, Debug, Default)]
-pub struct SplatGrads {
-    pub means: Vec<[f32; 3]>,
-    pub log_scales: Vec<[f32; 3]>,
-    pub rotations: Vec<[f32; 4]>,
-    pub opacity_logits: Vec<f32>,
-    pub sh_dc: Vec<[f32; 3]>,
-    pub sh_rest: Vec<[f32; 45]>,
-    /// ‖∂L/∂(projected mean)‖ in NDC units as 3DGS (for densification).
-    pub screen_grad_norm: Vec<f32>,
-    /// Screen radius in pixels (0 = not rendered).
-    pub radius: Vec<f32>,
-}
-
-/// A differentiable renderer.
-pub trait Rasterizer: Sync {
-    type State;
-    fn render(
-        &self,
-        s: &Splats,
-        cam: &Camera,
-        sh_degree: u32,
-        background: [f32; 3],
-    ) -> (Frame, Self::State);
-    /// Backward from the gradient of the loss w.r.t. the planar RGB image.
-    fn backward(&self, s: &Splats, cam: &Camera, state: &Self::State, d_rgb: &[f32]) -> SplatGrads;
-}
 
 /// A training view: camera, normalised time, planar RGB target.
 #[derive(Clone, Debug)]
@@ -173,36 +112,22 @@ impl Trainer {
             return (self.splats.clone(), None);
         }
         let (d, cache) = self.field_deltas(t);
-        (apply_field(&self.splats, &d), Some((d, cache)))
-    }
-
-    /// Indices the field is evaluated on: all, or the dynamic ones when `dynamic_only`.
-    fn field_indices(&self) -> Option<Vec<usize>> {
-        field_indices(&self.splats, self.settings.dynamic_only)
+        (field::deform_splats(&self.splats, &d), Some((d, cache)))
     }
 
     /// Field deltas for every Gaussian at time `t`.
     fn field_deltas(&self, t: f32) -> (field::Deltas, field::MlpCache<f32>) {
-        field_deltas(&self.field, &self.splats, t, self.settings.dynamic_only)
+        field::splat_deltas(&self.field, &self.splats, t, self.settings.dynamic_only)
     }
 
     /// Field parameter gradients from the gradients of all Gaussians' deltas.
     fn field_backward(&self, cache: &field::MlpCache<f32>, g: &field::Deltas) -> Vec<f32> {
-        match self.field_indices() {
-            None => Deformation::backward(&self.field, cache, g),
-            Some(idx) => {
-                let sub = field::Deltas {
-                    dx: idx.iter().map(|&i| g.dx[i]).collect(),
-                    dq: idx.iter().map(|&i| g.dq[i]).collect(),
-                    ds: idx.iter().map(|&i| g.ds[i]).collect(),
-                };
-                Deformation::backward(&self.field, cache, &sub)
-            }
-        }
+        let dynamic_only = self.settings.dynamic_only;
+        field::splat_deltas_backward(&self.field, &self.splats, dynamic_only, cache, g)
     }
 
     /// Render the model at a camera and time.
-    pub fn render<R: Rasterizer>(&self, r: &R, cam: &Camera, t: f32) -> Frame {
+    pub fn render<R: Rasterizer>(&self, r: &R, cam: &Camera, t: f32) -> RenderedImage {
         let (s, _) = self.deformed(t);
         r.render(&s, cam, self.sh_degree(), self.settings.background)
             .0
@@ -353,55 +278,14 @@ impl Trainer {
     }
 }
 
-/// Indices the field is evaluated on: all (`None`), or the dynamic ones when
-/// `dynamic_only` (missing flags count as dynamic).
-pub fn field_indices(splats: &Splats, dynamic_only: bool) -> Option<Vec<usize>> {
-    dynamic_only.then(|| {
-        (0..splats.len())
-            .filter(|&i| splats.dynamic.get(i).copied().unwrap_or(true))
-            .collect()
-    })
-}
-
-/// Field deltas for every Gaussian at time `t` (zero for static-flagged ones when
-/// `dynamic_only`; the field then runs on the dynamic subset only).
-pub fn field_deltas(
-    mlp: &Mlp<f32>,
-    splats: &Splats,
-    t: f32,
-    dynamic_only: bool,
-) -> (field::Deltas, field::MlpCache<f32>) {
-    match field_indices(splats, dynamic_only) {
-        None => Deformation::forward(mlp, &splats.means, &[t]),
-        Some(idx) => {
-            let sub: Vec<[f32; 3]> = idx.iter().map(|&i| splats.means[i]).collect();
-            let (ds, cache) = Deformation::forward(mlp, &sub, &[t]);
-            let mut d = field::Deltas::zeros(splats.len());
-            for (k, &i) in idx.iter().enumerate() {
-                d.dx[i] = ds.dx[k];
-                d.dq[i] = ds.dq[k];
-                d.ds[i] = ds.ds[k];
-            }
-            (d, cache)
-        }
-    }
-}
-
-/// The Gaussians deformed by `deltas` (Deform-GS: after activation).
-pub fn apply_field(splats: &Splats, deltas: &field::Deltas) -> Splats {
-    let g = field::apply_deltas(&splats.means, &splats.log_scales, &splats.rotations, deltas);
-    Splats {
-        means: g.means,
-        log_scales: g.log_scales,
-        rotations: g.rotations,
-        ..splats.clone()
-    }
-}
-
-/// Wall time per phase and how the run ended (for `report.json`).
+/// Steps and wall time per phase and how the run ended (for `report.json`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct RunSummary {
+    /// The trainer's iteration count at the end of the run.
     pub iterations: u32,
+    /// Steps this run took before / after the field was switched on.
+    pub static_steps: u32,
+    pub deform_steps: u32,
     pub static_seconds: f64,
     pub deform_seconds: f64,
     pub interrupted: bool,
@@ -430,8 +314,10 @@ impl Trainer {
             let info = self.step(r, views);
             let dt = t0.elapsed().as_secs_f64();
             if info.field_on {
+                sum.deform_steps += 1;
                 sum.deform_seconds += dt;
             } else {
+                sum.static_steps += 1;
                 sum.static_seconds += dt;
             }
             sum.final_loss = info.loss;

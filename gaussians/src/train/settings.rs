@@ -1,5 +1,5 @@
 //! Training settings (`settings.toml`): schedules and learning rates after Deform-GS
-//! (REFERENCES.md), scaled to the 3500-iteration warm-up of DEGS.
+//! (`docs/REFERENCES.md`), scaled to the 3500-iteration warm-up of DEGS.
 
 pub use super::stereo::StereoSettings;
 use crate::densify::DensifySettings;

@@ -1,7 +1,7 @@
 //! Random test scenes shared by the rasterizer tests.
 #![allow(dead_code)]
 
-use gaussians::train::Splats;
+use gaussians::{Gaussian, Splats};
 use glam::DVec3;
 use scene::{Camera, Intrinsics, Pose};
 
@@ -58,43 +58,27 @@ pub struct SceneKind {
 
 /// Random Gaussians around the origin (camera at distance ≈ 4 on +Z).
 pub fn random_splats(rng: &mut Rng, k: SceneKind) -> Splats {
-    let mut s = Splats::default();
-    for _ in 0..k.n {
-        s.means.push([
-            rng.uf(-k.spread, k.spread),
-            rng.uf(-k.spread, k.spread),
-            rng.uf(-k.spread, k.spread),
-        ]);
-        s.log_scales.push([
-            rng.uf(k.log_scale.0, k.log_scale.1),
-            rng.uf(k.log_scale.0, k.log_scale.1),
-            rng.uf(k.log_scale.0, k.log_scale.1),
-        ]);
-        s.rotations.push([
-            rng.uf(-1.0, 1.0),
-            rng.uf(-1.0, 1.0),
-            rng.uf(-1.0, 1.0),
-            rng.uf(-1.0, 1.0),
-        ]);
-        s.opacity_logits.push(rng.uf(k.logit.0, k.logit.1));
-        s.sh_dc
-            .push([rng.uf(-1.2, 1.2), rng.uf(-1.2, 1.2), rng.uf(-1.2, 1.2)]);
-        s.sh_rest
-            .push(std::array::from_fn(|_| rng.uf(-k.sh_rest, k.sh_rest)));
-        s.dynamic.push(false);
-    }
-    s
+    (0..k.n)
+        .map(|_| Gaussian {
+            mean: std::array::from_fn(|_| rng.uf(-k.spread, k.spread)),
+            log_scale: std::array::from_fn(|_| rng.uf(k.log_scale.0, k.log_scale.1)),
+            rotation: std::array::from_fn(|_| rng.uf(-1.0, 1.0)),
+            opacity_logit: rng.uf(k.logit.0, k.logit.1),
+            sh_dc: std::array::from_fn(|_| rng.uf(-1.2, 1.2)),
+            sh_rest: std::array::from_fn(|_| rng.uf(-k.sh_rest, k.sh_rest)),
+            dynamic: false,
+        })
+        .collect()
 }
 
 /// Append one Gaussian with the given mean (isotropic scale, fixed colour).
 pub fn push_gaussian(s: &mut Splats, mean: [f32; 3], log_scale: f32, logit: f32) {
-    s.means.push(mean);
-    s.log_scales.push([log_scale; 3]);
-    s.rotations.push([1.0, 0.0, 0.0, 0.0]);
-    s.opacity_logits.push(logit);
-    s.sh_dc.push([0.5, -0.2, 0.1]);
-    s.sh_rest.push([0.0; 45]);
-    s.dynamic.push(false);
+    s.push(Gaussian::isotropic(
+        mean,
+        log_scale,
+        logit,
+        [0.5, -0.2, 0.1],
+    ));
 }
 
 pub fn max_abs_diff(a: &[f32], b: &[f64]) -> f64 {

@@ -1,6 +1,6 @@
 //! PSNR / SSIM values and invariants; D-SSIM and L1 gradients against finite differences.
 
-use gaussians::metrics::{dssim_loss, l1_loss, psnr_u8, ssim_and_grad, ssim_u8};
+use scene::metrics::{dssim_loss, l1_loss, psnr_u8, ssim_and_grad, ssim_u8};
 
 fn pattern(n: usize, seed: f64) -> Vec<f64> {
     (0..n)

@@ -1,0 +1,37 @@
+//! Hyper-parameters of the deformation field (`field.json`).
+
+use serde::{Deserialize, Serialize};
+
+/// Field hyper-parameters (saved as `field.json`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FieldSettings {
+    /// Hidden layers D.
+    pub depth: usize,
+    /// Hidden width W.
+    pub width: usize,
+    /// Positional-encoding frequencies for x (Deform-GS: 10 → 63 dims).
+    pub pos_freqs: usize,
+    /// Positional-encoding frequencies for t (Deform-GS synthetic: 6 → 13 dims).
+    pub time_freqs: usize,
+    /// Initialisation seed.
+    pub seed: u64,
+    /// Start the output head at zero (weights and bias), so the field is the identity
+    /// when it is switched on and the static phase's model is not disturbed. Off: the
+    /// PyTorch/Deform-GS default init, whose random head moves every Gaussian by
+    /// ~0.1–0.3 units and perturbs its scale and rotation at the switch.
+    pub zero_head_init: bool,
+}
+
+impl Default for FieldSettings {
+    fn default() -> Self {
+        FieldSettings {
+            depth: 4,
+            width: 64,
+            pos_freqs: 10,
+            time_freqs: 6,
+            seed: 0,
+            zero_head_init: true,
+        }
+    }
+}

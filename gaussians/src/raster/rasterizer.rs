@@ -1,0 +1,61 @@
+//! What any differentiable renderer of [`Splats`] offers the trainer: the
+//! [`Rasterizer`] trait and the [`RenderedImage`] it produces.
+
+use crate::splats::{SplatGrads, Splats};
+use scene::Camera;
+use scene::image_io::Image;
+
+/// A rendered image: planar RGB `3 × H × W`, alpha-blended camera depth and
+/// accumulated alpha `H × W`.
+#[derive(Clone, Debug, Default)]
+pub struct RenderedImage {
+    pub width: usize,
+    pub height: usize,
+    pub rgb: Vec<f32>,
+    pub depth: Vec<f32>,
+    pub alpha: Vec<f32>,
+}
+
+impl RenderedImage {
+    /// Alpha-normalised depth (`depth / alpha`; 0 where alpha < 0.5), as the warm-up
+    /// writes it to `depth/NNNN.exr`.
+    pub fn normalised_depth(&self) -> Vec<f32> {
+        self.depth
+            .iter()
+            .zip(&self.alpha)
+            .map(|(&d, &a)| if a >= 0.5 { d / a } else { 0.0 })
+            .collect()
+    }
+
+    /// The colour as an interleaved image clamped to [0, 1] (ready for a PNG).
+    pub fn rgb_image(&self) -> Image {
+        let n = self.width * self.height;
+        let mut data = Vec::with_capacity(3 * n);
+        for p in 0..n {
+            for c in 0..3 {
+                data.push(self.rgb[c * n + p].clamp(0.0, 1.0));
+            }
+        }
+        Image {
+            width: self.width as u32,
+            height: self.height as u32,
+            channels: 3,
+            data,
+        }
+    }
+}
+
+/// A differentiable renderer.
+pub trait Rasterizer: Sync {
+    /// What the backward needs from the forward pass.
+    type State;
+    fn render(
+        &self,
+        s: &Splats,
+        cam: &Camera,
+        sh_degree: u32,
+        background: [f32; 3],
+    ) -> (RenderedImage, Self::State);
+    /// Backward from the gradient of the loss w.r.t. the planar RGB image.
+    fn backward(&self, s: &Splats, cam: &Camera, state: &Self::State, d_rgb: &[f32]) -> SplatGrads;
+}

@@ -1,0 +1,149 @@
+//! The Gaussians as trainable parameters: [`Splats`] (struct of arrays, what the
+//! rasterizer, the trainer and the model files share), [`Gaussian`] (one row of it) and
+//! [`SplatGrads`] (what a rasterizer's backward returns).
+
+/// Trainable Gaussians (raw: log-scale, logit opacity, quaternion w-first; SH DC and
+/// rest stored apart as 3DGS `features_dc` / `features_rest`, rest coefficient-major:
+/// `rest[i][(k−1)·3 + c]` for k = 1..16).
+///
+/// Build one with [`Splats::push`] or by collecting [`Gaussian`]s.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Splats {
+    pub means: Vec<[f32; 3]>,
+    pub log_scales: Vec<[f32; 3]>,
+    pub rotations: Vec<[f32; 4]>,
+    pub opacity_logits: Vec<f32>,
+    pub sh_dc: Vec<[f32; 3]>,
+    pub sh_rest: Vec<[f32; 45]>,
+    /// Per Gaussian: deformed by the field (used when `TrainSettings::dynamic_only`).
+    /// Empty when the Gaussians carry no flags (every Gaussian counts as dynamic).
+    pub dynamic: Vec<bool>,
+}
+
+/// One Gaussian's raw parameters (a row of [`Splats`], same conventions).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Gaussian {
+    pub mean: [f32; 3],
+    pub log_scale: [f32; 3],
+    /// Quaternion `(w, x, y, z)`, not necessarily normalised.
+    pub rotation: [f32; 4],
+    pub opacity_logit: f32,
+    pub sh_dc: [f32; 3],
+    pub sh_rest: [f32; 45],
+    pub dynamic: bool,
+}
+
+impl Gaussian {
+    /// An isotropic Gaussian (scale `exp(log_scale)` on every axis, identity rotation)
+    /// of constant colour (SH DC only), flagged static.
+    pub fn isotropic(mean: [f32; 3], log_scale: f32, opacity_logit: f32, sh_dc: [f32; 3]) -> Self {
+        Gaussian {
+            mean,
+            log_scale: [log_scale; 3],
+            rotation: [1.0, 0.0, 0.0, 0.0],
+            opacity_logit,
+            sh_dc,
+            sh_rest: [0.0; 45],
+            dynamic: false,
+        }
+    }
+}
+
+impl Splats {
+    /// No Gaussians, room for `n`.
+    pub fn with_capacity(n: usize) -> Self {
+        Splats {
+            means: Vec::with_capacity(n),
+            log_scales: Vec::with_capacity(n),
+            rotations: Vec::with_capacity(n),
+            opacity_logits: Vec::with_capacity(n),
+            sh_dc: Vec::with_capacity(n),
+            sh_rest: Vec::with_capacity(n),
+            dynamic: Vec::with_capacity(n),
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.means.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.means.is_empty()
+    }
+
+    /// Append a Gaussian, its dynamic flag included.
+    pub fn push(&mut self, g: Gaussian) {
+        self.means.push(g.mean);
+        self.log_scales.push(g.log_scale);
+        self.rotations.push(g.rotation);
+        self.opacity_logits.push(g.opacity_logit);
+        self.sh_dc.push(g.sh_dc);
+        self.sh_rest.push(g.sh_rest);
+        self.dynamic.push(g.dynamic);
+    }
+
+    /// Gaussian `i` (a missing flag reads as dynamic). Panics when `i ≥ len()`.
+    pub fn get(&self, i: usize) -> Gaussian {
+        Gaussian {
+            mean: self.means[i],
+            log_scale: self.log_scales[i],
+            rotation: self.rotations[i],
+            opacity_logit: self.opacity_logits[i],
+            sh_dc: self.sh_dc[i],
+            sh_rest: self.sh_rest[i],
+            dynamic: self.is_dynamic(i),
+        }
+    }
+
+    /// Whether the field deforms Gaussian `i` (a missing flag counts as dynamic).
+    pub fn is_dynamic(&self, i: usize) -> bool {
+        self.dynamic.get(i).copied().unwrap_or(true)
+    }
+}
+
+impl Extend<Gaussian> for Splats {
+    fn extend<I: IntoIterator<Item = Gaussian>>(&mut self, iter: I) {
+        for g in iter {
+            self.push(g);
+        }
+    }
+}
+
+impl FromIterator<Gaussian> for Splats {
+    fn from_iter<I: IntoIterator<Item = Gaussian>>(iter: I) -> Self {
+        let mut s = Splats::default();
+        s.extend(iter);
+        s
+    }
+}
+
+/// Gradients from the rasterizer, per Gaussian, plus densification statistics.
+#[derive(Clone, Debug, Default)]
+pub struct SplatGrads {
+    pub means: Vec<[f32; 3]>,
+    pub log_scales: Vec<[f32; 3]>,
+    pub rotations: Vec<[f32; 4]>,
+    pub opacity_logits: Vec<f32>,
+    pub sh_dc: Vec<[f32; 3]>,
+    pub sh_rest: Vec<[f32; 45]>,
+    /// ‖∂L/∂(projected mean)‖ in NDC units as 3DGS (for densification).
+    pub screen_grad_norm: Vec<f32>,
+    /// Screen radius in pixels (0 = not rendered).
+    pub radius: Vec<f32>,
+}
+
+impl SplatGrads {
+    /// All-zero gradients for `n` Gaussians.
+    pub fn zeros(n: usize) -> Self {
+        SplatGrads {
+            means: vec![[0.0; 3]; n],
+            log_scales: vec![[0.0; 3]; n],
+            rotations: vec![[0.0; 4]; n],
+            opacity_logits: vec![0.0; n],
+            sh_dc: vec![[0.0; 3]; n],
+            sh_rest: vec![[0.0; 45]; n],
+            screen_grad_norm: vec![0.0; n],
+            radius: vec![0.0; n],
+        }
+    }
+}
