@@ -2,11 +2,9 @@
 //! contrast-maximisation loss and LoCM fine-tuning (DESIGN §2, §5).
 
 pub mod cm;
-pub mod cm_grad;
 pub mod eval;
 pub mod finetune;
 pub mod flowfile;
-pub mod lora;
 pub mod net;
 pub mod predict;
 pub mod pretrain;
@@ -15,4 +13,3 @@ pub mod source;
 pub mod stage;
 pub mod synthesize;
 pub mod voxel;
-pub mod weights;

@@ -11,7 +11,7 @@ use std::path::PathBuf;
 /// (LoRA + contrast maximisation). Outputs per-event flow files (`flow/NNNN.evflow`,
 /// px/s) that `assoc` and `deform` read, dense previews and report.json.
 #[derive(Parser, Debug)]
-#[command(name = "evflow", version, after_help = evflow::weights::TENSOR_NAMES_HELP)]
+#[command(name = "evflow", version, after_help = evflow::net::io::TENSOR_NAMES_HELP)]
 struct Cli {
     #[command(subcommand)]
     cmd: Cmd,

@@ -128,7 +128,7 @@ pub fn run(
     phases.start("load");
     emit(Event::Phase("load"));
     let src = input.open()?;
-    let weights = crate::finetune::resolve_weights(s.weights.as_deref())?;
+    let weights = crate::net::io::resolve_weights(s.weights.as_deref())?;
     if !weights.is_file() {
         return Err(Error::invalid(
             &weights,
@@ -136,13 +136,13 @@ pub fn run(
         ));
     }
     let device = Device::flex().autodiff();
-    let loaded = crate::weights::load(&weights, &s.bare_weights(), &device, DType::F32)?;
+    let loaded = crate::net::io::load(&weights, &s.bare_weights(), &device, DType::F32)?;
     if let Some(note) = loaded.note(&weights) {
         emit(Event::Warning(&note));
     }
     let mut net = loaded.net;
     if let Some(a) = adapter {
-        crate::lora::load_adapters(&mut net, a)?;
+        crate::net::io::load_adapters(&mut net, a)?;
     }
     let inputs = Inputs {
         events: src.events_path.clone(),
@@ -174,7 +174,7 @@ pub fn run(
         ft = crate::finetune::finetune(&mut net, &src, s, |st| emit(Event::Step(st)))?;
         match s.mode {
             Mode::Lora if ft.trainable_params > 0 => {
-                crate::lora::save_adapters(&net, &dir.path().join("adapter.safetensors"))?
+                crate::net::io::save_adapters(&net, &dir.path().join("adapter.safetensors"))?
             }
             Mode::Full if ft.trainable_params > 0 => net.save(
                 &dir.path().join("weights.safetensors"),

@@ -263,7 +263,7 @@ fn base_weights_hash(settings: &Table, hashes: &mut BinaryHashes) -> Result<Opti
         .get("weights")
         .and_then(|v| v.as_str())
         .map(std::path::PathBuf::from);
-    match evflow::finetune::resolve_weights(explicit.as_deref()) {
+    match evflow::net::io::resolve_weights(explicit.as_deref()) {
         Ok(path) if path.is_file() => Ok(Some(hashes.hash(&path)?)),
         _ => Ok(None),
     }

@@ -15,7 +15,7 @@
 //! **Loss.** `supervised_weight · mean EPE over pixels with events` (px per window, the
 //! network's unit) `+ cm_weight · L_CM` ([`crate::cm::cm_loss`] on the window's events
 //! with times normalised to `[0, 1]`, exact gradient through
-//! [`crate::cm_grad::cm_surrogate`]). Adam, learning rate decaying exponentially from
+//! [`crate::cm::cm_surrogate`]). Adam, learning rate decaying exponentially from
 //! `lr` to `lr_final`.
 //!
 //! **Held-out evaluation.** Scenes from `eval_seeds` (which must not overlap
@@ -468,7 +468,7 @@ pub fn run(
                 loss_value += wgt * l.loss;
                 let gu: Vec<f64> = l.grad_u.iter().map(|g| g * wgt).collect();
                 let gv: Vec<f64> = l.grad_v.iter().map(|g| g * wgt).collect();
-                total = total + crate::cm_grad::cm_surrogate(fk, &gu, &gv);
+                total = total + crate::cm::cm_surrogate(fk, &gu, &gv);
             }
         }
         if !loss_value.is_finite() {
