@@ -1,6 +1,7 @@
 //! `evflow` — event voxel grids, the event simulator, EV-FlowNet with LoRA, the
 //! contrast-maximisation loss and LoCM fine-tuning (DESIGN §2, §5).
 
+pub mod cli;
 pub mod cm;
 pub mod eval;
 pub mod finetune;
