@@ -110,7 +110,8 @@ pub fn file_hash(path: &Path) -> Result<String> {
 }
 
 /// Run the stage: fine-tune (`train`, per `s.mode`) then predict into `out`. `adapter`
-/// loads LoRA adapters onto the base weights before (predict-only runs).
+/// loads LoRA adapters onto the base weights before (predict-only runs): an adapter
+/// file or the output directory of `evflow finetune` ([`crate::net::io::adapter_file`]).
 pub fn run(
     input: &Input,
     out: &Path,
@@ -141,6 +142,8 @@ pub fn run(
         emit(Event::Warning(&note));
     }
     let mut net = loaded.net;
+    let adapter = adapter.map(crate::net::io::adapter_file).transpose()?;
+    let adapter = adapter.as_deref();
     if let Some(a) = adapter {
         crate::net::io::load_adapters(&mut net, a)?;
     }
@@ -174,7 +177,7 @@ pub fn run(
         ft = crate::finetune::finetune(&mut net, &src, s, |st| emit(Event::Step(st)))?;
         match s.mode {
             Mode::Lora if ft.trainable_params > 0 => {
-                crate::net::io::save_adapters(&net, &dir.path().join("adapter.safetensors"))?
+                crate::net::io::save_adapters(&net, &dir.path().join(crate::net::io::ADAPTER_FILE))?
             }
             Mode::Full if ft.trainable_params > 0 => net.save(
                 &dir.path().join("weights.safetensors"),

@@ -66,7 +66,8 @@ pub struct PredictArgs {
     pub input: InputArgs,
     #[command(flatten)]
     pub common: CommonArgs,
-    /// LoRA adapter (adapter.safetensors written by `evflow finetune`).
+    /// LoRA adapter: the output directory of `evflow finetune`, or the
+    /// adapter.safetensors in it (with its .json sidecar).
     #[arg(long)]
     pub adapter: Option<PathBuf>,
 }

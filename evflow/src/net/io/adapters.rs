@@ -9,7 +9,43 @@ use crate::net::tensor::to_f32;
 use burn::tensor::{Tensor, TensorData};
 use scene::error::{Error, Result};
 use serde::{Deserialize, Serialize};
-use std::path::Path;
+use std::path::{Path, PathBuf};
+
+/// File name of the adapters in the output directory of `evflow finetune --mode lora`
+/// (its sidecar is this name + `.json`).
+pub const ADAPTER_FILE: &str = "adapter.safetensors";
+
+/// The adapter file `--adapter PATH` means: `PATH/adapter.safetensors` when `PATH` is a
+/// directory (the output of `evflow finetune`), else `PATH` itself. Its JSON sidecar
+/// must be beside it; otherwise the error says what `--adapter` expects.
+pub fn adapter_file(path: &Path) -> Result<PathBuf> {
+    let expects = format!(
+        "--adapter takes the output directory of `evflow finetune` (mode lora), or the \
+         {ADAPTER_FILE} in it with its sidecar {ADAPTER_FILE}.json"
+    );
+    let file = if path.is_dir() {
+        let file = path.join(ADAPTER_FILE);
+        if !file.is_file() {
+            return Err(Error::invalid(
+                path,
+                format!("directory has no {ADAPTER_FILE}; {expects}"),
+            ));
+        }
+        file
+    } else if path.is_file() {
+        path.to_path_buf()
+    } else {
+        return Err(Error::invalid(path, format!("not found; {expects}")));
+    };
+    let side = sidecar(&file);
+    if !side.is_file() {
+        return Err(Error::invalid(
+            &side,
+            format!("adapter sidecar not found; {expects}"),
+        ));
+    }
+    Ok(file)
+}
 
 /// Sidecar of an adapter file.
 #[derive(Clone, Debug, Serialize, Deserialize)]

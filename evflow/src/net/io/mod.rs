@@ -5,7 +5,7 @@
 //! - [`weights`]: base weights ([`FlowNet::save`](crate::net::FlowNet::save),
 //!   [`FlowNet::load`](crate::net::FlowNet::load), and [`load`], which also takes bare
 //!   safetensors without a sidecar), and where the shipped weights are;
-//! - [`adapters`]: LoRA adapters on their own.
+//! - [`adapters`]: LoRA adapters on their own, and which file `--adapter` means.
 //!
 //! Dependencies point one way: this module uses the network ([`crate::net::flownet`])
 //! and the adapters' math ([`crate::net::lora`]); they know nothing of files.
@@ -16,7 +16,7 @@ pub mod adapters;
 pub mod safetensors;
 pub mod weights;
 
-pub use adapters::{AdapterMeta, load_adapters, save_adapters};
+pub use adapters::{ADAPTER_FILE, AdapterMeta, adapter_file, load_adapters, save_adapters};
 pub use safetensors::{NamedF32, TensorMap, read_safetensors, sidecar, take, write_safetensors};
 pub use weights::{
     BareWeights, DEFAULT_MAX_FLOW, Loaded, TENSOR_NAMES_HELP, WEIGHTS_ENV, WeightsMeta,
