@@ -1,5 +1,5 @@
-//! LoCM fine-tuning (paper Eq. 7–8, DESIGN §5): adapt the pretrained flow network to one
-//! recording with the contrast-maximisation loss only (no ground truth).
+//! LoCM fine-tuning (paper Eq. 7–8, `docs/DESIGN.md` §5): adapt the pretrained flow
+//! network to one recording with the contrast-maximisation loss only (no ground truth).
 //!
 //! Per step (one window): voxel grid → network → dense flow (px per window) →
 //! [`crate::cm::cm_loss`] on the window's undistorted events with times normalised to

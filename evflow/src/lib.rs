@@ -1,5 +1,5 @@
 //! `evflow` — event voxel grids, the event simulator, EV-FlowNet with LoRA, the
-//! contrast-maximisation loss and LoCM fine-tuning (DESIGN §2, §5).
+//! contrast-maximisation loss and LoCM fine-tuning (`docs/DESIGN.md` §2, §5).
 
 pub mod cli;
 pub mod cm;

@@ -1,5 +1,5 @@
-//! The `evflow` stage (DESIGN §4): fine-tune then predict, or predict only, into an
-//! output directory that appears complete or not at all:
+//! The `evflow` stage (`docs/DESIGN.md` §4): fine-tune then predict, or predict only,
+//! into an output directory that appears complete or not at all:
 //!
 //! ```text
 //! OUT/adapter.safetensors(.json)   LoRA adapters (mode lora)

@@ -53,7 +53,7 @@ fn output_has_input_size_and_is_bounded() {
         dims,
         vec![[1, 2, 4, 4], [1, 2, 8, 8], [1, 2, 16, 16], [1, 2, 32, 32]]
     );
-    // 14.1 M parameters at base 64 (REFERENCES): the layout matches the original.
+    // 14.1 M parameters at base 64 (`docs/REFERENCES.md`): the layout matches the original.
     let big = evflow::net::layout(&cfg(64));
     let n: usize = big.iter().map(|(_, o, i, k, _)| o * i * k * k + o).sum();
     assert!(

@@ -1,5 +1,5 @@
 //! Pretraining of the flow network on synthetic scenes with ground-truth flow (issue 4
-//! item 4, DESIGN §5 "Pretrained weights").
+//! item 4, `docs/DESIGN.md` §5 "Pretrained weights").
 //!
 //! **Data.** For every `(preset, seed)` a synthetic world is built in memory from the
 //! preset ([`scene::synth::SynthConfig::preset`]) and randomised by the seed
