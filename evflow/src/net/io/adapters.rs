@@ -2,7 +2,7 @@
 //! `[out, r]` for every convolution, and a JSON sidecar with the rank, α and the network
 //! settings they were trained for.
 
-use super::safetensors::{read_safetensors, sidecar, take, write_safetensors};
+use super::tensor_file::{read_safetensors, sidecar, take, write_safetensors};
 use crate::net::flownet::{FlowNet, NetConfig};
 use crate::net::lora::Lora;
 use crate::net::tensor::to_f32;

@@ -13,7 +13,7 @@
 //! Every tensor is then checked by name and shape against [`layout`]; see
 //! [`TENSOR_NAMES_HELP`] for the names.
 
-use super::safetensors::{TensorMap, read_safetensors, sidecar, take, write_safetensors};
+use super::tensor_file::{TensorMap, read_safetensors, sidecar, take, write_safetensors};
 use crate::net::flownet::{Conv, FlowNet, NetConfig, layout};
 use crate::net::tensor::{tensor4, to_f32};
 use burn::tensor::{DType, Device, Tensor, TensorData};
