@@ -1,6 +1,6 @@
-//! Flow evaluation (issue 4 item 8, DESIGN §5 "Metrics"): end-point error and outliers
-//! against ground truth where it exists, the flow-warp loss always, and the shared real
-//! ECD slice (`shared/data/ecd_shapes_rotation/`) as a scored test case.
+//! Flow evaluation (issue 4 item 8, `docs/DESIGN.md` §5 "Metrics"): end-point error and
+//! outliers against ground truth where it exists, the flow-warp loss always, and the
+//! shared real ECD slice (`shared/data/ecd_shapes_rotation/`) as a scored test case.
 //!
 //! **Units.** [`flow_metrics`] compares flows in the same unit; the 3 px outlier
 //! threshold assumes *pixel displacement over the window* (the network's unit, the

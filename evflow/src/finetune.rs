@@ -1,21 +1,22 @@
-//! LoCM fine-tuning (paper Eq. 7–8, DESIGN §5): adapt the pretrained flow network to one
-//! recording with the contrast-maximisation loss only (no ground truth).
+//! LoCM fine-tuning (paper Eq. 7–8, `docs/DESIGN.md` §5): adapt the pretrained flow
+//! network to one recording with the contrast-maximisation loss only (no ground truth).
 //!
 //! Per step (one window): voxel grid → network → dense flow (px per window) →
 //! [`crate::cm::cm_loss`] on the window's undistorted events with times normalised to
 //! `[0, 1]` (so its flow unit is px per window too) → its exact f64 gradient is pushed
-//! into burn's graph through [`crate::cm_grad::cm_surrogate`] → Adam on the trainable
+//! into burn's graph through [`crate::cm::cm_surrogate`] → Adam on the trainable
 //! tensors. Modes: `lora` (adapters r = 16 on every conv, base frozen; default), `full`
 //! (every base weight trainable; the paper's "Full Ft"), `none` (pretrained as is).
 //! The learning rate decays exponentially from `lr_start` to `lr_end` over all steps.
 //! Windows without events are skipped (nothing to sharpen).
 
+use crate::net::io::BareWeights;
 use crate::net::{FlowNet, NetConfig, to_f32, to_f64};
 use crate::source::Source;
-use burn::tensor::{DType, Device, Gradients, Tensor, TensorData};
+use burn::tensor::{Gradients, Tensor, TensorData};
 use scene::error::{Error, Result};
 use serde::{Deserialize, Serialize};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 /// Which parameters LoCM trains.
@@ -132,8 +133,8 @@ impl FlowSettings {
     }
 
     /// Settings for base weights without a sidecar.
-    pub fn bare_weights(&self) -> crate::weights::BareWeights {
-        crate::weights::BareWeights {
+    pub fn bare_weights(&self) -> BareWeights {
+        BareWeights {
             base: self.weights_width,
             max_flow: self.weights_max_flow,
         }
@@ -146,58 +147,6 @@ impl FlowSettings {
             first_level: 0,
         }
     }
-}
-
-/// Environment variable that overrides the shipped weights' location.
-pub const WEIGHTS_ENV: &str = "EVFLOW_WEIGHTS";
-
-/// Directory of the weights shipped with the project.
-pub fn shipped_weights_dir() -> PathBuf {
-    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/weights"))
-}
-
-/// The base weights to use: `explicit` if given, else `$EVFLOW_WEIGHTS`, else the shipped
-/// `evflow/weights/default.safetensors` (or the only `*.safetensors` there).
-pub fn resolve_weights(explicit: Option<&Path>) -> Result<PathBuf> {
-    if let Some(p) = explicit {
-        return Ok(p.to_path_buf());
-    }
-    if let Some(p) = std::env::var_os(WEIGHTS_ENV) {
-        return Ok(PathBuf::from(p));
-    }
-    let dir = shipped_weights_dir();
-    let default = dir.join("default.safetensors");
-    if default.is_file() {
-        return Ok(default);
-    }
-    let mut found: Vec<PathBuf> = std::fs::read_dir(&dir)
-        .map(|rd| {
-            rd.filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|p| p.extension().is_some_and(|e| e == "safetensors"))
-                .collect()
-        })
-        .unwrap_or_default();
-    found.sort();
-    match found.len() {
-        1 => Ok(found.remove(0)),
-        0 => Err(Error::invalid(
-            &dir,
-            format!(
-                "no shipped flow-network weights here; pass --weights FILE \
-                 (or set {WEIGHTS_ENV}), or run `evflow pretrain`"
-            ),
-        )),
-        _ => Err(Error::invalid(
-            &dir,
-            "several weight files and no default.safetensors; pass --weights FILE",
-        )),
-    }
-}
-
-/// Load base weights onto `device` (which may be an autodiff device); without a
-/// sidecar the settings are inferred from the tensors ([`crate::weights::load`]).
-pub fn load_base(path: &Path, device: &Device) -> Result<FlowNet> {
-    crate::weights::load(path, &Default::default(), device, DType::F32).map(|l| l.net)
 }
 
 /// A copy of `net` for inference: adapters merged, tensors off the autodiff graph.
@@ -419,7 +368,7 @@ pub fn finetune(
                     w.index
                 )));
             }
-            let grads = crate::cm_grad::cm_surrogate(flow, &l.grad_u, &l.grad_v).backward();
+            let grads = crate::cm::cm_surrogate(flow, &l.grad_u, &l.grad_v).backward();
             k += 1;
             for (ci, c) in net.convs.iter_mut().enumerate() {
                 let (s0, s1) = slots[2 * ci..].split_at_mut(1);

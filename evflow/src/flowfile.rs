@@ -1,4 +1,5 @@
-//! Per-event flow files `.evflow` (DESIGN §3) and Middlebury `.flo` dense previews.
+//! Per-event flow files `.evflow` (`docs/DESIGN.md` §3) and Middlebury `.flo` dense
+//! previews.
 //!
 //! **`.evflow`**, little-endian, an 88-byte header followed by three columns:
 //!

@@ -1,12 +1,11 @@
 //! `evflow` — event voxel grids, the event simulator, EV-FlowNet with LoRA, the
-//! contrast-maximisation loss and LoCM fine-tuning (DESIGN §2, §5).
+//! contrast-maximisation loss and LoCM fine-tuning (`docs/DESIGN.md` §2, §5).
 
+pub mod cli;
 pub mod cm;
-pub mod cm_grad;
 pub mod eval;
 pub mod finetune;
 pub mod flowfile;
-pub mod lora;
 pub mod net;
 pub mod predict;
 pub mod pretrain;
@@ -15,4 +14,3 @@ pub mod source;
 pub mod stage;
 pub mod synthesize;
 pub mod voxel;
-pub mod weights;

@@ -1,10 +1,11 @@
 //! Where the events of a flow run come from, cut into windows.
 //!
-//! - **A scene directory** (DESIGN §3): the events of the train manifest, one window per
-//!   interval between consecutive train frames, `[t_i, t_{i+1})` (the last one includes
-//!   its end). Window `i` is written as `flow/iiii.evflow`. A scene with a single train
-//!   frame has no interval: that is an error naming `transforms_train.json` (give the
-//!   event file with `--events` and `--window` instead).
+//! - **A scene directory** (`docs/DESIGN.md` §3): the events of the train manifest, one
+//!   window per interval between consecutive train frames, `[t_i, t_{i+1})` (the last
+//!   one includes its end). Window `i` is written as `flow/iiii.evflow`. A scene with a
+//!   single train frame has no interval: that is an error naming
+//!   `transforms_train.json` (give the event file with `--events` and `--window`
+//!   instead).
 //! - **A bare event file** (`--events FILE --sensor WxH [--calib calib.txt]
 //!   [--window T0,T1]… [--window-length S]`): the windows given; else consecutive windows
 //!   of `S` seconds from the first event; else one window over the whole stream.

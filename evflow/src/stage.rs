@@ -1,5 +1,5 @@
-//! The `evflow` stage (DESIGN §4): fine-tune then predict, or predict only, into an
-//! output directory that appears complete or not at all:
+//! The `evflow` stage (`docs/DESIGN.md` §4): fine-tune then predict, or predict only,
+//! into an output directory that appears complete or not at all:
 //!
 //! ```text
 //! OUT/adapter.safetensors(.json)   LoRA adapters (mode lora)
@@ -110,7 +110,8 @@ pub fn file_hash(path: &Path) -> Result<String> {
 }
 
 /// Run the stage: fine-tune (`train`, per `s.mode`) then predict into `out`. `adapter`
-/// loads LoRA adapters onto the base weights before (predict-only runs).
+/// loads LoRA adapters onto the base weights before (predict-only runs): an adapter
+/// file or the output directory of `evflow finetune` ([`crate::net::io::adapter_file`]).
 pub fn run(
     input: &Input,
     out: &Path,
@@ -128,7 +129,7 @@ pub fn run(
     phases.start("load");
     emit(Event::Phase("load"));
     let src = input.open()?;
-    let weights = crate::finetune::resolve_weights(s.weights.as_deref())?;
+    let weights = crate::net::io::resolve_weights(s.weights.as_deref())?;
     if !weights.is_file() {
         return Err(Error::invalid(
             &weights,
@@ -136,13 +137,15 @@ pub fn run(
         ));
     }
     let device = Device::flex().autodiff();
-    let loaded = crate::weights::load(&weights, &s.bare_weights(), &device, DType::F32)?;
+    let loaded = crate::net::io::load(&weights, &s.bare_weights(), &device, DType::F32)?;
     if let Some(note) = loaded.note(&weights) {
         emit(Event::Warning(&note));
     }
     let mut net = loaded.net;
+    let adapter = adapter.map(crate::net::io::adapter_file).transpose()?;
+    let adapter = adapter.as_deref();
     if let Some(a) = adapter {
-        crate::lora::load_adapters(&mut net, a)?;
+        crate::net::io::load_adapters(&mut net, a)?;
     }
     let inputs = Inputs {
         events: src.events_path.clone(),
@@ -174,7 +177,7 @@ pub fn run(
         ft = crate::finetune::finetune(&mut net, &src, s, |st| emit(Event::Step(st)))?;
         match s.mode {
             Mode::Lora if ft.trainable_params > 0 => {
-                crate::lora::save_adapters(&net, &dir.path().join("adapter.safetensors"))?
+                crate::net::io::save_adapters(&net, &dir.path().join(crate::net::io::ADAPTER_FILE))?
             }
             Mode::Full if ft.trainable_params > 0 => net.save(
                 &dir.path().join("weights.safetensors"),

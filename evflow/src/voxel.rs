@@ -1,4 +1,4 @@
-//! Event voxel grid (DESIGN §5, paper Eq. 15) — the flow network's input.
+//! Event voxel grid (`docs/DESIGN.md` §5, paper Eq. 15) — the flow network's input.
 //!
 //! For a window `[t_a, t_b]` and `B` bins, each event gets the normalised time
 //! `t*_i = (B−1)(t_i − t_a)/(t_b − t_a)` and is spread bilinearly in time over the two

@@ -91,6 +91,66 @@ fn bare_event_file_windows_and_calibration() {
     assert!(e.contains("calib.txt"), "{e}");
 }
 
+#[test]
+fn predict_takes_the_finetune_output_directory_as_adapter() {
+    let tmp = tempfile::tempdir().unwrap();
+    // A bar of events moving right over a 32x24 sensor for 0.5 s (one window).
+    let ev = tmp.path().join("ev.txt");
+    let lines: String = (0..3000)
+        .map(|i| {
+            let t = i as f64 / 6000.0;
+            let x = 4 + (40.0 * t) as u32 + i % 3;
+            format!("{t} {x} {} {}\n", 2 + (i * 7) % 20, i % 2)
+        })
+        .collect();
+    std::fs::write(&ev, lines).unwrap();
+    let run = |args: &[&str], out: &std::path::Path, adapter: Option<&std::path::Path>| {
+        let mut c = evflow();
+        c.args(args)
+            .arg("--events")
+            .arg(&ev)
+            .args(["--sensor", "32x24", "--no-previews", "--out"])
+            .arg(out);
+        if let Some(a) = adapter {
+            c.arg("--adapter").arg(a);
+        }
+        let run = c.output().unwrap();
+        let err = String::from_utf8_lossy(&run.stderr).into_owned();
+        (
+            run.status.code(),
+            err.lines().last().unwrap_or_default().to_string(),
+        )
+    };
+    let ft = tmp.path().join("ft");
+    let (code, last) = run(&["finetune", "--epochs", "1"], &ft, None);
+    assert_eq!(code, Some(0), "{last}");
+    let flow = |dir: &std::path::Path| evflow::flowfile::read_evflow(&dir.join("flow/0000.evflow"));
+    let tuned = flow(&ft).unwrap();
+    // The finetune output directory and the adapter file in it both give the fine-tuned
+    // flow (which differs from the base network's).
+    for (name, adapter) in [
+        ("dir", ft.clone()),
+        ("file", ft.join("adapter.safetensors")),
+    ] {
+        let out = tmp.path().join(name);
+        let (code, last) = run(&["predict"], &out, Some(&adapter));
+        assert_eq!(code, Some(0), "--adapter {name}: {last}");
+        assert_eq!(flow(&out).unwrap(), tuned, "--adapter {name}");
+    }
+    let base = tmp.path().join("base");
+    assert_eq!(run(&["predict"], &base, None).0, Some(0));
+    assert_ne!(flow(&base).unwrap(), tuned, "the adapter changes the flow");
+    // A directory without an adapter (the base prediction's): the error names it and
+    // says what --adapter takes.
+    let (code, last) = run(&["predict"], &tmp.path().join("x"), Some(&base));
+    assert_eq!(code, Some(1));
+    assert!(
+        last.contains("base") && last.contains("adapter.safetensors") && last.contains("finetune"),
+        "{last}"
+    );
+    assert!(!last.contains("base.json"), "{last}");
+}
+
 /// Grey PNG frames `frame_KKKK.png` (8-bit codes, row-major) and `timestamps.txt`: the
 /// layout `evflow simulate --frames DIR` reads.
 fn write_frame_dir(dir: &std::path::Path, w: u32, h: u32, codes: &[Vec<u8>], times: &[f64]) {

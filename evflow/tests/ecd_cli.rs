@@ -74,9 +74,19 @@ fn calibrated_event_file_predict_finetune_and_eval_against_flow_npy() {
         assert!(epe < 0.47 * gt, "EPE {epe} vs zero flow {gt}");
         assert!(ratio > 1.5, "flow-warp ratio {ratio}");
     }
-    // One LoCM step on the slice already lowers the EPE (3.69 -> 3.38 px measured) and
-    // sharpens the events more.
-    assert!(b.0 < a.0 - 0.3, "lora {} vs none {}", b.0, a.0);
+    // One LoCM step on the slice already lowers the EPE and sharpens the events more.
+    // Measured: 3.69 -> 3.38 px (8.6 % lower); over LoRA seeds 0-7 (`--seed`) 3.36 to
+    // 3.39 px, i.e. 8.2-9.0 % lower, a spread of 0.03 px. The bar is half the measured
+    // gain, 4 % (0.15 px): five times the seed spread away from the measurement, so a
+    // different platform's rounding does not flip it, while a LoCM step that stops
+    // helping (or keeps less than half its effect) fails.
+    assert!(
+        b.0 < 0.96 * a.0,
+        "lora {} vs none {}: {:.1} % lower, expected > 4 %",
+        b.0,
+        a.0,
+        100.0 * (1.0 - b.0 / a.0)
+    );
     assert!(b.1 < a.1, "outliers: lora {} vs none {}", b.1, a.1);
     assert!(b.4 > a.4, "flow-warp ratio: lora {} vs none {}", b.4, a.4);
     // The report records the undistortion grid and every event's flow.

@@ -5,6 +5,7 @@
 
 use burn::tensor::{DType, Device};
 use evflow::finetune::{FlowSettings, Mode, for_inference};
+use evflow::net::io::sidecar;
 use evflow::net::{FlowNet, NetConfig, tensor4, to_f64};
 use evflow::source::{Source, WindowSpec};
 use evflow::stage::{Event, Input};
@@ -149,7 +150,7 @@ fn lora_at_init_is_exact_and_merged_matches_unmerged() {
     let src = Source::from_scene(&scene).unwrap();
     let win = &src.windows[1];
     let dev = Device::flex().autodiff();
-    let mut net = evflow::finetune::load_base(&w, &dev).unwrap();
+    let mut net = evflow::net::io::load_base(&w, &dev).unwrap();
     let base = evflow::predict::dense_flow(&for_inference(&net), &src, win);
     net.attach_lora(16, 16.0, 3);
     // Unmerged forward on the autodiff net vs the base network.
@@ -232,7 +233,7 @@ fn single_frame_scene_and_corrupt_weights_give_clear_errors() {
     let bad = tmp.path().join("bad.safetensors");
     let bytes = std::fs::read(&w).unwrap();
     std::fs::write(&bad, &bytes[..bytes.len() / 3]).unwrap();
-    std::fs::copy(evflow::lora::sidecar(&w), evflow::lora::sidecar(&bad)).unwrap();
+    std::fs::copy(sidecar(&w), sidecar(&bad)).unwrap();
     let out = tmp.path().join("out");
     let e = evflow::stage::run(
         &Input::Scene(scene.clone()),

@@ -3,7 +3,7 @@
 //! gradient matches central finite differences in f64.
 
 use burn::tensor::{DType, Device, Tensor, TensorData};
-use evflow::lora::{load_adapters, save_adapters};
+use evflow::net::io::{load_adapters, save_adapters, sidecar};
 use evflow::net::{FlowNet, NetConfig, tensor4, to_f64};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -53,7 +53,7 @@ fn output_has_input_size_and_is_bounded() {
         dims,
         vec![[1, 2, 4, 4], [1, 2, 8, 8], [1, 2, 16, 16], [1, 2, 32, 32]]
     );
-    // 14.1 M parameters at base 64 (REFERENCES): the layout matches the original.
+    // 14.1 M parameters at base 64 (`docs/REFERENCES.md`): the layout matches the original.
     let big = evflow::net::layout(&cfg(64));
     let n: usize = big.iter().map(|(_, o, i, k, _)| o * i * k * k + o).sum();
     assert!(
@@ -135,7 +135,7 @@ fn corrupt_weights_give_errors_naming_the_file() {
             .path()
             .join(format!("{}.safetensors", what.replace(' ', "_")));
         std::fs::write(&p, b).unwrap();
-        std::fs::copy(evflow::lora::sidecar(&wpath), evflow::lora::sidecar(&p)).unwrap();
+        std::fs::copy(sidecar(&wpath), sidecar(&p)).unwrap();
         let e = FlowNet::load(&p, None, &dev, DType::F32)
             .unwrap_err()
             .to_string();
@@ -145,13 +145,13 @@ fn corrupt_weights_give_errors_naming_the_file() {
         );
     }
     // NaN in a kernel
-    let mut t = evflow::net::read_safetensors(&wpath).unwrap();
+    let mut t = evflow::net::io::read_safetensors(&wpath).unwrap();
     let mut named: Vec<_> = t.drain().map(|(n, (s, v))| (n, s, v)).collect();
     named.sort_by(|a, b| a.0.cmp(&b.0));
     named[0].2[0] = f32::NAN;
     let p = dir.path().join("nan.safetensors");
-    evflow::net::write_safetensors(&p, &named).unwrap();
-    std::fs::copy(evflow::lora::sidecar(&wpath), evflow::lora::sidecar(&p)).unwrap();
+    evflow::net::io::write_safetensors(&p, &named).unwrap();
+    std::fs::copy(sidecar(&wpath), sidecar(&p)).unwrap();
     let e = FlowNet::load(&p, None, &dev, DType::F32)
         .unwrap_err()
         .to_string();
@@ -162,10 +162,10 @@ fn corrupt_weights_give_errors_naming_the_file() {
     // wrong network width in the sidecar
     let p2 = dir.path().join("wide.safetensors");
     std::fs::copy(&wpath, &p2).unwrap();
-    let side = std::fs::read_to_string(evflow::lora::sidecar(&wpath)).unwrap();
+    let side = std::fs::read_to_string(sidecar(&wpath)).unwrap();
     let mut meta: serde_json::Value = serde_json::from_str(&side).unwrap();
     meta["net"]["base"] = serde_json::json!(3);
-    std::fs::write(evflow::lora::sidecar(&p2), meta.to_string()).unwrap();
+    std::fs::write(sidecar(&p2), meta.to_string()).unwrap();
     let e = FlowNet::load(&p2, None, &dev, DType::F32)
         .unwrap_err()
         .to_string();

@@ -4,8 +4,8 @@
 //! one-line errors that name the file, from the library and from the binary.
 
 use burn::tensor::{DType, Device};
+use evflow::net::io::{BareWeights, DEFAULT_MAX_FLOW, load};
 use evflow::net::{FlowNet, NetConfig, tensor4, to_f64};
-use evflow::weights::{BareWeights, DEFAULT_MAX_FLOW, load};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -25,7 +25,7 @@ fn weights(dir: &Path) -> (PathBuf, PathBuf) {
     net.save(&with, "test").unwrap();
     let bare = dir.join("bare.safetensors");
     std::fs::copy(&with, &bare).unwrap();
-    assert!(!evflow::lora::sidecar(&bare).exists());
+    assert!(!evflow::net::io::sidecar(&bare).exists());
     (with, bare)
 }
 
@@ -198,7 +198,7 @@ fn corrupt_bare_weights_name_the_file() {
     ];
     for (name, tensors, want) in cases {
         let p = tmp.path().join(name);
-        evflow::net::write_safetensors(&p, &tensors).unwrap();
+        evflow::net::io::write_safetensors(&p, &tensors).unwrap();
         let e = err_of(&p, BareWeights::default());
         assert!(e.contains(name) && e.contains(want), "{name}: {e}");
     }

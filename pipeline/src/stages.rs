@@ -202,7 +202,7 @@ fn evflow_base_weights(settings: &Table) -> Option<PathBuf> {
         .get("weights")
         .and_then(|v| v.as_str())
         .map(PathBuf::from);
-    evflow::finetune::resolve_weights(explicit.as_deref())
+    evflow::net::io::resolve_weights(explicit.as_deref())
         .ok()
         .filter(|p| p.is_file())
 }

@@ -1,7 +1,7 @@
 //! Pretraining data: the randomised synthetic scenes, their simulated events and
 //! ground-truth flow, and training samples (voxel grid + target flow) cut from them.
 
-use super::PretrainSettings;
+use super::settings::PretrainSettings;
 use crate::cm::CmEvents;
 use crate::synthesize::simulate_scene;
 use glam::DVec3;

@@ -1,58 +1,50 @@
-//! LoRA adapters on convolutions (paper Eq. 7; REFERENCES "LoRA on convolutions").
-//!
-//! A kernel `W0` of shape `[out, in, k, k]` is seen as the matrix `[out, in·k·k]`; the
-//! adapter adds `ΔW = (α/r)·B·A` with `A: [r, in·k·k]` Gaussian (std `1/√(in·k·k)`)
-//! and `B: [out, r]` zero, so at initialisation the network is exactly the base one.
-//! `W0` stays frozen during LoCM. Adapters are saved on their own (safetensors
-//! `NAME.lora_a`, `NAME.lora_b`, JSON sidecar with rank and α) and can be merged.
+//! LoRA adapters on their own: safetensors `NAME.lora_a` `[r, in·k·k]`, `NAME.lora_b`
+//! `[out, r]` for every convolution, and a JSON sidecar with the rank, α and the network
+//! settings they were trained for.
 
-use crate::net::{FlowNet, to_f32};
-use burn::tensor::{DType, Device, Tensor, TensorData};
-use rand_distr::{Distribution, Normal};
+use super::tensor_file::{read_safetensors, sidecar, take, write_safetensors};
+use crate::net::flownet::{FlowNet, NetConfig};
+use crate::net::lora::Lora;
+use crate::net::tensor::to_f32;
+use burn::tensor::{Tensor, TensorData};
 use scene::error::{Error, Result};
 use serde::{Deserialize, Serialize};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-/// One adapter.
-#[derive(Clone, Debug)]
-pub struct Lora {
-    /// `[r, in·k·k]`.
-    pub a: Tensor<2>,
-    /// `[out, r]`.
-    pub b: Tensor<2>,
-    pub rank: usize,
-    pub alpha: f64,
-}
+/// File name of the adapters in the output directory of `evflow finetune --mode lora`
+/// (its sidecar is this name + `.json`).
+pub const ADAPTER_FILE: &str = "adapter.safetensors";
 
-impl Lora {
-    pub fn new(
-        shape: [usize; 4],
-        rank: usize,
-        alpha: f64,
-        rng: &mut impl rand::Rng,
-        device: &Device,
-        dtype: DType,
-    ) -> Lora {
-        let [out, inp, kh, kw] = shape;
-        let fan = inp * kh * kw;
-        let normal = Normal::new(0.0, 1.0 / (fan as f64).sqrt()).expect("finite std");
-        let a: Vec<f64> = (0..rank * fan).map(|_| normal.sample(rng)).collect();
-        let a = Tensor::<2>::from_data(
-            TensorData::new(a, [rank, fan]).convert_dtype(dtype),
-            (device, dtype),
-        );
-        let b = Tensor::<2>::zeros([out, rank], (device, dtype));
-        Lora { a, b, rank, alpha }
+/// The adapter file `--adapter PATH` means: `PATH/adapter.safetensors` when `PATH` is a
+/// directory (the output of `evflow finetune`), else `PATH` itself. Its JSON sidecar
+/// must be beside it; otherwise the error says what `--adapter` expects.
+pub fn adapter_file(path: &Path) -> Result<PathBuf> {
+    let expects = format!(
+        "--adapter takes the output directory of `evflow finetune` (mode lora), or the \
+         {ADAPTER_FILE} in it with its sidecar {ADAPTER_FILE}.json"
+    );
+    let file = if path.is_dir() {
+        let file = path.join(ADAPTER_FILE);
+        if !file.is_file() {
+            return Err(Error::invalid(
+                path,
+                format!("directory has no {ADAPTER_FILE}; {expects}"),
+            ));
+        }
+        file
+    } else if path.is_file() {
+        path.to_path_buf()
+    } else {
+        return Err(Error::invalid(path, format!("not found; {expects}")));
+    };
+    let side = sidecar(&file);
+    if !side.is_file() {
+        return Err(Error::invalid(
+            &side,
+            format!("adapter sidecar not found; {expects}"),
+        ));
     }
-
-    /// `(α/r)·B·A` reshaped to the kernel.
-    pub fn delta(&self, shape: [usize; 4]) -> Tensor<4> {
-        self.b
-            .clone()
-            .matmul(self.a.clone())
-            .mul_scalar(self.alpha / self.rank as f64)
-            .reshape(shape)
-    }
+    Ok(file)
 }
 
 /// Sidecar of an adapter file.
@@ -61,7 +53,7 @@ pub struct AdapterMeta {
     pub format: String,
     pub rank: usize,
     pub alpha: f64,
-    pub net: crate::net::NetConfig,
+    pub net: NetConfig,
 }
 
 /// Save the adapters of `net` to `path` (safetensors) and `path.json` (sidecar).
@@ -95,15 +87,8 @@ pub fn save_adapters(net: &FlowNet, path: &Path) -> Result<()> {
         ));
     }
     let meta = meta.ok_or_else(|| Error::invalid(path, "network has no convolutions"))?;
-    crate::net::write_safetensors(path, &tensors)?;
+    write_safetensors(path, &tensors)?;
     scene::atomic::write_json_atomic(&sidecar(path), &meta)
-}
-
-/// Path of the JSON sidecar of a safetensors file.
-pub fn sidecar(path: &Path) -> std::path::PathBuf {
-    let mut s = path.as_os_str().to_owned();
-    s.push(".json");
-    s.into()
 }
 
 /// Load adapters saved by [`save_adapters`] into `net` (replacing any it has).
@@ -129,17 +114,17 @@ pub fn load_adapters(net: &mut FlowNet, path: &Path) -> Result<()> {
             "adapter rank must be > 0 and alpha finite",
         ));
     }
-    let tensors = crate::net::read_safetensors(path)?;
+    let tensors = read_safetensors(path)?;
     for c in &mut net.convs {
         let [out, inp, kh, kw] = c.shape();
         let fan = inp * kh * kw;
-        let a = crate::net::take(
+        let a = take(
             &tensors,
             path,
             &format!("{}.lora_a", c.name),
             &[meta.rank, fan],
         )?;
-        let b = crate::net::take(
+        let b = take(
             &tensors,
             path,
             &format!("{}.lora_b", c.name),

@@ -1,5 +1,5 @@
-//! EV-FlowNet (Zhu et al. 2018; DESIGN §5, REFERENCES "EV-FlowNet") written with burn
-//! 0.22.1 tensors on a run-time `Device` (flex CPU by default).
+//! EV-FlowNet (Zhu et al. 2018; `docs/DESIGN.md` §5, `docs/REFERENCES.md` "EV-FlowNet")
+//! written with burn 0.22.1 tensors on a run-time `Device` (flex CPU by default).
 //!
 //! Layout for base width `C` and a `B`-bin voxel grid `[1, B, H, W]`:
 //! - encoders `enc1..enc4`: conv 3×3 stride 2 + ReLU, `C, 2C, 4C, 8C` channels;
@@ -15,21 +15,19 @@
 //! (px per window, u right, v down), at full input resolution. Divide by the window
 //! length for px/s ([`px_per_window_to_px_per_s`]); `.evflow` files hold px/s.
 //!
-//! Every convolution is a [`Conv`] with an optional LoRA bypass (see [`crate::lora`]);
-//! parameters are plain tensors kept in a fixed, named order so the optimiser,
-//! safetensors I/O and LoRA adapters all address them by name.
+//! Every convolution is a [`Conv`] with an optional LoRA bypass ([`Lora`]); parameters
+//! are plain tensors kept in a fixed, named order ([`layout`]) so the optimiser, the
+//! weight files and LoRA adapters all address them by name. Reading and writing them is
+//! `net::io`'s job, not this module's.
 
-use crate::lora::Lora;
+use super::lora::Lora;
 use burn::tensor::module::{conv2d, interpolate};
 use burn::tensor::ops::{ConvOptions, InterpolateMode, InterpolateOptions};
 use burn::tensor::{DType, Device, Tensor, TensorData, activation::relu};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
-use scene::error::{Error, Result};
 use serde::{Deserialize, Serialize};
-use std::collections::HashMap;
-use std::path::Path;
 
 /// Hyper-parameters of the flow network (stored in the weights' JSON sidecar).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -64,6 +62,7 @@ pub struct Conv {
 
 impl Conv {
     /// Effective kernel: `W0 + (α/r)·B·A` when a LoRA adapter is attached.
+    // Eq. 7
     pub fn kernel(&self) -> Tensor<4> {
         match &self.lora {
             None => self.weight.clone(),
@@ -304,225 +303,4 @@ pub fn upsample2(x: Tensor<4>) -> Tensor<4> {
         x,
         InterpolateOptions::new(InterpolateMode::Nearest).with_output_size([2 * h, 2 * w]),
     )
-}
-
-/// Flatten a tensor into f64 values (any float dtype).
-pub fn to_f64<const D: usize>(t: Tensor<D>) -> Vec<f64> {
-    t.into_data().iter::<f64>().collect()
-}
-
-/// Flatten a tensor into f32 values (any float dtype).
-pub fn to_f32<const D: usize>(t: Tensor<D>) -> Vec<f32> {
-    t.into_data().iter::<f32>().collect()
-}
-
-/// A tensor of the given shape from f32 values, in the network's dtype.
-pub fn tensor4(values: Vec<f32>, shape: [usize; 4], device: &Device, dtype: DType) -> Tensor<4> {
-    Tensor::<4>::from_data(
-        TensorData::new(values, shape).convert_dtype(dtype),
-        (device, dtype),
-    )
-}
-
-/// Sidecar of a weights file.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct WeightsMeta {
-    pub format: String,
-    pub net: NetConfig,
-    /// Free-form provenance (command line that produced the weights).
-    #[serde(default)]
-    pub trained_by: String,
-}
-
-/// A named f32 tensor for safetensors I/O: name, shape, values.
-pub type NamedF32 = (String, Vec<usize>, Vec<f32>);
-
-/// Write named f32 tensors as safetensors, atomically.
-pub fn write_safetensors(path: &Path, tensors: &[NamedF32]) -> Result<()> {
-    let bytes: Vec<Vec<u8>> = tensors
-        .iter()
-        .map(|(_, _, v)| v.iter().flat_map(|x| x.to_le_bytes()).collect())
-        .collect();
-    let views = tensors
-        .iter()
-        .zip(&bytes)
-        .map(|((name, shape, _), b)| {
-            safetensors::tensor::TensorView::new(safetensors::Dtype::F32, shape.clone(), b)
-                .map(|v| (name.clone(), v))
-        })
-        .collect::<std::result::Result<Vec<_>, _>>()
-        .map_err(|e| Error::invalid(path, format!("safetensors: {e}")))?;
-    let out = safetensors::serialize(views, None)
-        .map_err(|e| Error::invalid(path, format!("safetensors: {e}")))?;
-    scene::atomic::write_bytes_atomic(path, &out)
-}
-
-/// Tensors by name: (shape, values as f32).
-pub type TensorMap = HashMap<String, (Vec<usize>, Vec<f32>)>;
-
-/// Read every tensor of a safetensors file as f32 (F32 or F64 stored), checking
-/// finiteness.
-pub fn read_safetensors(path: &Path) -> Result<TensorMap> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let st = safetensors::SafeTensors::deserialize(&bytes)
-        .map_err(|e| Error::invalid(path, format!("not a safetensors file: {e}")))?;
-    let mut out = HashMap::new();
-    for (name, view) in st.tensors() {
-        let data = view.data();
-        let values: Vec<f32> = match view.dtype() {
-            safetensors::Dtype::F32 => data
-                .chunks_exact(4)
-                .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-                .collect(),
-            safetensors::Dtype::F64 => data
-                .chunks_exact(8)
-                .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")) as f32)
-                .collect(),
-            d => {
-                return Err(Error::invalid(
-                    path,
-                    format!("tensor {name} has dtype {d:?}; only F32/F64 are supported"),
-                ));
-            }
-        };
-        if values.iter().any(|x| !x.is_finite()) {
-            return Err(Error::invalid(
-                path,
-                format!("tensor {name} has non-finite values"),
-            ));
-        }
-        out.insert(name, (view.shape().to_vec(), values));
-    }
-    Ok(out)
-}
-
-/// The values of tensor `name`, which must have exactly `shape`.
-pub fn take(
-    tensors: &HashMap<String, (Vec<usize>, Vec<f32>)>,
-    path: &Path,
-    name: &str,
-    shape: &[usize],
-) -> Result<Vec<f32>> {
-    let (s, v) = tensors
-        .get(name)
-        .ok_or_else(|| Error::invalid(path, format!("missing tensor {name}")))?;
-    if s != shape {
-        return Err(Error::invalid(
-            path,
-            format!("tensor {name} has shape {s:?}, expected {shape:?}"),
-        ));
-    }
-    Ok(v.clone())
-}
-
-impl FlowNet {
-    /// Save the base weights (`NAME.weight` `[out,in,k,k]`, `NAME.bias` `[out]`, names
-    /// from [`layout`]) to safetensors plus a JSON sidecar with the [`NetConfig`].
-    /// Adapters are not included (merge first, or use [`crate::lora::save_adapters`]).
-    pub fn save(&self, path: &Path, trained_by: &str) -> Result<()> {
-        let mut t = Vec::new();
-        for c in &self.convs {
-            t.push((
-                format!("{}.weight", c.name),
-                c.shape().to_vec(),
-                to_f32(c.weight.clone()),
-            ));
-            t.push((
-                format!("{}.bias", c.name),
-                vec![c.shape()[0]],
-                to_f32(c.bias.clone()),
-            ));
-        }
-        write_safetensors(path, &t)?;
-        let meta = WeightsMeta {
-            format: "degs-evflownet-v1".into(),
-            net: self.config,
-            trained_by: trained_by.into(),
-        };
-        scene::atomic::write_json_atomic(&crate::lora::sidecar(path), &meta)
-    }
-
-    /// Load weights saved by [`FlowNet::save`] (or external safetensors with the same
-    /// tensor names; then `config` must be given since there is no sidecar).
-    pub fn load(
-        path: &Path,
-        config: Option<NetConfig>,
-        device: &Device,
-        dtype: DType,
-    ) -> Result<FlowNet> {
-        let side = crate::lora::sidecar(path);
-        let config = match std::fs::read_to_string(&side) {
-            Ok(text) => {
-                let meta: WeightsMeta = serde_json::from_str(&text)
-                    .map_err(|e| Error::invalid(&side, format!("bad weights sidecar: {e}")))?;
-                meta.net
-            }
-            Err(_) => config.ok_or_else(|| {
-                Error::invalid(
-                    path,
-                    "no JSON sidecar; give the network settings explicitly \
-                     (or load with evflow::weights::load, which infers them)",
-                )
-            })?,
-        };
-        if config.base == 0
-            || config.bins == 0
-            || !config.max_flow.is_finite()
-            || config.max_flow <= 0.0
-        {
-            return Err(Error::invalid(
-                path,
-                format!("invalid network settings {config:?}"),
-            ));
-        }
-        FlowNet::from_tensors(path, config, &read_safetensors(path)?, device, dtype)
-    }
-
-    /// A network with `config` whose parameters are taken from `tensors` (read from
-    /// `path`, named in errors): every tensor of [`layout`] must be there with its shape.
-    pub fn from_tensors(
-        path: &Path,
-        config: NetConfig,
-        tensors: &TensorMap,
-        device: &Device,
-        dtype: DType,
-    ) -> Result<FlowNet> {
-        if config.base == 0 || config.base > 1 << 14 || config.bins == 0 || config.bins > 1024 {
-            return Err(Error::invalid(
-                path,
-                format!(
-                    "network settings out of range: C = {}, B = {}",
-                    config.base, config.bins
-                ),
-            ));
-        }
-        // Check every tensor before allocating anything (a hostile sidecar or shape
-        // must not make us allocate a huge network).
-        let mut convs = Vec::new();
-        for (name, out, inp, k, stride) in layout(&config) {
-            let shape = [out, inp, k, k];
-            let w = take(tensors, path, &format!("{name}.weight"), &shape)?;
-            let b = take(tensors, path, &format!("{name}.bias"), &[out])?;
-            convs.push((name, shape, w, b, stride));
-        }
-        let convs = convs
-            .into_iter()
-            .map(|(name, shape, w, b, stride)| Conv {
-                name,
-                weight: tensor4(w, shape, device, dtype),
-                bias: Tensor::<1>::from_data(
-                    TensorData::new(b, [shape[0]]).convert_dtype(dtype),
-                    (device, dtype),
-                ),
-                stride,
-                lora: None,
-            })
-            .collect();
-        Ok(FlowNet {
-            config,
-            convs,
-            device: device.clone(),
-            dtype,
-        })
-    }
 }

@@ -1,35 +1,7 @@
-//! Contrast maximisation (DESIGN §5, paper Eq. 4–8) in plain Rust, independent of burn.
-//!
-//! Each event k is warped to a reference time with the flow of its own pixel,
-//! `x'_k = x_k − (t_k − t_ref)·v(x_k)` (flow in px/s), and splatted bilinearly into the
-//! image of warped events (IWE). The sharpness objective is the mean squared gradient
-//! magnitude (GM) of the IWE, with central differences `(I[x+1] − I[x−1])/2` over the
-//! interior pixels, averaged over `scales` levels of 2×2 average pooling.
-//! Following Shiba et al. the loss is the normalised GM, `GM(unwarped)/GM(warped)`,
-//! averaged over the references start, middle (weight 2) and end, plus `λ·TV(flow)`
-//! where TV is the mean Charbonnier norm `sqrt(d² + ε²)` (ε = 1e-3 px/s) of the forward
-//! differences of u and v (smooth, so the gradient is exact everywhere).
-//!
-//! Everything is f64; [`cm_loss`] returns the exact gradient with respect to the dense
-//! flow (hand-written backward, checked against finite differences in the tests).
+//! The contrast-maximisation loss of a dense flow and its exact gradient (paper Eq. 6
+//! and 8; the definition is in the doc of `cm`).
 
-/// Events prepared for contrast maximisation: sub-pixel positions (e.g. undistorted),
-/// times in seconds. Struct of arrays.
-#[derive(Clone, Debug, Default)]
-pub struct CmEvents {
-    pub x: Vec<f64>,
-    pub y: Vec<f64>,
-    pub t: Vec<f64>,
-}
-
-impl CmEvents {
-    pub fn len(&self) -> usize {
-        self.t.len()
-    }
-    pub fn is_empty(&self) -> bool {
-        self.t.is_empty()
-    }
-}
+use super::warp::{CmEvents, at, corners, event_pixel, iwe};
 
 /// Settings of the CM loss.
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
@@ -68,66 +40,6 @@ pub struct CmLoss {
 }
 
 const TV_EPS: f64 = 1e-3;
-
-/// Pixel whose flow an event uses (nearest pixel, clamped to the sensor).
-#[inline]
-pub fn event_pixel(x: f64, y: f64, width: usize, height: usize) -> usize {
-    let xi = (x.round().max(0.0) as usize).min(width - 1);
-    let yi = (y.round().max(0.0) as usize).min(height - 1);
-    yi * width + xi
-}
-
-/// Bilinear splat of the events warped to `t_ref` (unit weight per event).
-pub fn iwe(ev: &CmEvents, u: &[f64], v: &[f64], t_ref: f64, w: usize, h: usize) -> Vec<f64> {
-    let mut img = vec![0.0; w * h];
-    if w == 0 || h == 0 {
-        return img;
-    }
-    for k in 0..ev.len() {
-        let p = event_pixel(ev.x[k], ev.y[k], w, h);
-        let dt = ev.t[k] - t_ref;
-        let wx = ev.x[k] - dt * u[p];
-        let wy = ev.y[k] - dt * v[p];
-        splat(&mut img, w, h, wx, wy);
-    }
-    img
-}
-
-#[inline]
-fn corners(wx: f64, wy: f64) -> (i64, i64, f64, f64) {
-    let x0 = wx.floor();
-    let y0 = wy.floor();
-    (x0 as i64, y0 as i64, wx - x0, wy - y0)
-}
-
-#[inline]
-fn splat(img: &mut [f64], w: usize, h: usize, wx: f64, wy: f64) {
-    if !wx.is_finite() || !wy.is_finite() {
-        return;
-    }
-    let (x0, y0, fx, fy) = corners(wx, wy);
-    for (dx, dy, wt) in [
-        (0, 0, (1.0 - fx) * (1.0 - fy)),
-        (1, 0, fx * (1.0 - fy)),
-        (0, 1, (1.0 - fx) * fy),
-        (1, 1, fx * fy),
-    ] {
-        let (xx, yy) = (x0 + dx, y0 + dy);
-        if xx >= 0 && yy >= 0 && (xx as usize) < w && (yy as usize) < h {
-            img[yy as usize * w + xx as usize] += wt;
-        }
-    }
-}
-
-/// Value of the image at integer (x, y), 0 outside.
-#[inline]
-fn at(img: &[f64], w: usize, h: usize, x: i64, y: i64) -> f64 {
-    if x >= 0 && y >= 0 && (x as usize) < w && (y as usize) < h {
-        img[y as usize * w + x as usize]
-    } else {
-        0.0
-    }
-}
 
 /// 2×2 average pooling (odd trailing row/column dropped).
 fn pool2(img: &[f64], w: usize, h: usize) -> (Vec<f64>, usize, usize) {
@@ -182,6 +94,7 @@ pub fn gradient_magnitude(
 
 /// Multi-scale GM over the pyramid levels `first..scales` (level 0 = `img`; `first`
 /// clamped to `scales − 1`): their mean. With `grad`, fills dGM/dimg.
+// Eq. 6 (contrast of the IWE; the GM of Shiba et al., see the module doc)
 pub fn gradient_magnitude_from(
     img: &[f64],
     w: usize,
@@ -280,6 +193,7 @@ fn tv(u: &[f64], w: usize, h: usize, grad: &mut [f64], weight: f64) -> f64 {
 ///
 /// Loss = Σ_ref w_ref·GM(unwarped)/GM(warped to ref) / Σ w_ref + λ·(TV(u) + TV(v)).
 /// With no events (or a featureless unwarped IWE) the data term is 0 and only TV acts.
+// Eq. 8 (the LoCM loss)
 pub fn cm_loss(
     ev: &CmEvents,
     u: &[f64],
@@ -359,16 +273,6 @@ pub fn cm_loss(
         gm_warped: gm_mean,
         gm_unwarped: gm0,
     }
-}
-
-/// Variance of an image (the classic CM objective; used by `eval` as flow-warp loss).
-pub fn variance(img: &[f64]) -> f64 {
-    if img.is_empty() {
-        return 0.0;
-    }
-    let n = img.len() as f64;
-    let mean = img.iter().sum::<f64>() / n;
-    img.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n
 }
 
 #[cfg(test)]

@@ -1,4 +1,4 @@
-//! Bridge from the hand-written CM gradient (plain Rust, [`crate::cm`]) into a burn graph:
+//! Bridge from the hand-written CM gradient (plain Rust, `cm_loss`) into a burn graph:
 //! the scalar `Σ flow · g` with `g` a constant has gradient exactly `g` with respect to
 //! the flow, so `cm_surrogate(flow, ..).backward()` pushes dL/dflow into the network.
 
