@@ -73,7 +73,21 @@ impl Rasterizer for Additive {
             (),
         )
     }
-    fn backward(&self, s: &Splats, cam: &Camera, _: &(), d: &[f32]) -> SplatGrads {
+    fn backward_view(
+        &self,
+        s: &Splats,
+        cam: &Camera,
+        st: &(),
+        d: &[f32],
+        d_depth: Option<&[f32]>,
+    ) -> (SplatGrads, [f64; 6]) {
+        assert!(d_depth.is_none(), "the additive test renderer has no depth");
+        (self.backward_rgb(s, cam, st, d), [0.0; 6])
+    }
+}
+
+impl Additive {
+    fn backward_rgb(&self, s: &Splats, cam: &Camera, _: &(), d: &[f32]) -> SplatGrads {
         let n = s.len();
         let mut g = SplatGrads::zeros(n);
         for i in 0..n {

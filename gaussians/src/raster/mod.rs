@@ -100,7 +100,14 @@ impl Rasterizer for TileRasterizer {
         self.render_full(s, cam, sh_degree, background)
     }
 
-    fn backward(&self, s: &Splats, cam: &Camera, state: &RenderState, d_rgb: &[f32]) -> SplatGrads {
-        self.backward_full(s, cam, state, d_rgb, None, None).0
+    fn backward_view(
+        &self,
+        s: &Splats,
+        cam: &Camera,
+        state: &RenderState,
+        d_rgb: &[f32],
+        d_depth: Option<&[f32]>,
+    ) -> (SplatGrads, [f64; 6]) {
+        self.backward_full(s, cam, state, d_rgb, d_depth, None)
     }
 }

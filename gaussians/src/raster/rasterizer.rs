@@ -56,6 +56,19 @@ pub trait Rasterizer: Sync {
         sh_degree: u32,
         background: [f32; 3],
     ) -> (RenderedImage, Self::State);
+    /// Backward from `∂L/∂rgb` (planar `3×H×W`) and optionally `∂L/∂depth` (`H×W`) to
+    /// every Gaussian parameter and to the camera as a world-frame left twist
+    /// (`raster::apply_twist`).
+    fn backward_view(
+        &self,
+        s: &Splats,
+        cam: &Camera,
+        state: &Self::State,
+        d_rgb: &[f32],
+        d_depth: Option<&[f32]>,
+    ) -> (SplatGrads, [f64; 6]);
     /// Backward from the gradient of the loss w.r.t. the planar RGB image.
-    fn backward(&self, s: &Splats, cam: &Camera, state: &Self::State, d_rgb: &[f32]) -> SplatGrads;
+    fn backward(&self, s: &Splats, cam: &Camera, state: &Self::State, d_rgb: &[f32]) -> SplatGrads {
+        self.backward_view(s, cam, state, d_rgb, None).0
+    }
 }

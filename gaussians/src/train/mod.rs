@@ -26,6 +26,26 @@ pub struct View {
     pub rgb: Vec<f32>,
 }
 
+/// A view rendered by the current model, with what its backward needs.
+pub struct ViewRender<S> {
+    pub image: RenderedImage,
+    pub camera: Camera,
+    /// The Gaussians as rendered (deformed to the view's time).
+    pub deformed: Splats,
+    deltas: Option<(field::Deltas, field::MlpCache<f32>)>,
+    state: S,
+}
+
+/// Gradients of a loss on the model: canonical Gaussians (with the densification
+/// statistics of the render they came from), the field's parameters (empty when the
+/// field is off) and the camera (world-frame left twist).
+#[derive(Clone, Debug, Default)]
+pub struct ModelGrads {
+    pub splats: SplatGrads,
+    pub field: Vec<f32>,
+    pub camera: [f64; 6],
+}
+
 /// Per-step figures.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct StepInfo {
@@ -133,63 +153,127 @@ impl Trainer {
             .0
     }
 
-    /// One optimisation step on a random view (each view once per epoch).
-    pub fn step<R: Rasterizer>(&mut self, r: &R, views: &[View]) -> StepInfo {
-        use rand::seq::SliceRandom;
-        if self.order.is_empty() {
-            self.order = (0..views.len()).collect();
-            self.order.shuffle(&mut self.rng);
+    /// Render the current model (deformed to `t` when the field is on) at `camera`,
+    /// keeping what [`Self::view_backward`] needs.
+    pub fn render_view<R: Rasterizer>(
+        &self,
+        r: &R,
+        camera: &Camera,
+        t: f32,
+    ) -> ViewRender<R::State> {
+        let (deformed, deltas) = self.deformed(t);
+        let (image, state) = r.render(
+            &deformed,
+            camera,
+            self.sh_degree(),
+            self.settings.background,
+        );
+        ViewRender {
+            image,
+            camera: *camera,
+            deformed,
+            deltas,
+            state,
         }
-        let view = &views[self.order.pop().expect("views")];
-        if self.settings.densify.max_gaussians == 0 {
-            // automatic cap: resolved once, from the size of the train frames
-            let pixels = view.rgb.len() / 3;
-            self.settings.densify.max_gaussians = self.settings.gaussian_cap(pixels);
-        }
-        let it = self.iteration;
-        let field_on = self.field_on();
-        let sh = self.sh_degree();
-        let (deformed, deltas) = self.deformed(view.time);
-        let (frame, state) = r.render(&deformed, &view.camera, sh, self.settings.background);
-        let (w, h) = (frame.width, frame.height);
-        let lam = self.settings.dssim_weight;
-        let (l1, mut grad) = metrics::l1_loss(&frame.rgb, &view.rgb);
-        let mut loss = (1.0 - lam) * l1;
-        if lam > 0.0 {
-            let (ds, gd) = metrics::dssim_loss(&frame.rgb, &view.rgb, w, h);
-            loss += lam * ds;
-            for (g, d) in grad.iter_mut().zip(gd) {
-                *g = (1.0 - lam) as f32 * *g + lam as f32 * d;
-            }
-        }
-        let psnr = metrics::psnr_u8(&frame.rgb, &view.rgb);
-        let mut g = r.backward(&deformed, &view.camera, &state, &grad);
-        drop(deformed);
-        if let Some((d, cache)) = deltas {
+    }
+
+    /// Gradients of a loss on a rendered view, from `∂L/∂rgb` (planar) and optionally
+    /// `∂L/∂depth`, taken back through the rasterizer and the field to the canonical
+    /// Gaussians, the field's parameters and the camera.
+    pub fn view_backward<R: Rasterizer>(
+        &self,
+        r: &R,
+        v: &ViewRender<R::State>,
+        d_rgb: &[f32],
+        d_depth: Option<&[f32]>,
+    ) -> ModelGrads {
+        let (mut g, camera) = r.backward_view(&v.deformed, &v.camera, &v.state, d_rgb, d_depth);
+        let mut field_grads = Vec::new();
+        if let Some((d, cache)) = &v.deltas {
             let dg = field::apply_deltas_backward(
                 &self.splats.log_scales,
                 &self.splats.rotations,
-                &d,
+                d,
                 &g.means,
                 &g.log_scales,
                 &g.rotations,
             );
-            let fg = self.field_backward(&cache, &dg.deltas);
+            field_grads = self.field_backward(cache, &dg.deltas);
+            g.means = dg.means;
+            g.log_scales = dg.log_scales;
+            g.rotations = dg.rotations;
+        }
+        ModelGrads {
+            splats: g,
+            field: field_grads,
+            camera,
+        }
+    }
+
+    /// One Adam step of the canonical Gaussians (and of the field when `g.field` is not
+    /// empty), then the densification statistics of `g` and the densification schedule.
+    pub fn apply_gradients(&mut self, g: &ModelGrads) {
+        let it = self.iteration;
+        if !g.field.is_empty() {
             self.field_adam.groups[0].lr = ExpSchedule::new(
                 self.settings.field_lr_init,
                 self.settings.field_lr_final,
                 self.settings.iterations as u64,
             )
             .at(it as u64);
-            self.field_adam.step(0, &mut self.field.params, &fg);
-            g.means = dg.means;
-            g.log_scales = dg.log_scales;
-            g.rotations = dg.rotations;
+            self.field_adam.step(0, &mut self.field.params, &g.field);
         }
-        self.apply_grads(&g, it);
-        self.stats.add(&g.screen_grad_norm, &g.radius);
+        self.apply_grads(&g.splats, it);
+        self.stats.add(&g.splats.screen_grad_norm, &g.splats.radius);
         self.iteration += 1;
         self.densify_if_due();
+    }
+
+    /// The RGB loss of the warm-up (`(1−λ)·L1 + λ·D-SSIM`) of a render against a planar
+    /// target, and its gradient w.r.t. the render.
+    pub fn rgb_loss(&self, image: &RenderedImage, target: &[f32]) -> (f64, Vec<f32>) {
+        let (w, h) = (image.width, image.height);
+        let lam = self.settings.dssim_weight;
+        let (l1, mut grad) = metrics::l1_loss(&image.rgb, target);
+        let mut loss = (1.0 - lam) * l1;
+        if lam > 0.0 {
+            let (ds, gd) = metrics::dssim_loss(&image.rgb, target, w, h);
+            loss += lam * ds;
+            for (g, d) in grad.iter_mut().zip(gd) {
+                *g = (1.0 - lam) as f32 * *g + lam as f32 * d;
+            }
+        }
+        (loss, grad)
+    }
+
+    /// The next view index of the shuffled epoch order (each view once per epoch).
+    pub fn next_view(&mut self, views: usize) -> usize {
+        use rand::seq::SliceRandom;
+        if self.order.is_empty() {
+            self.order = (0..views).collect();
+            self.order.shuffle(&mut self.rng);
+        }
+        self.order.pop().expect("views")
+    }
+
+    /// Resolve the automatic Gaussian cap from the size of the train frames (once).
+    pub fn resolve_cap(&mut self, pixels: usize) {
+        if self.settings.densify.max_gaussians == 0 {
+            self.settings.densify.max_gaussians = self.settings.gaussian_cap(pixels);
+        }
+    }
+
+    /// One optimisation step on a random view (each view once per epoch).
+    pub fn step<R: Rasterizer>(&mut self, r: &R, views: &[View]) -> StepInfo {
+        let view = &views[self.next_view(views.len())];
+        self.resolve_cap(view.rgb.len() / 3);
+        let field_on = self.field_on();
+        let rendered = self.render_view(r, &view.camera, view.time);
+        let (loss, grad) = self.rgb_loss(&rendered.image, &view.rgb);
+        let psnr = metrics::psnr_u8(&rendered.image.rgb, &view.rgb);
+        let g = self.view_backward(r, &rendered, &grad, None);
+        drop(rendered);
+        self.apply_gradients(&g);
         StepInfo {
             iteration: self.iteration,
             loss,
