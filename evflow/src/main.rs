@@ -28,7 +28,7 @@ enum Cmd {
         /// Output event file (.evs).
         #[arg(long)]
         out: PathBuf,
-        /// Simulator settings (TOML, keys of evflow::sim::SimConfig).
+        /// Simulator settings (TOML, keys of synth::sim::SimConfig).
         #[arg(long)]
         config: Option<PathBuf>,
         /// Random seed (threshold mismatch, noise).
@@ -300,9 +300,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     toml::from_str(&text)
                         .map_err(|e| anyhow::anyhow!("{}: {}", p.display(), e.message()))?
                 }
-                None => evflow::sim::SimConfig::default(),
+                None => synth::sim::SimConfig::default(),
             };
-            let s = evflow::sim::simulate_frames(&frames, &out, &cfg, seed)?;
+            let s = synth::frames::simulate_frames(&frames, &out, &cfg, seed)?;
             eprintln!(
                 "evflow: {} frames -> {} events ({}x{}) in {:.2} s -> {}",
                 s.frames,

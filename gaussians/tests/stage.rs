@@ -3,9 +3,9 @@
 use gaussians::model::Model;
 use gaussians::stage::{self, Split, TrainArgs};
 use gaussians::train::TrainSettings;
-use scene::synth::SynthConfig;
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
+use synth::SynthConfig;
 
 /// The static preset at 40×40 with few frames and coarse textures (features a few
 /// pixels wide at this size).
@@ -20,7 +20,7 @@ fn tiny_scene(dir: &Path) {
     cfg.train_fps = 5.0;
     cfg.test_frames = 3;
     cfg.supersample = 1;
-    stage::write_rgb_synthetic_scene(&cfg, dir).unwrap();
+    synth::write_rgb_synthetic_scene(&cfg, dir).unwrap();
 }
 
 fn tiny_settings(dir: &Path) -> std::path::PathBuf {

@@ -23,10 +23,10 @@
 
 use crate::canon;
 use anyhow::{Context, Result, anyhow, bail};
-use scene::synth::{PRESETS, SynthConfig};
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use synth::{PRESETS, SynthConfig};
 use toml::{Table, Value};
 
 /// The stages that take settings from the experiment, in run order.

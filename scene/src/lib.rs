@@ -1,6 +1,6 @@
-//! `scene` — the shared data layer of degs (DESIGN §2–§3): camera model, scene
+//! `scene` — the shared data layer of degs (docs/DESIGN.md §2–§3): camera model, scene
 //! manifest, event streams and their readers/writers, image and EXR helpers, atomic
-//! outputs, and analytic synthetic scenes with ground truth.
+//! outputs. Synthetic scenes live in the `synth` crate.
 
 pub mod atomic;
 pub mod camera;
@@ -14,7 +14,6 @@ pub mod formats;
 pub mod image_io;
 pub mod manifest;
 pub mod report;
-pub mod synth;
 pub mod testdata;
 pub use formats::{ReadOptions, read_events, write_evs};
 pub use image_io::Image;
