@@ -203,3 +203,22 @@ fn invalid_settings_leave_nothing_behind() {
     assert!(!out.exists());
     assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 0);
 }
+
+#[test]
+fn the_rgb_only_writer_writes_the_frames_of_the_full_one() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cfg = small("nonrigid");
+    let (full, rgb) = (tmp.path().join("full"), tmp.path().join("rgb"));
+    write_synthetic_scene(&cfg, &full).unwrap();
+    synth::write_rgb_synthetic_scene(&cfg, &rgb).unwrap();
+    let (a, b) = (Scene::open(&full).unwrap(), Scene::open(&rgb).unwrap());
+    assert!(b.train.events.is_none() && !rgb.join("events.evs").exists());
+    for (ma, mb) in [(&a.train, &b.train), (&a.test, &b.test)] {
+        assert_eq!(ma.camera, mb.camera);
+        assert_eq!(ma.frames, mb.frames);
+        for f in &ma.frames {
+            let bytes = |root: &std::path::Path| std::fs::read(root.join(&f.file_path)).unwrap();
+            assert!(bytes(&full) == bytes(&rgb), "{}", f.file_path);
+        }
+    }
+}
