@@ -10,8 +10,8 @@ use gaussians::{Gaussian, Splats};
 use glam::DVec2;
 use scene::Scene;
 use scene::image_io::{read_exr_depth, write_exr_depth};
-use scene::synth::{SynthConfig, SynthWorld};
 use std::path::Path;
+use synth::{SynthConfig, SynthWorld};
 
 /// Gaussians on a 3-px grid of the surfaces seen at time 0 (a static model).
 fn surface_model(cfg: &SynthConfig) -> Model {
@@ -71,7 +71,7 @@ fn stage_writes_the_library_bindings_for_every_frame_and_rejects_bad_depth() {
     cfg.render_rate_hz = 400.0;
     cfg.supersample = 1;
     let scene_dir = tmp.path().join("scene");
-    evflow::synthesize::write_synthetic_scene(&cfg, &scene_dir).unwrap();
+    synth::write_synthetic_scene(&cfg, &scene_dir).unwrap();
     let scene = Scene::open(&scene_dir).unwrap();
     assert!(scene.train.frames.len() >= 3);
 

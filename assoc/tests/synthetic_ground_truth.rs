@@ -9,8 +9,8 @@ use assoc::{AssocSettings, associate_frame, lift_events};
 use gaussians::raster::TileRasterizer;
 use gaussians::{Gaussian, Splats};
 use glam::{DVec2, DVec3};
-use scene::synth::gt::NOISE_ID;
-use scene::synth::{Hit, SynthConfig, SynthWorld};
+use synth::gt::NOISE_ID;
+use synth::{Hit, SynthConfig, SynthWorld};
 
 /// Gaussians on a 2-px grid of the surfaces seen at `t0`, with their object ids.
 fn surface_gaussians(world: &SynthWorld, t0: f64) -> (Splats, Vec<u16>) {
@@ -61,7 +61,7 @@ fn lifted_events_lie_on_true_surfaces_and_bind_to_their_own_object() {
     cfg.render_rate_hz = 500.0;
     cfg.supersample = 1;
     let world = SynthWorld::new(&cfg).unwrap();
-    let (events, gt) = evflow::synthesize::simulate_scene(&world).unwrap();
+    let (events, gt) = synth::simulate_scene(&world).unwrap();
     assert_eq!(gt.len(), events.len());
     let t0 = cfg.train_times()[2];
     let camera = world.camera_at(t0);

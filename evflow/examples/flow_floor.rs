@@ -50,7 +50,7 @@ fn main() -> anyhow::Result<()> {
             .range
             .clone()
             .map(|i| match gt.index.binary_search(&(i as u64)) {
-                Ok(j) if gt.object[j] != scene::synth::gt::NOISE_ID => {
+                Ok(j) if gt.object[j] != synth::gt::NOISE_ID => {
                     (gt.u[j] as f64 * span, gt.v[j] as f64 * span)
                 }
                 _ => (f64::NAN, f64::NAN),

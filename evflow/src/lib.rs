@@ -1,5 +1,6 @@
-//! `evflow` — event voxel grids, the event simulator, EV-FlowNet with LoRA, the
-//! contrast-maximisation loss and LoCM fine-tuning (`docs/DESIGN.md` §2, §5).
+//! `evflow` — event voxel grids, EV-FlowNet with LoRA, the contrast-maximisation loss
+//! and LoCM fine-tuning (docs/DESIGN.md §2, §5). The event simulator is in the `synth`
+//! crate.
 
 pub mod cli;
 pub mod cm;
@@ -9,8 +10,6 @@ pub mod flowfile;
 pub mod net;
 pub mod predict;
 pub mod pretrain;
-pub mod sim;
 pub mod source;
 pub mod stage;
-pub mod synthesize;
 pub mod voxel;

@@ -144,12 +144,12 @@ pub fn warp_gain(src: &Source, w: &Window, dense: &DenseFlow) -> f64 {
 }
 
 /// Ground-truth per-event flow of a synthetic scene (`gt/event_flow.bin`), if present.
-pub fn scene_gt(scene_dir: &Path) -> Result<Option<scene::synth::gt::EventFlowGt>> {
+pub fn scene_gt(scene_dir: &Path) -> Result<Option<synth::gt::EventFlowGt>> {
     let p = scene_dir.join("gt").join("event_flow.bin");
     if !p.is_file() {
         return Ok(None);
     }
-    scene::synth::gt::read_event_flow_gt(&p).map(Some)
+    synth::gt::read_event_flow_gt(&p).map(Some)
 }
 
 /// Evaluate one window's per-event flow: flow-warp gain always, errors against `gt`
@@ -159,7 +159,7 @@ pub fn eval_window(
     w: &Window,
     dense: &DenseFlow,
     flow: &EvFlow,
-    gt: Option<&scene::synth::gt::EventFlowGt>,
+    gt: Option<&synth::gt::EventFlowGt>,
 ) -> WindowEval {
     let mut e = WindowEval {
         window: w.index,
@@ -176,7 +176,7 @@ pub fn eval_window(
         let Ok(j) = gt.index.binary_search(&idx) else {
             continue;
         };
-        if gt.object[j] == scene::synth::gt::NOISE_ID {
+        if gt.object[j] == synth::gt::NOISE_ID {
             continue;
         }
         let du = (flow.u[k] - gt.u[j]) as f64;
@@ -220,7 +220,7 @@ pub fn predict_all(
     src: &Source,
     out_dir: &Path,
     previews: bool,
-    gt: Option<&scene::synth::gt::EventFlowGt>,
+    gt: Option<&synth::gt::EventFlowGt>,
     mut progress: impl FnMut(usize, usize),
     mut warn: impl FnMut(&str),
 ) -> Result<PredictReport> {

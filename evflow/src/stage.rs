@@ -340,7 +340,7 @@ pub fn eval_flows(input: &Input, flows_dir: &Path, gt_flow: Option<&Path>) -> Re
             f.index
                 .iter()
                 .map(|idx| match g.index.binary_search(idx) {
-                    Ok(j) if g.object[j] != scene::synth::gt::NOISE_ID => {
+                    Ok(j) if g.object[j] != synth::gt::NOISE_ID => {
                         (g.u[j] as f64 * span, g.v[j] as f64 * span)
                     }
                     _ => (f64::NAN, f64::NAN),

@@ -223,7 +223,7 @@ fn simulate_a_brightening_ramp_through_the_binary() {
     // grey value as read from the PNG; the k-th event at the time the (piecewise linear
     // in t) L crosses L₀ + k·C.
     let log_y = |v: u8| {
-        let y = evflow::sim::luminance(&[v as f32 / 255.0; 3])[0];
+        let y = synth::sim::luminance(&[v as f32 / 255.0; 3])[0];
         (1e-3 + y as f64).ln()
     };
     let mut total = 0;

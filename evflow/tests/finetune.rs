@@ -9,8 +9,8 @@ use evflow::net::io::sidecar;
 use evflow::net::{FlowNet, NetConfig, tensor4, to_f64};
 use evflow::source::{Source, WindowSpec};
 use evflow::stage::{Event, Input};
-use scene::synth::SynthConfig;
 use std::path::{Path, PathBuf};
+use synth::SynthConfig;
 
 fn tiny_scene(dir: &Path) -> PathBuf {
     let out = dir.join("scene");
@@ -23,7 +23,7 @@ fn tiny_scene(dir: &Path) -> PathBuf {
         render_rate_hz: 300.0,
         ..SynthConfig::preset("rigid").unwrap()
     };
-    evflow::synthesize::write_synthetic_scene(&cfg, &out).unwrap();
+    synth::write_synthetic_scene(&cfg, &out).unwrap();
     out
 }
 

@@ -102,13 +102,13 @@ fn main() -> ExitCode {
             Err(e) => fail(e),
         },
         Verb::SynthRgb { preset, out, size } => {
-            let Some(mut cfg) = scene::synth::SynthConfig::preset(&preset) else {
+            let Some(mut cfg) = synth::SynthConfig::preset(&preset) else {
                 return fail(format!("unknown preset {preset}"));
             };
             if let Some(n) = size {
                 (cfg.width, cfg.height) = (n, n);
             }
-            match stage::write_rgb_synthetic_scene(&cfg, &out) {
+            match synth::write_rgb_synthetic_scene(&cfg, &out) {
                 Ok(()) => ExitCode::SUCCESS,
                 Err(e) => fail(e),
             }

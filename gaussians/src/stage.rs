@@ -14,7 +14,7 @@ use crate::train::settings::Init;
 use crate::train::{StepInfo, TrainSettings, Trainer, View, init};
 use scene::atomic::{AtomicDir, write_bytes_atomic, write_json_atomic};
 use scene::error::{Error, Result};
-use scene::image_io::{Image, read_image, write_exr_depth, write_png};
+use scene::image_io::{read_image, write_exr_depth, write_png};
 use scene::manifest::{Manifest, Scene};
 use scene::metrics;
 use scene::report::{Phases, peak_rss_mib};
@@ -451,45 +451,4 @@ pub fn render(
     write_json_atomic(&out.path().join("report.json"), &report)?;
     out.commit()?;
     Ok(report)
-}
-
-/// Write an RGB-only scene directory (manifests + PNGs, no events) of a synthetic
-/// configuration: for tests and benchmarks of the warm-up without the event simulator.
-/// Frame layout and times as the full synthetic writer (`images/{split}_NNNN.png`,
-/// `time = t / duration`).
-pub fn write_rgb_synthetic_scene(cfg: &scene::synth::SynthConfig, out: &Path) -> Result<()> {
-    let world = scene::synth::SynthWorld::new(cfg)
-        .map_err(|e| Error::Other(format!("synthetic scene settings: {e}")))?;
-    let dir = AtomicDir::new(out)?;
-    for (split, times, file) in [
-        ("train", cfg.train_times(), scene::manifest::TRAIN_FILE),
-        ("test", cfg.test_times(), scene::manifest::TEST_FILE),
-    ] {
-        let mut frames = Vec::new();
-        for (k, &t) in times.iter().enumerate() {
-            let r = world.render_frame(t);
-            let file_path = format!("images/{split}_{k:04}.png");
-            let img = Image {
-                width: r.width,
-                height: r.height,
-                channels: 3,
-                data: r.rgb,
-            };
-            write_png(dir.path().join(&file_path), &img)?;
-            frames.push(scene::manifest::Frame {
-                file_path,
-                timestamp: t,
-                time: (t / cfg.duration).clamp(0.0, 1.0),
-                cam_to_world: world.camera_at(t).cam_to_world,
-            });
-        }
-        Manifest {
-            camera: world.intrinsics(),
-            frames,
-            events: None,
-        }
-        .write(dir.path().join(file))?;
-    }
-    dir.commit()?;
-    Ok(())
 }

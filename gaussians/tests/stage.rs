@@ -3,14 +3,14 @@
 use gaussians::model::Model;
 use gaussians::stage::{self, Split, TrainArgs};
 use gaussians::train::TrainSettings;
-use scene::synth::{SynthConfig, SynthWorld};
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
+use synth::{SynthConfig, SynthWorld};
 
 /// The static preset at 40×40 with few frames and coarse textures (features a few
 /// pixels wide at this size).
 fn tiny_scene(dir: &Path) {
-    stage::write_rgb_synthetic_scene(&tiny_config(), dir).unwrap();
+    synth::write_rgb_synthetic_scene(&tiny_config(), dir).unwrap();
 }
 
 fn tiny_config() -> SynthConfig {

@@ -7,7 +7,7 @@ use gaussians::train::stereo::{
     StereoSettings, StereoView, depth_map, fill_holes, fused_depth_maps,
 };
 use glam::DVec3;
-use scene::synth::{SynthConfig, SynthWorld};
+use synth::{SynthConfig, SynthWorld};
 
 struct Views {
     cams: Vec<scene::Camera>,

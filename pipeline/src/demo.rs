@@ -13,10 +13,10 @@ use anyhow::{Context as _, Result};
 use scene::events::EventStream;
 use scene::image_io::{Image, write_png};
 use scene::manifest::Scene;
-use scene::synth::SynthConfig;
 use serde::Serialize;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
+use synth::SynthConfig;
 
 /// Side of the demo's square scene when the user sets no size (small enough that the
 /// whole demo runs in minutes on two cores).

@@ -181,9 +181,9 @@ pub struct FlowError {
 
 /// Compare every `flow_dir/*.evflow` with `gt_path` (`gt/event_flow.bin`), matching
 /// events by their index into the scene's stream; noise events (ground-truth object
-/// [`NOISE_ID`](scene::synth::gt::NOISE_ID)) are left out. None when no event matches.
+/// [`NOISE_ID`](synth::gt::NOISE_ID)) are left out. None when no event matches.
 pub fn flow_error(flow_dir: &Path, gt_path: &Path) -> Result<Option<FlowError>> {
-    let gt = scene::synth::gt::read_event_flow_gt(gt_path)?;
+    let gt = synth::gt::read_event_flow_gt(gt_path)?;
     let mut files: Vec<PathBuf> = std::fs::read_dir(flow_dir)
         .with_context(|| format!("{}: cannot list", flow_dir.display()))?
         .flatten()
@@ -210,7 +210,7 @@ pub fn flow_error(flow_dir: &Path, gt_path: &Path) -> Result<Option<FlowError>> 
             let Ok(j) = gt.index.binary_search(idx) else {
                 continue;
             };
-            if gt.object[j] == scene::synth::gt::NOISE_ID {
+            if gt.object[j] == synth::gt::NOISE_ID {
                 continue;
             }
             let du = flow.u[k] as f64 - gt.u[j] as f64;

@@ -29,12 +29,12 @@ pub use crate::overrides::{merge, parse_set};
 use crate::settings::toml_section;
 use crate::stages::{self, STAGES};
 use anyhow::{Context, Result, anyhow, bail};
-use scene::synth::{PRESETS, SynthConfig};
 use serde::Deserialize;
 use serde::de::{self, Deserializer, MapAccess, Visitor};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::LazyLock;
+use synth::{PRESETS, SynthConfig};
 use toml::{Table, Value};
 
 /// The top level of an experiment file: `name`, `[scene]` and one table per stage of

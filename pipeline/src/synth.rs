@@ -2,8 +2,8 @@
 
 use crate::experiment::{merge, parse_set, synth_config};
 use anyhow::{Context, Result, anyhow};
-use scene::synth::SynthConfig;
 use std::path::Path;
+use synth::SynthConfig;
 
 /// The config of `degs synth`: a full config file (TOML, as written by `degs run` /
 /// `degs plan`), or a preset, with `--set key=value` overrides either way.
@@ -40,6 +40,6 @@ pub fn load_config(
 }
 
 /// Write the scene of `cfg` to `out` (atomically; an existing directory is replaced).
-pub fn write_scene(cfg: &SynthConfig, out: &Path) -> Result<evflow::synthesize::Summary> {
-    Ok(evflow::synthesize::write_synthetic_scene(cfg, out)?)
+pub fn write_scene(cfg: &SynthConfig, out: &Path) -> Result<synth::Summary> {
+    Ok(synth::write_synthetic_scene(cfg, out)?)
 }

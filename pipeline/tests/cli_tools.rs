@@ -183,7 +183,7 @@ const TINY: [&str; 12] = [
 #[test]
 fn synth_writes_every_preset_in_the_scene_layout() {
     let d = tempfile::tempdir().unwrap();
-    for preset in scene::synth::PRESETS {
+    for preset in synth::PRESETS {
         let out = d.path().join(preset);
         let mut args = vec!["synth", "--preset", preset, "--out", out.to_str().unwrap()];
         args.extend_from_slice(&TINY);
@@ -201,7 +201,7 @@ fn synth_writes_every_preset_in_the_scene_layout() {
         assert_eq!((ev.width, ev.height), (24, 16));
         assert!(!ev.is_empty(), "{preset}: no events");
         assert!(out.join("events.evs").is_file());
-        let gt = scene::synth::gt::read_event_flow_gt(out.join("gt/event_flow.bin")).unwrap();
+        let gt = synth::gt::read_event_flow_gt(out.join("gt/event_flow.bin")).unwrap();
         assert_eq!(gt.len(), ev.len(), "{preset}: one gt flow per event");
         for split in ["train", "test"] {
             let n = if split == "train" { 3 } else { 2 };

@@ -103,11 +103,11 @@ fn eval_and_compare_report_known_errors() {
     let root = d.path().join("cache-root");
     let scene_dir = tiny_scene(d.path());
     let scene = Scene::open(&scene_dir).unwrap();
-    let gt = scene::synth::gt::read_event_flow_gt(scene_dir.join("gt/event_flow.bin")).unwrap();
+    let gt = synth::gt::read_event_flow_gt(scene_dir.join("gt/event_flow.bin")).unwrap();
     let noise = gt
         .object
         .iter()
-        .filter(|&&o| o == scene::synth::gt::NOISE_ID)
+        .filter(|&&o| o == synth::gt::NOISE_ID)
         .count();
     assert!(noise > 0 && noise < gt.len(), "{noise} of {}", gt.len());
 
@@ -129,7 +129,7 @@ fn eval_and_compare_report_known_errors() {
         };
         for j in range {
             fl.index.push(gt.index[j]);
-            let bad = gt.object[j] == scene::synth::gt::NOISE_ID;
+            let bad = gt.object[j] == synth::gt::NOISE_ID;
             fl.u.push(if bad { 1e4 } else { gt.u[j] + 3.0 });
             fl.v.push(if bad { 1e4 } else { gt.v[j] - 4.0 });
         }

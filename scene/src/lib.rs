@@ -1,7 +1,8 @@
-//! `scene` — the shared data layer of degs (DESIGN §2–§3): camera model, scene
+//! `scene` — the shared data layer of degs (docs/DESIGN.md §2–§3): camera model, scene
 //! manifest, event streams and their readers/writers, image and EXR helpers, image
-//! metrics (PSNR, SSIM) and the losses built on them, atomic outputs, and analytic
-//! synthetic scenes with ground truth.
+//! metrics (PSNR, SSIM) and the losses built on them, atomic outputs, Adam, and the
+//! plumbing every binary shares (settings files, progress, errors). Synthetic scenes
+//! live in the `synth` crate.
 
 pub mod atomic;
 pub mod camera;
@@ -18,7 +19,6 @@ pub mod manifest;
 pub mod metrics;
 pub mod optim;
 pub mod report;
-pub mod synth;
 pub mod testdata;
 pub use formats::{ReadOptions, read_events, write_evs};
 pub use image_io::Image;

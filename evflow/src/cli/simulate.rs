@@ -1,4 +1,4 @@
-//! `evflow simulate`: events from a directory of frames ([`crate::sim::simulate_frames`]).
+//! `evflow simulate`: events from a directory of frames ([`synth::frames::simulate_frames`]).
 
 use super::args::read_toml;
 use clap::Args;
@@ -12,7 +12,7 @@ pub struct SimulateArgs {
     /// Output event file (.evs).
     #[arg(long)]
     pub out: PathBuf,
-    /// Simulator settings (TOML, keys of evflow::sim::SimConfig).
+    /// Simulator settings (TOML, keys of synth::sim::SimConfig).
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Random seed (threshold mismatch, noise).
@@ -25,9 +25,9 @@ impl SimulateArgs {
     pub fn run(&self) -> anyhow::Result<()> {
         let cfg = match &self.config {
             Some(p) => read_toml(p)?,
-            None => crate::sim::SimConfig::default(),
+            None => synth::sim::SimConfig::default(),
         };
-        let s = crate::sim::simulate_frames(&self.frames, &self.out, &cfg, self.seed)?;
+        let s = synth::frames::simulate_frames(&self.frames, &self.out, &cfg, self.seed)?;
         eprintln!(
             "evflow: {} frames -> {} events ({}x{}) in {:.2} s -> {}",
             s.frames,

@@ -3,14 +3,13 @@
 
 use super::settings::PretrainSettings;
 use crate::cm::CmEvents;
-use crate::synthesize::simulate_scene;
 use glam::DVec3;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use scene::error::{Error, Result};
 use scene::events::EventStream;
-use scene::synth::gt::NOISE_ID;
-use scene::synth::{Pattern, SynthConfig, SynthWorld};
+use synth::gt::NOISE_ID;
+use synth::{Pattern, SynthConfig, SynthWorld, simulate_scene};
 
 /// The synthetic world of `(preset, seed)`: the preset at `size`², randomised by `seed`
 /// (see the module doc). Different seeds give different textures; the world does not
@@ -30,9 +29,10 @@ pub fn scene_config(
     cfg.render_rate_hz = s.render_rate_hz;
     cfg.supersample = 1;
     cfg.seed = seed;
-    cfg.contrast_threshold = rng.random_range(0.1..0.25);
-    cfg.threshold_sigma = rng.random_range(0.0..0.03);
-    cfg.shot_noise_hz = rng.random_range(0.0..0.3);
+    let c = rng.random_range(0.1..0.25);
+    (cfg.events.threshold_pos, cfg.events.threshold_neg) = (c, c);
+    cfg.events.threshold_sigma = rng.random_range(0.0..0.03);
+    cfg.events.shot_noise_hz = rng.random_range(0.0..0.3);
     cfg.fov_x_deg = rng.random_range(45.0..75.0);
     let g = rng.random_range(0.05..0.5);
     cfg.background = [g, g, g];

@@ -2,11 +2,11 @@
 //! item 4, `docs/DESIGN.md` §5 "Pretrained weights").
 //!
 //! **Data.** For every `(preset, seed)` a synthetic world is built in memory from the
-//! preset ([`scene::synth::SynthConfig::preset`]) and randomised by the seed
+//! preset ([`synth::SynthConfig::preset`]) and randomised by the seed
 //! ([`scene_config`]): textures (pattern, feature size, colours, texture seeds), camera
 //! path, object placement, spin axes, a speed factor, the contrast threshold and sensor
 //! noise. Its events and per-event ground-truth flow come from
-//! [`crate::synthesize::simulate_scene`]. A training sample is a random window
+//! [`synth::simulate_scene`]. A training sample is a random window
 //! `[t_a, t_a + L]` (L uniform in `[window_min_s, window_max_s]`) of a random scene: input
 //! the normalised voxel grid (Eq. 15), target the mean per-event ground-truth
 //! displacement (px per window) of each pixel with non-noise events, randomly flipped

@@ -1,8 +1,8 @@
 //! Settings of a pretraining run and their validation.
 
 use crate::net::NetConfig;
-use scene::synth::SynthConfig;
 use serde::{Deserialize, Serialize};
+use synth::SynthConfig;
 
 /// Settings of a pretraining run (TOML/JSON; every field defaulted).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -164,7 +164,7 @@ impl PretrainSettings {
             if SynthConfig::preset(p).is_none() {
                 return Err(format!(
                     "unknown preset '{p}' (known: {:?})",
-                    scene::synth::PRESETS
+                    synth::PRESETS
                 ));
             }
         }

@@ -1,13 +1,13 @@
 //! Synthetic scene directories: layout accepted by `Scene::open`, ground truth equal to
 //! the analytic renders, events consistent with the brightness change.
 
-use evflow::sim::luminance;
-use evflow::synthesize::{simulate_scene, write_synthetic_scene};
 use glam::DVec2;
 use scene::image_io::{read_exr_depth, read_exr_flow, read_image};
 use scene::manifest::Scene;
-use scene::synth::gt::{NOISE_ID, read_event_flow_gt, read_object_png};
-use scene::synth::{SynthConfig, SynthWorld};
+use synth::gt::{NOISE_ID, read_event_flow_gt, read_object_png};
+use synth::scene_dir::{simulate_scene, write_synthetic_scene};
+use synth::sim::{SimConfig, luminance};
+use synth::{SynthConfig, SynthWorld};
 
 fn small(preset: &str) -> SynthConfig {
     SynthConfig {
@@ -102,7 +102,7 @@ fn preset_scene_opens_and_its_ground_truth_matches_the_renders() {
 #[test]
 fn events_integrate_to_the_log_brightness_change() {
     // Without threshold noise each pixel's reference level is L(0) + C·Σp and stays
-    // within C of the current L (event generation model, DESIGN §5 Eq. 11).
+    // within C of the current L (event generation model, docs/DESIGN.md §5 Eq. 11).
     let cfg = small("fast");
     let world = SynthWorld::new(&cfg).unwrap();
     let (events, _) = simulate_scene(&world).unwrap();
@@ -117,7 +117,7 @@ fn events_integrate_to_the_log_brightness_change() {
     for i in 0..events.len() {
         sum[events.y[i] as usize * 48 + events.x[i] as usize] += events.p[i] as i64;
     }
-    let c = cfg.contrast_threshold;
+    let c = cfg.events.threshold_pos;
     let mut changed = 0;
     for i in 0..l0.len() {
         let residual = l1[i] - (l0[i] + c * sum[i] as f64);
@@ -129,13 +129,17 @@ fn events_integrate_to_the_log_brightness_change() {
 
 #[test]
 fn every_preset_produces_events_and_simulation_is_deterministic() {
-    for name in scene::synth::PRESETS {
+    for name in synth::PRESETS {
+        let base = small(name);
         let cfg = SynthConfig {
             duration: 0.1,
             render_rate_hz: 200.0,
-            shot_noise_hz: 2.0,
-            threshold_sigma: 0.02,
-            ..small(name)
+            events: SimConfig {
+                shot_noise_hz: 2.0,
+                threshold_sigma: 0.02,
+                ..base.events
+            },
+            ..base
         };
         let world = SynthWorld::new(&cfg).unwrap();
         let (a, ga) = simulate_scene(&world).unwrap();
@@ -191,12 +195,30 @@ fn blurred_train_frames_differ_from_sharp_test_renders() {
 fn invalid_settings_leave_nothing_behind() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("bad");
-    let cfg = SynthConfig {
-        contrast_threshold: 0.0,
-        ..small("rigid")
-    };
+    let mut cfg = small("rigid");
+    cfg.events.threshold_pos = 0.0;
+    cfg.events.threshold_neg = 0.0;
     let e = write_synthetic_scene(&cfg, &out).unwrap_err();
-    assert!(e.to_string().contains("contrast_threshold"), "{e}");
+    assert!(e.to_string().contains("events.threshold_pos"), "{e}");
     assert!(!out.exists());
     assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 0);
+}
+
+#[test]
+fn the_rgb_only_writer_writes_the_frames_of_the_full_one() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cfg = small("nonrigid");
+    let (full, rgb) = (tmp.path().join("full"), tmp.path().join("rgb"));
+    write_synthetic_scene(&cfg, &full).unwrap();
+    synth::write_rgb_synthetic_scene(&cfg, &rgb).unwrap();
+    let (a, b) = (Scene::open(&full).unwrap(), Scene::open(&rgb).unwrap());
+    assert!(b.train.events.is_none() && !rgb.join("events.evs").exists());
+    for (ma, mb) in [(&a.train, &b.train), (&a.test, &b.test)] {
+        assert_eq!(ma.camera, mb.camera);
+        assert_eq!(ma.frames, mb.frames);
+        for f in &ma.frames {
+            let bytes = |root: &std::path::Path| std::fs::read(root.join(&f.file_path)).unwrap();
+            assert!(bytes(&full) == bytes(&rgb), "{}", f.file_path);
+        }
+    }
 }

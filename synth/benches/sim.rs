@@ -2,11 +2,11 @@
 //! Prints a table and writes `target/bench-results/sim.json`.
 //! `SIM_BENCH_FRAMES` sets the number of internal frames simulated (default 200).
 
-use evflow::sim::{SimConfig, Simulator, luminance};
-use evflow::synthesize::write_synthetic_scene;
 use scene::EventStream;
-use scene::synth::{SynthConfig, SynthWorld};
 use std::time::Instant;
+use synth::scene_dir::write_synthetic_scene;
+use synth::sim::{SimConfig, Simulator, luminance};
+use synth::{SynthConfig, SynthWorld};
 
 #[derive(serde::Serialize)]
 struct Row {
@@ -50,8 +50,8 @@ fn main() {
 
             // Simulate (no noise, threshold mismatch as the default config).
             let sim_cfg = SimConfig {
-                threshold_pos: cfg.contrast_threshold,
-                threshold_neg: cfg.contrast_threshold,
+                threshold_pos: cfg.events.threshold_pos,
+                threshold_neg: cfg.events.threshold_neg,
                 ..SimConfig::default()
             };
             let mut sim = Simulator::new(size, size, &sim_cfg, 1);

@@ -17,8 +17,8 @@
 //!
 //! **Object ids** `gt/*/object_XXXX.png`: 16-bit grayscale PNG, value = object id.
 
-use crate::atomic::{write_atomic, write_bytes_atomic};
-use crate::error::{Error, IoContext, Result};
+use scene::atomic::{write_atomic, write_bytes_atomic};
+use scene::error::{Error, IoContext, Result};
 use std::io::Write;
 use std::path::Path;
 

@@ -1,6 +1,6 @@
 //! Ground-truth files of synthetic scenes: round trips and hostile input.
 
-use scene::synth::gt::{
+use synth::gt::{
     EventFlowGt, read_event_flow_gt, read_object_png, write_event_flow_gt, write_object_png,
 };
 

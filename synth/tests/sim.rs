@@ -1,7 +1,8 @@
 //! Event simulator: exact crossings on ramps, determinism, noise, refractory period.
 
-use evflow::sim::{SimConfig, Simulator, luminance, read_timestamps, simulate_frames};
 use scene::EventStream;
+use synth::frames::{read_timestamps, simulate_frames};
+use synth::sim::{SimConfig, Simulator, luminance};
 
 const EPS: f64 = 1e-3;
 

@@ -1,5 +1,5 @@
-//! Write a complete synthetic scene directory (DESIGN §3) with ground truth, from a
-//! [`SynthConfig`]: analytic renders ([`scene::synth`]) plus simulated events
+//! Write a complete synthetic scene directory (docs/DESIGN.md §3) with ground truth,
+//! from a [`SynthConfig`]: analytic renders ([`crate::world`]) plus simulated events
 //! ([`crate::sim`]).
 //!
 //! Layout of `out_dir` (built under a temp name and renamed at the end):
@@ -18,7 +18,7 @@
 //! gt/train/object_XXXX.png object ids (16-bit PNG, 0 = background, k+1 = objects[k])
 //! gt/test/…               the same at the test times
 //! gt/event_flow.bin       per-event flow (px/s) and object id, one row per event of
-//!                         events.evs (format: scene::synth::gt)
+//!                         events.evs (format: crate::gt)
 //! ```
 //!
 //! XXXX is the frame's index in its manifest. The ground truth of the train frames is
@@ -27,14 +27,15 @@
 //! two internal renders around it (the nearer one when the object differs); noise
 //! events get flow 0 and object id [`NOISE_ID`].
 
-use crate::sim::{SimConfig, Simulator, luminance};
+use crate::config::SynthConfig;
+use crate::gt::{EventFlowGt, NOISE_ID, write_event_flow_gt, write_object_png};
+use crate::sim::{Simulator, luminance};
+use crate::world::{Render, SynthWorld};
 use scene::atomic::{AtomicDir, write_json_atomic};
 use scene::error::{Error, Result};
 use scene::events::EventStream;
 use scene::image_io::{Image, write_exr_depth, write_exr_flow, write_png};
 use scene::manifest::{EventsRef, Frame, Manifest, TEST_FILE, TRAIN_FILE};
-use scene::synth::gt::{EventFlowGt, NOISE_ID, write_event_flow_gt, write_object_png};
-use scene::synth::{Render, SynthConfig, SynthWorld};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -61,30 +62,15 @@ pub struct Summary {
     pub total_s: f64,
 }
 
-/// The simulator settings a synthetic config implies.
-pub fn sim_config(cfg: &SynthConfig) -> SimConfig {
-    SimConfig {
-        threshold_pos: cfg.contrast_threshold,
-        threshold_neg: cfg.contrast_threshold,
-        threshold_sigma: cfg.threshold_sigma,
-        refractory_s: cfg.refractory_s,
-        shot_noise_hz: cfg.shot_noise_hz,
-        hot_pixel_fraction: cfg.hot_pixel_fraction,
-        hot_pixel_hz: cfg.hot_pixel_hz,
-        ..SimConfig::default()
-    }
-}
-
 /// Render the recording at the internal rate and simulate its events, with the
 /// per-event ground truth (see the module doc).
 pub fn simulate_scene(world: &SynthWorld) -> Result<(EventStream, EventFlowGt)> {
     let cfg = world.config();
     let (w, h) = (cfg.width, cfg.height);
-    let sim_cfg = sim_config(cfg);
-    sim_cfg
+    cfg.events
         .validate()
         .map_err(|e| Error::Other(format!("synthetic scene: simulator settings: {e}")))?;
-    let mut sim = Simulator::new(w, h, &sim_cfg, cfg.seed);
+    let mut sim = Simulator::new(w, h, &cfg.events, cfg.seed);
     let mut events = EventStream::new(w, h);
     let mut noise = Vec::new();
     let mut gt = EventFlowGt {
@@ -219,7 +205,7 @@ pub fn write_synthetic_scene(cfg: &SynthConfig, out_dir: &Path) -> Result<Summar
         frames: write_split(&world, &root, "train", &cfg.train_times())?,
         events: Some(EventsRef {
             path: EVENTS_FILE.into(),
-            contrast_threshold: cfg.contrast_threshold,
+            contrast_threshold: cfg.events.nominal_threshold(),
         }),
     };
     let test = Manifest {

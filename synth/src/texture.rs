@@ -3,7 +3,7 @@
 //! sharp (events and flow are rich there); an optional smooth value-noise factor adds
 //! low-contrast detail inside the regions.
 
-use super::config::{Pattern, Texture};
+use crate::config::{Pattern, Texture};
 use glam::DVec3;
 
 /// Direction of the stripes (oblique, so both image axes see motion).

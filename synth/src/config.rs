@@ -1,15 +1,20 @@
-//! Settings of a synthetic scene (serde, every field defaulted) and the presets.
+//! Settings of a synthetic scene: the types, their validation and the frame times.
+//! Every field is defaulted in files (a missing key takes the `rigid` preset's value,
+//! see [`crate::presets`]); the keys and the flat simulator keys of older files are
+//! handled in [`crate::keys`].
 
+use crate::sim::SimConfig;
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
-/// Names accepted by [`SynthConfig::preset`].
-pub const PRESETS: &[&str] = &["static", "rigid", "nonrigid", "fast"];
-
-/// Everything that defines a synthetic recording: sensor, timing, event simulation,
-/// noise, the camera path and the objects.
+/// Everything that defines a synthetic recording: sensor, timing, the event simulator,
+/// the camera path and the objects.
+///
+/// Serialised with the simulator's settings as a nested table (`[events]`); reading also
+/// accepts the flat keys of before (`contrast_threshold`, `threshold_sigma`, …), see
+/// [`crate::keys`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
+#[serde(remote = "Self", default, deny_unknown_fields)]
 pub struct SynthConfig {
     /// Name of the preset this config started from (informative).
     pub preset: String,
@@ -36,22 +41,12 @@ pub struct SynthConfig {
     /// integrates light over the pixel; with too few samples the hard texture edges
     /// alias differently in every view, which no 3D model can reproduce.
     pub frame_supersample: u32,
-    /// Nominal contrast threshold C (both polarities), log units.
-    pub contrast_threshold: f64,
-    /// Per-pixel threshold mismatch σ.
-    pub threshold_sigma: f64,
-    /// Refractory period of the simulated pixels, seconds.
-    pub refractory_s: f64,
-    /// Shot-noise rate per pixel, Hz.
-    pub shot_noise_hz: f64,
-    /// Fraction of hot pixels.
-    pub hot_pixel_fraction: f64,
-    /// Rate of a hot pixel, Hz.
-    pub hot_pixel_hz: f64,
     /// Seed of the event simulator (noise, threshold mismatch).
     pub seed: u64,
     /// Linear RGB of rays that hit nothing.
     pub background: [f64; 3],
+    /// The event simulator: contrast thresholds, mismatch, refractory period, noise.
+    pub events: SimConfig,
     pub camera: CameraPath,
     /// Objects; object id `k + 1` is `objects[k]` (0 is the background).
     pub objects: Vec<ObjectSpec>,
@@ -200,224 +195,7 @@ pub struct ObjectSpec {
     pub deform: Deform,
 }
 
-impl Default for SynthConfig {
-    fn default() -> Self {
-        Self::preset("rigid").expect("the rigid preset exists")
-    }
-}
-
-fn rgb(r: f64, g: f64, b: f64) -> [f64; 3] {
-    [r, g, b]
-}
-
-/// The room every preset shares: a checkered floor and a blob-textured back wall.
-fn room() -> Vec<ObjectSpec> {
-    vec![
-        ObjectSpec {
-            name: "floor".into(),
-            shape: Shape::Plane {
-                half_size: [6.0, 6.0],
-            },
-            texture: Texture {
-                pattern: Pattern::Checker,
-                cell: 0.3,
-                colour_a: rgb(0.85, 0.82, 0.75),
-                colour_b: rgb(0.12, 0.16, 0.25),
-                detail: 0.15,
-                seed: 11,
-            },
-            motion: Motion {
-                position: DVec3::new(0.0, -0.6, 0.0),
-                rotation_deg: DVec3::new(-90.0, 0.0, 0.0),
-                ..Motion::default()
-            },
-            deform: Deform::default(),
-        },
-        ObjectSpec {
-            name: "wall".into(),
-            shape: Shape::Plane {
-                half_size: [0.0, 0.0],
-            },
-            texture: Texture {
-                pattern: Pattern::Blobs,
-                cell: 0.35,
-                colour_a: rgb(0.9, 0.55, 0.25),
-                colour_b: rgb(0.08, 0.12, 0.3),
-                detail: 0.25,
-                seed: 12,
-            },
-            motion: Motion {
-                position: DVec3::new(0.0, 0.0, -3.0),
-                ..Motion::default()
-            },
-            deform: Deform::default(),
-        },
-    ]
-}
-
-/// The foreground objects (box, ball, blob, flag); `moving` scales their motion (0 = still).
-fn props(moving: f64, nonrigid: bool) -> Vec<ObjectSpec> {
-    vec![
-        ObjectSpec {
-            name: "box".into(),
-            shape: Shape::Cuboid {
-                half_size: DVec3::new(0.3, 0.3, 0.3),
-            },
-            texture: Texture {
-                pattern: Pattern::Stripes,
-                cell: 0.1,
-                colour_a: rgb(0.95, 0.9, 0.2),
-                colour_b: rgb(0.05, 0.3, 0.1),
-                detail: 0.1,
-                seed: 21,
-            },
-            motion: Motion {
-                position: DVec3::new(-0.75, -0.25, 0.2),
-                rotation_deg: DVec3::new(10.0, 30.0, 0.0),
-                oscillation: DVec3::new(0.3, 0.1, 0.0) * moving,
-                oscillation_hz: 0.5,
-                spin_axis: DVec3::new(0.3, 1.0, 0.2),
-                spin_deg_per_s: 60.0 * moving,
-                ..Motion::default()
-            },
-            deform: Deform::default(),
-        },
-        ObjectSpec {
-            name: "ball".into(),
-            shape: Shape::Ellipsoid {
-                radii: DVec3::splat(0.35),
-            },
-            texture: Texture {
-                pattern: Pattern::Checker,
-                cell: 0.12,
-                colour_a: rgb(0.9, 0.2, 0.15),
-                colour_b: rgb(0.95, 0.95, 0.9),
-                detail: 0.1,
-                seed: 31,
-            },
-            motion: Motion {
-                position: DVec3::new(0.75, -0.1, -0.2),
-                velocity: DVec3::new(-0.25, 0.0, 0.3) * moving,
-                spin_axis: DVec3::new(0.0, 1.0, 0.3),
-                spin_deg_per_s: 90.0 * moving,
-                ..Motion::default()
-            },
-            deform: Deform::default(),
-        },
-        ObjectSpec {
-            name: "blob".into(),
-            shape: Shape::Ellipsoid {
-                radii: DVec3::new(0.3, 0.25, 0.3),
-            },
-            texture: Texture {
-                pattern: Pattern::Blobs,
-                cell: 0.12,
-                colour_a: rgb(0.2, 0.6, 0.95),
-                colour_b: rgb(0.05, 0.05, 0.1),
-                detail: 0.1,
-                seed: 41,
-            },
-            motion: Motion {
-                position: DVec3::new(0.0, 0.15, -1.0),
-                oscillation: DVec3::new(0.0, 0.15, 0.0) * moving,
-                oscillation_hz: 0.8,
-                spin_axis: DVec3::new(1.0, 0.2, 0.0),
-                spin_deg_per_s: 40.0 * moving,
-                ..Motion::default()
-            },
-            deform: Deform {
-                scale_amplitude: if nonrigid {
-                    DVec3::new(0.3, 0.25, 0.3)
-                } else {
-                    DVec3::ZERO
-                },
-                hz: 1.2,
-                ..Deform::default()
-            },
-        },
-        ObjectSpec {
-            name: "flag".into(),
-            shape: Shape::Plane {
-                half_size: [0.5, 0.3],
-            },
-            texture: Texture {
-                pattern: Pattern::Stripes,
-                cell: 0.08,
-                colour_a: rgb(0.95, 0.95, 0.95),
-                colour_b: rgb(0.6, 0.05, 0.3),
-                detail: 0.1,
-                seed: 51,
-            },
-            motion: Motion {
-                position: DVec3::new(0.35, 0.75, -1.8),
-                rotation_deg: DVec3::new(0.0, -15.0, 0.0),
-                ..Motion::default()
-            },
-            deform: Deform {
-                wave_amplitude: if nonrigid { 0.08 } else { 0.0 },
-                wave_length: 0.5,
-                wave_hz: 1.0,
-                ..Deform::default()
-            },
-        },
-    ]
-}
-
 impl SynthConfig {
-    /// A named preset (see [`PRESETS`]): `static` (still objects, moving camera),
-    /// `rigid` (rigidly moving objects), `nonrigid` (adds a non-uniformly pulsing
-    /// ellipsoid and a waving flag), `fast` (nonrigid with 3× faster motion). `None` for
-    /// other names. Every preset has the same objects (floor, wall, box, ball, blob,
-    /// flag: ids 1–6); only their motion differs.
-    pub fn preset(name: &str) -> Option<SynthConfig> {
-        let (moving, nonrigid, speed) = match name {
-            "static" => (0.0, false, 1.0),
-            "rigid" => (1.0, false, 1.0),
-            "nonrigid" => (1.0, true, 1.0),
-            "fast" => (1.0, true, 3.0),
-            _ => return None,
-        };
-        let mut objects = room();
-        objects.extend(props(moving, nonrigid));
-        let mut camera = CameraPath::default();
-        if speed != 1.0 {
-            camera.sway_hz *= speed;
-            camera.turn_hz *= speed;
-            for o in &mut objects {
-                let m = &mut o.motion;
-                m.velocity *= speed;
-                m.oscillation_hz *= speed;
-                m.spin_deg_per_s *= speed;
-                o.deform.hz *= speed;
-                o.deform.wave_hz *= speed;
-            }
-        }
-        Some(SynthConfig {
-            preset: name.to_string(),
-            width: 128,
-            height: 128,
-            fov_x_deg: 60.0,
-            duration: 1.0,
-            train_fps: 8.0,
-            test_frames: 8,
-            render_rate_hz: 1000.0,
-            blur_subframes: 1,
-            exposure_s: 0.01,
-            supersample: 2,
-            frame_supersample: 8,
-            contrast_threshold: 0.1,
-            threshold_sigma: 0.0,
-            refractory_s: 0.0,
-            shot_noise_hz: 0.0,
-            hot_pixel_fraction: 0.0,
-            hot_pixel_hz: 0.0,
-            seed: 0,
-            background: [0.2, 0.2, 0.2],
-            camera,
-            objects,
-        })
-    }
-
     /// `Err` with a sentence when a setting is out of range.
     pub fn validate(&self) -> Result<(), String> {
         if self.width == 0 || self.height == 0 || self.width > 8192 || self.height > 8192 {
@@ -431,7 +209,6 @@ impl SynthConfig {
             ("duration", self.duration),
             ("train_fps", self.train_fps),
             ("render_rate_hz", self.render_rate_hz),
-            ("contrast_threshold", self.contrast_threshold),
         ];
         for (name, v) in positive {
             if !(v.is_finite() && v > 0.0) {
@@ -441,21 +218,14 @@ impl SynthConfig {
         if self.fov_x_deg >= 179.0 {
             return Err(format!("fov_x_deg = {} must be < 179", self.fov_x_deg));
         }
-        let non_negative = [
-            ("exposure_s", self.exposure_s),
-            ("threshold_sigma", self.threshold_sigma),
-            ("refractory_s", self.refractory_s),
-            ("shot_noise_hz", self.shot_noise_hz),
-            ("hot_pixel_hz", self.hot_pixel_hz),
-        ];
-        for (name, v) in non_negative {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(format!("{name} = {v} must be finite and ≥ 0"));
-            }
+        if !(self.exposure_s.is_finite() && self.exposure_s >= 0.0) {
+            return Err(format!(
+                "exposure_s = {} must be finite and ≥ 0",
+                self.exposure_s
+            ));
         }
-        if !(0.0..=1.0).contains(&self.hot_pixel_fraction) {
-            return Err("hot_pixel_fraction must be in [0, 1]".into());
-        }
+        // The simulator's messages start with the key; name its table too.
+        self.events.validate().map_err(|e| format!("events.{e}"))?;
         let sampling_ok = |n: u32| (1..=8).contains(&n);
         if self.blur_subframes == 0
             || !sampling_ok(self.supersample)

@@ -1,0 +1,52 @@
+//! RGB-only synthetic scene directories: the manifests and frames of a
+//! [`SynthConfig`], no events and no ground truth. For tests and benchmarks of the RGB
+//! warm-up without the event simulator (`gaussians synth-rgb`).
+
+use crate::config::SynthConfig;
+use crate::world::SynthWorld;
+use scene::atomic::AtomicDir;
+use scene::error::{Error, Result};
+use scene::image_io::{Image, write_png};
+use scene::manifest::{Frame, Manifest, TEST_FILE, TRAIN_FILE};
+use std::path::Path;
+
+/// Write an RGB-only scene directory (manifests + PNGs, no events) of a synthetic
+/// configuration. Frame layout and times as the full synthetic writer
+/// ([`crate::scene_dir::write_synthetic_scene`]: `images/{split}_NNNN.png`,
+/// `time = t / duration`). The directory appears complete or not at all.
+pub fn write_rgb_synthetic_scene(cfg: &SynthConfig, out: &Path) -> Result<()> {
+    let world =
+        SynthWorld::new(cfg).map_err(|e| Error::Other(format!("synthetic scene settings: {e}")))?;
+    let dir = AtomicDir::new(out)?;
+    for (split, times, file) in [
+        ("train", cfg.train_times(), TRAIN_FILE),
+        ("test", cfg.test_times(), TEST_FILE),
+    ] {
+        let mut frames = Vec::new();
+        for (k, &t) in times.iter().enumerate() {
+            let r = world.render_frame(t);
+            let file_path = format!("images/{split}_{k:04}.png");
+            let img = Image {
+                width: r.width,
+                height: r.height,
+                channels: 3,
+                data: r.rgb,
+            };
+            write_png(dir.path().join(&file_path), &img)?;
+            frames.push(Frame {
+                file_path,
+                timestamp: t,
+                time: (t / cfg.duration).clamp(0.0, 1.0),
+                cam_to_world: world.camera_at(t).cam_to_world,
+            });
+        }
+        Manifest {
+            camera: world.intrinsics(),
+            frames,
+            events: None,
+        }
+        .write(dir.path().join(file))?;
+    }
+    dir.commit()?;
+    Ok(())
+}
