@@ -220,29 +220,70 @@ fn write_refuses_non_finite_and_leaves_the_old_file() {
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
 }
 
+/// A Python that can import plyfile: `$DEGS_PYTHON`, else `python3` if it has plyfile,
+/// else a virtual environment this test makes once under the target directory
+/// (`python3 -m venv` + `pip install plyfile` from PyPI). `Err` says what failed.
+fn python_with_plyfile() -> Result<String, String> {
+    let has_plyfile = |py: &str| {
+        std::process::Command::new(py)
+            .args(["-c", "import plyfile"])
+            .output()
+            .is_ok_and(|o| o.status.success())
+    };
+    if let Ok(py) = std::env::var("DEGS_PYTHON") {
+        return if has_plyfile(&py) {
+            Ok(py)
+        } else {
+            Err(format!("DEGS_PYTHON={py} cannot import plyfile"))
+        };
+    }
+    if has_plyfile("python3") {
+        return Ok("python3".into());
+    }
+    let venv = Path::new(env!("CARGO_TARGET_TMPDIR")).join("plyfile-venv");
+    let py = venv.join("bin/python").display().to_string();
+    if !has_plyfile(&py) {
+        let run = |cmd: &str, args: &[&str]| {
+            std::process::Command::new(cmd)
+                .args(args)
+                .output()
+                .map_err(|e| format!("{cmd}: {e}"))
+                .and_then(|o| {
+                    o.status.success().then_some(()).ok_or_else(|| {
+                        format!(
+                            "{cmd} {}: {}",
+                            args.join(" "),
+                            String::from_utf8_lossy(&o.stderr)
+                        )
+                    })
+                })
+        };
+        let venv_s = venv.display().to_string();
+        run("python3", &["-m", "venv", &venv_s])?;
+        run(&py, &["-m", "pip", "install", "-q", "plyfile"])?;
+    }
+    Ok(py)
+}
+
 /// An independent reader (Python `plyfile`) opens our file with the exact 3DGS property
-/// list and values. The interpreter is `$DEGS_PYTHON` (`.ci/run` makes a venv with
-/// plyfile) or `python3`. Without plyfile the test fails, unless `DEGS_SKIP_PLYFILE=1`
-/// opts out (then it says it skipped).
+/// list and values. The interpreter comes from [`python_with_plyfile`]; when none can be
+/// had the test fails, unless `DEGS_SKIP_PLYFILE=1` opts out (then it says it skipped).
 #[test]
 fn plyfile_reads_our_output() {
-    let python = std::env::var("DEGS_PYTHON").unwrap_or_else(|_| "python3".into());
-    let ok = std::process::Command::new(&python)
-        .args(["-c", "import plyfile"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !ok {
-        let skip = std::env::var("DEGS_SKIP_PLYFILE").is_ok_and(|v| v == "1");
-        if skip {
-            eprintln!("SKIPPED: `{python}` cannot import plyfile and DEGS_SKIP_PLYFILE=1");
-            return;
+    let python = match python_with_plyfile() {
+        Ok(py) => py,
+        Err(why) => {
+            if std::env::var("DEGS_SKIP_PLYFILE").is_ok_and(|v| v == "1") {
+                eprintln!("SKIPPED: no Python with plyfile ({why}) and DEGS_SKIP_PLYFILE=1");
+                return;
+            }
+            panic!(
+                "no Python with plyfile, the independent PLY reader this test needs: {why}. \
+                 Install it (`pip install plyfile`), point DEGS_PYTHON at an interpreter that \
+                 has it, or opt out with DEGS_SKIP_PLYFILE=1"
+            );
         }
-        panic!(
-            "`{python}` cannot import plyfile, the independent PLY reader this test needs. \
-             Install it (`{python} -m pip install plyfile`, or `pip install plyfile`), point \
-             DEGS_PYTHON at an interpreter that has it, or opt out with DEGS_SKIP_PLYFILE=1"
-        );
-    }
+    };
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("py.ply");
     let mut s = splats(4, 3);
