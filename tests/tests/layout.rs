@@ -483,3 +483,37 @@ fn no_source_file_is_over_600_lines_and_main_rs_is_thin() {
         long.join("\n")
     );
 }
+
+/// `docs/DESIGN.md`'s equation table names files that exist and functions they define.
+#[test]
+fn design_equation_table_names_real_files_and_functions() {
+    let root = workspace_root();
+    let design = std::fs::read_to_string(root.join("docs/DESIGN.md")).unwrap();
+    let table: Vec<&str> = design
+        .lines()
+        .skip_while(|l| !l.starts_with("## 8."))
+        .take_while(|l| !l.starts_with("## 9."))
+        .filter(|l| l.starts_with("| ") && !l.starts_with("| Eq."))
+        .collect();
+    assert_eq!(table.len(), 15, "one row per equation (Eq. 1–15)");
+    let mut missing = Vec::new();
+    for row in table {
+        let ticked: Vec<&str> = row.split('`').skip(1).step_by(2).collect();
+        let files: Vec<&str> = ticked.iter().copied().filter(|t| t.ends_with(".rs")).collect();
+        assert!(!files.is_empty(), "no file in row {row}");
+        let sources: String = files
+            .iter()
+            .map(|f| std::fs::read_to_string(root.join(f)).unwrap_or_else(|_| {
+                missing.push(format!("{f} (file)"));
+                String::new()
+            }))
+            .collect();
+        for name in ticked.iter().filter(|t| !t.ends_with(".rs")) {
+            let f = name.rsplit("::").next().unwrap();
+            if !sources.contains(&format!("fn {f}")) {
+                missing.push(format!("{name} (function) in {files:?}"));
+            }
+        }
+    }
+    assert!(missing.is_empty(), "docs/DESIGN.md §8 names what does not exist:\n{}", missing.join("\n"));
+}
