@@ -98,6 +98,7 @@ fn write_scene(dir: &Path) -> EventStream {
             path: "events.evs".into(),
             contrast_threshold: 0.2,
         }),
+        frame_encoding: None,
     }
     .write(dir.join(TRAIN_FILE))
     .unwrap();

@@ -27,22 +27,26 @@
 //! the frames' clock, windows half-open `[t_a, t_b)`, polarity ±1. Reductions are summed
 //! per fixed chunk in order, so results do not depend on the thread count.
 //!
-//! **Planned** (not written yet): the training loop (sampling `t_e`, rendering through
-//! `gaussians`, periodic rebinding through `assoc`, Adam over the PoseNet's and the
-//! contrast threshold's flat parameters, PoseNet save/load) and the `deform` stage
-//! binary with its `report.json`. The kernels depend only on `scene`, `glam`, `rayon`
-//! and `serde`. Imports between modules go one way only: any module may use the leaves
+//! **The stage**: [`inputs`] reads the scene, the warm-up model, the flows and the
+//! bindings; [`trainer`] runs the joint iterations (Eq. 13) around the warm-up's
+//! `gaussians::train::Trainer`, rebinding through `assoc`; [`stage`] writes the outputs
+//! and `report.json`; [`settings`] holds every setting. The kernels depend only on
+//! `scene`, `glam`, `rayon` and `serde`. Imports between modules go one way only: any module may use the leaves
 //! `real` and `lie`, and `event_image` uses `event_counts`.
 
 pub mod camera_path;
 pub mod event_counts;
 pub mod event_image;
 pub mod flow;
+pub mod inputs;
 pub mod lie;
 pub mod motion_loss;
 pub mod posenet;
 pub mod real;
 pub mod schedule;
+pub mod settings;
+pub mod stage;
+pub mod trainer;
 
 #[cfg(test)]
 mod tests;

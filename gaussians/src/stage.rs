@@ -211,7 +211,7 @@ fn input_hashes(scene: &Scene, init_ply: Option<&Path>) -> Result<Vec<InputHash>
 
 /// Render `model` at every view, write `renders/NNNN.png` (when `renders` is set) and
 /// return PSNR/SSIM against the views' images.
-fn evaluate(
+pub fn evaluate(
     model: &Model,
     views: &[View],
     split: &str,
@@ -252,7 +252,7 @@ fn mean_colour(rgb: &[f32]) -> Vec<f32> {
 }
 
 /// Write `depth/NNNN.exr` for every view.
-fn write_depths(model: &Model, views: &[View], dir: &Path) -> Result<()> {
+pub fn write_depths(model: &Model, views: &[View], dir: &Path) -> Result<()> {
     for (i, v) in views.iter().enumerate() {
         let f = model.render(&v.camera, v.time);
         write_exr_depth(

@@ -163,9 +163,7 @@ pub const STAGES: &[Stage] = &[
     Stage {
         name: "deform",
         binary: "deform",
-        // Not written yet: when the crate lands, its verb (`train`) and its settings
-        // type go here.
-        verb: None,
+        verb: Some("train"),
         inputs: &[
             SCENE_INPUT,
             Input {
@@ -182,7 +180,7 @@ pub const STAGES: &[Stage] = &[
             },
         ],
         package: "degs-deform",
-        settings: None,
+        settings: Some(SettingsType::of::<deform::settings::DeformSettings>()),
         key_file: None,
         renders: Some("renders"),
         event_flow: None,

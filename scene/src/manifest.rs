@@ -63,12 +63,30 @@ pub struct EventsRef {
     pub contrast_threshold: f64,
 }
 
+/// How the frames' 8-bit codes map to intensity (`frame_encoding` in the manifest).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FrameEncoding {
+    /// The sRGB transfer curve (PNG/JPEG convention; what a missing field means).
+    Srgb,
+    /// Linear in the stored code (`degs synth` writes these).
+    Linear,
+}
+
+impl FrameEncoding {
+    pub fn is_srgb(self) -> bool {
+        self == FrameEncoding::Srgb
+    }
+}
+
 /// The content of one `transforms_*.json`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Manifest {
     pub camera: Intrinsics,
     pub frames: Vec<Frame>,
     pub events: Option<EventsRef>,
+    /// How the frames are encoded; `None` (the field absent) means sRGB for 8-bit images.
+    pub frame_encoding: Option<FrameEncoding>,
 }
 
 /// Camera fields as they appear in the file (all optional: checked after parsing).
@@ -129,6 +147,8 @@ struct RawManifest {
     frames: Vec<RawFrame>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     events: Option<RawEvents>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    frame_encoding: Option<FrameEncoding>,
 }
 
 impl Manifest {
@@ -212,6 +232,7 @@ impl Manifest {
             camera,
             frames,
             events,
+            frame_encoding: raw.frame_encoding,
         })
     }
 
@@ -270,6 +291,7 @@ impl Manifest {
                 path: e.path.clone(),
                 contrast_threshold: e.contrast_threshold,
             }),
+            frame_encoding: self.frame_encoding,
         };
         crate::atomic::write_json_atomic(path, &raw)
     }
@@ -401,6 +423,7 @@ impl Scene {
                 camera: train.camera,
                 frames: Vec::new(),
                 events: None,
+                frame_encoding: train.frame_encoding,
             }
         };
         let scene = Scene { root, train, test };

@@ -42,6 +42,7 @@ fn manifest(n: usize) -> Manifest {
             path: "events.evs".into(),
             contrast_threshold: 0.17,
         }),
+        frame_encoding: None,
     }
 }
 
@@ -58,6 +59,7 @@ fn write_scene(dir: &Path, n_train: usize) -> Manifest {
         frames: frames(1),
         events: None,
         ..m.clone()
+        frame_encoding: None,
     };
     test.write(dir.join("transforms_test.json")).unwrap();
     let mut ev = EventStream::new(8, 6);
@@ -386,6 +388,7 @@ fn scene_open_checks_images_and_events() {
     Manifest {
         frames: vec![],
         ..manifest(0)
+        frame_encoding: None,
     }
     .write(dir.path().join("transforms_train.json"))
     .unwrap();

@@ -7,7 +7,7 @@ use crate::world::SynthWorld;
 use scene::atomic::AtomicDir;
 use scene::error::{Error, Result};
 use scene::image_io::{Image, write_png};
-use scene::manifest::{Frame, Manifest, TEST_FILE, TRAIN_FILE};
+use scene::manifest::{Frame, FrameEncoding, Manifest, TEST_FILE, TRAIN_FILE};
 use std::path::Path;
 
 /// Write an RGB-only scene directory (manifests + PNGs, no events) of a synthetic
@@ -44,6 +44,7 @@ pub fn write_rgb_synthetic_scene(cfg: &SynthConfig, out: &Path) -> Result<()> {
             camera: world.intrinsics(),
             frames,
             events: None,
+            frame_encoding: Some(FrameEncoding::Linear),
         }
         .write(dir.path().join(file))?;
     }

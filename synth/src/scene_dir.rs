@@ -35,7 +35,7 @@ use scene::atomic::{AtomicDir, write_json_atomic};
 use scene::error::{Error, Result};
 use scene::events::EventStream;
 use scene::image_io::{Image, write_exr_depth, write_exr_flow, write_png};
-use scene::manifest::{EventsRef, Frame, Manifest, TEST_FILE, TRAIN_FILE};
+use scene::manifest::{EventsRef, Frame, FrameEncoding, Manifest, TEST_FILE, TRAIN_FILE};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -207,11 +207,13 @@ pub fn write_synthetic_scene(cfg: &SynthConfig, out_dir: &Path) -> Result<Summar
             path: EVENTS_FILE.into(),
             contrast_threshold: cfg.events.nominal_threshold(),
         }),
+        frame_encoding: Some(FrameEncoding::Linear),
     };
     let test = Manifest {
         camera,
         frames: write_split(&world, &root, "test", &cfg.test_times())?,
         events: None,
+        frame_encoding: Some(FrameEncoding::Linear),
     };
     train.write(root.join(TRAIN_FILE))?;
     test.write(root.join(TEST_FILE))?;

@@ -1,0 +1,183 @@
+//! What the joint training reads: the scene (train and test views, the events, the
+//! camera path), the warm-up model and its settings, the per-event flow of `evflow` and
+//! the bindings of `assoc`. Every error names the file it is about.
+
+use crate::camera_path::{CameraPath, Interp};
+use crate::event_counts::EventCounts;
+use crate::event_image::srgb_to_linear;
+use crate::settings::{DeformSettings, FrameEncoding};
+use gaussians::model::Model;
+use gaussians::train::{TrainSettings, View};
+use scene::error::{Error, Result};
+use scene::events::EventStream;
+use scene::image_io::read_image;
+use scene::manifest::{Manifest, Scene};
+use scene::metrics::interleaved_to_planar;
+use std::path::Path;
+
+/// Everything the joint training needs from the files, in memory.
+pub struct Inputs {
+    pub scene: Scene,
+    /// Train views (camera, normalised time, planar RGB as stored).
+    pub views: Vec<View>,
+    /// Test views (held out).
+    pub test: Vec<View>,
+    /// Train frames as linear intensity (planar), for the event model.
+    pub linear: Vec<Vec<f32>>,
+    /// Train frame times, seconds (the events' clock).
+    pub times: Vec<f64>,
+    pub events: EventStream,
+    pub counts: EventCounts,
+    /// Per event of the stream: flow in px/s (NaN where `evflow` gave none).
+    pub flow_u: Vec<f32>,
+    pub flow_v: Vec<f32>,
+    /// The interpolated camera path through the train frames.
+    pub path: CameraPath,
+    pub contrast: f64,
+    /// Whether the stored frames are sRGB (else linear).
+    pub srgb: bool,
+    pub model: Model,
+    pub warmup: TrainSettings,
+    /// Bindings per train frame, from `assoc.bin`.
+    pub bindings: Vec<assoc::Bindings>,
+    /// Half-width δt of the association window.
+    pub assoc_delta_t: f64,
+}
+
+/// Planar RGB views of a manifest's frames (images checked against the camera size).
+pub fn load_views(scene: &Scene, m: &Manifest) -> Result<Vec<View>> {
+    m.frames
+        .iter()
+        .map(|f| {
+            let camera = scene::Camera {
+                intrinsics: m.camera,
+                cam_to_world: f.cam_to_world,
+            };
+            let path = scene.image_path(f);
+            let img = read_image(&path)?;
+            let (w, h) = (m.camera.width, m.camera.height);
+            if (img.width, img.height) != (w, h) {
+                return Err(Error::invalid(
+                    &path,
+                    format!("image is {}x{} but the camera is {w}x{h}", img.width, img.height),
+                ));
+            }
+            Ok(View {
+                camera,
+                time: f.time as f32,
+                rgb: interleaved_to_planar(&img.data, w as usize, h as usize, 3),
+            })
+        })
+        .collect()
+}
+
+/// Per-event flow of every `flow/NNNN.evflow` in `flows` spread over the stream's
+/// `n` events (NaN where no window covers an event).
+fn read_flows(flows: &Path, n: usize) -> Result<(Vec<f32>, Vec<f32>)> {
+    let dir = flows.join("flow");
+    let mut files: Vec<_> = std::fs::read_dir(&dir)
+        .map_err(|e| Error::io(&dir, e))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "evflow"))
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        return Err(Error::invalid(&dir, "no .evflow files: is this an evflow output?"));
+    }
+    let (mut u, mut v) = (vec![f32::NAN; n], vec![f32::NAN; n]);
+    for p in files {
+        let f = evflow::flowfile::read_evflow(&p)?;
+        for (k, &i) in f.index.iter().enumerate() {
+            let i = usize::try_from(i).ok().filter(|&i| i < n).ok_or_else(|| {
+                Error::invalid(&p, format!("event index {i} beyond the stream's {n} events"))
+            })?;
+            (u[i], v[i]) = (f.u[k], f.v[k]);
+        }
+    }
+    Ok((u, v))
+}
+
+impl Inputs {
+    /// Read the scene, the warm-up model (`model`), flows (`flows`) and bindings
+    /// (`assoc`).
+    pub fn load(
+        scene_dir: &Path,
+        model_dir: &Path,
+        flows: &Path,
+        assoc_dir: &Path,
+        s: &DeformSettings,
+    ) -> Result<Inputs> {
+        let scene = Scene::open(scene_dir)?;
+        let views = load_views(&scene, &scene.train)?;
+        let test = load_views(&scene, &scene.test)?;
+        let srgb = match s.frame_encoding {
+            FrameEncoding::Srgb => true,
+            FrameEncoding::Linear => false,
+            FrameEncoding::Auto => scene.train.frame_encoding.is_none_or(|e| e.is_srgb()),
+        };
+        let linear = views
+            .iter()
+            .map(|v| {
+                if srgb {
+                    v.rgb.iter().map(|&c| srgb_to_linear(c)).collect()
+                } else {
+                    v.rgb.clone()
+                }
+            })
+            .collect();
+        let times: Vec<f64> = scene.train.frames.iter().map(|f| f.timestamp).collect();
+        let events = scene.load_events()?;
+        let train_file = scene.root.join(scene::manifest::TRAIN_FILE);
+        let counts = EventCounts::build(&events.as_slice(), &times, &s.counts)
+            .map_err(|e| Error::invalid(&train_file, e))?;
+        let path = CameraPath::from_trajectory(&scene.train_trajectory(), Interp::Linear)
+            .map_err(|e| Error::invalid(&train_file, e))?;
+        let contrast = if s.contrast_threshold > 0.0 {
+            s.contrast_threshold
+        } else {
+            scene.contrast_threshold()
+        };
+        let (flow_u, flow_v) = read_flows(flows, events.len())?;
+        let model = Model::load(model_dir)?;
+        let settings_file = model_dir.join("settings.toml");
+        let text = std::fs::read_to_string(&settings_file).map_err(|e| Error::io(&settings_file, e))?;
+        let warmup = TrainSettings::from_toml(&text).map_err(|e| Error::invalid(&settings_file, e))?;
+        let assoc_file = assoc_dir.join("assoc.bin");
+        let frames = assoc::read_assoc(&assoc_file)?;
+        if frames.len() != views.len() {
+            return Err(Error::invalid(
+                &assoc_file,
+                format!("{} frames of bindings for {} train frames", frames.len(), views.len()),
+            ));
+        }
+        let n = model.splats.len();
+        if let Some(f) = frames.iter().find(|f| f.bindings.gaussians() != n) {
+            return Err(Error::invalid(
+                &assoc_file,
+                format!(
+                    "bindings for {} Gaussians but the model has {n}: from another warm-up?",
+                    f.bindings.gaussians()
+                ),
+            ));
+        }
+        let assoc_delta_t = frames.first().map_or(s.assoc.delta_t, |f| f.delta_t);
+        Ok(Inputs {
+            scene,
+            views,
+            test,
+            linear,
+            times,
+            events,
+            counts,
+            flow_u,
+            flow_v,
+            path,
+            contrast,
+            srgb,
+            model,
+            warmup,
+            bindings: frames.into_iter().map(|f| f.bindings).collect(),
+            assoc_delta_t,
+        })
+    }
+}

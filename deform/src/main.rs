@@ -1,0 +1,54 @@
+//! `deform`: the joint training of the dynamic Gaussians with RGB, event and motion
+//! supervision (DEGS §3.4–3.5). The library ([`deform::stage`]) does the work.
+
+use clap::{Parser, Subcommand};
+use deform::stage::{self, TrainArgs};
+use scene::cli::{Progress, exit_on_error, sigint_flag};
+use std::process::ExitCode;
+
+#[derive(Parser)]
+#[command(version, about = "Joint RGB + event + motion training of the dynamic Gaussians (DEGS)")]
+struct Cli {
+    #[command(subcommand)]
+    verb: Verb,
+}
+
+#[derive(Subcommand)]
+enum Verb {
+    /// Train from the warm-up model with the event and motion losses; writes the model,
+    /// posenet.safetensors, depth/, renders/ of the test frames, settings.toml, report.json.
+    Train(TrainArgs),
+}
+
+fn main() -> ExitCode {
+    exit_on_error("deform", || match Cli::parse().verb {
+        Verb::Train(args) => {
+            let total = stage::resolve_settings(&args)?.iterations;
+            let progress = Progress::new("deform", total as u64);
+            let o = stage::train(&args, sigint_flag(), |s| {
+                progress.set(s.iteration as u64, || {
+                    format!(
+                        "rgb {:.4} event {:.4} motion {:.4}  PSNR {:.2} dB  {} bound",
+                        s.l_rgb, s.l_event, s.l_motion, s.psnr, s.bound
+                    )
+                })
+            })?;
+            progress.finish();
+            let r = &o.report;
+            eprintln!(
+                "{}: {} joint iterations, {} Gaussians, test PSNR {:.2} dB, SSIM {:.4}{}",
+                o.out.display(),
+                r.iterations,
+                r.gaussians,
+                r.test.psnr_mean,
+                r.test.ssim_mean,
+                if r.interrupted { " (interrupted)" } else { "" }
+            );
+            Ok::<_, scene::Error>(if r.interrupted {
+                ExitCode::from(130)
+            } else {
+                ExitCode::SUCCESS
+            })
+        }
+    })
+}

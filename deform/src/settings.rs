@@ -1,0 +1,126 @@
+//! Settings of the joint training (`deform train --config settings.toml`; every key has
+//! a default, unknown keys are errors).
+
+use crate::event_counts::CountSettings;
+use crate::event_image::PseudoSettings;
+use crate::motion_loss::MotionSettings;
+use crate::posenet::PoseNetSettings;
+use crate::schedule::LossSchedule;
+use serde::{Deserialize, Serialize};
+
+/// How `F_gs` (Eq. 10) projects the two deformed centres.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FlowForm {
+    /// The paper's: both centres by the camera at `t0`, plus `F_ego·Δt` for the camera.
+    #[default]
+    Paper,
+    /// `x(t1)` by the camera at `t1`, `x(t0)` by the camera at `t0` (ego-motion
+    /// included, no `F_ego` term).
+    Exact,
+}
+
+/// How the 8-bit frames are encoded (the event model works on linear intensity).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FrameEncoding {
+    /// What the scene manifest says (`frame_encoding`), sRGB when it says nothing.
+    #[default]
+    Auto,
+    Srgb,
+    Linear,
+}
+
+/// The joint training's settings. The Gaussians' learning rates, densification and field
+/// come from the warm-up's `settings.toml` in the model directory.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DeformSettings {
+    /// Joint iterations after the warm-up.
+    pub iterations: u32,
+    /// Seed of the sampling of views, event times and the PoseNet's first layer.
+    pub seed: u64,
+    /// γ1 and γ2(iter) of Eq. 13 (`gamma1 = 0`: w/o L_event; `gamma2_max = 0`: w/o
+    /// L_motion).
+    pub schedule: LossSchedule,
+    /// Use the PoseNet correction of the interpolated camera path (`false`: plain
+    /// interpolation).
+    pub posenet: bool,
+    pub posenet_net: PoseNetSettings,
+    /// Adam learning rate of the PoseNet.
+    pub posenet_lr: f64,
+    /// Contrast threshold C; 0 takes the manifest's.
+    pub contrast_threshold: f64,
+    pub frame_encoding: FrameEncoding,
+    /// Fine time bins of the per-pixel event counts.
+    pub counts: CountSettings,
+    pub pseudo: PseudoSettings,
+    pub motion: MotionSettings,
+    pub flow_form: FlowForm,
+    /// Span Δt of the motion loss in seconds (`t1 = t0 + Δt`); 0 takes the
+    /// association window's half-width δt.
+    pub motion_span: f64,
+    /// Rebind events to Gaussians every this many iterations (§3.3); 0 never.
+    pub rebind_every: u32,
+    /// Association settings used when rebinding (those of the `assoc` stage by default).
+    pub assoc: assoc::AssocSettings,
+    /// Continue densification as in the warm-up (within its `until_iter`).
+    pub densify: bool,
+    /// Record the losses every this many iterations in the report.
+    pub log_every: u32,
+}
+
+impl Default for DeformSettings {
+    fn default() -> Self {
+        DeformSettings {
+            iterations: 2000,
+            seed: 0,
+            schedule: LossSchedule::default(),
+            posenet: true,
+            posenet_net: PoseNetSettings::default(),
+            posenet_lr: 1e-4,
+            contrast_threshold: 0.0,
+            frame_encoding: FrameEncoding::Auto,
+            counts: CountSettings::default(),
+            pseudo: PseudoSettings::default(),
+            motion: MotionSettings::default(),
+            flow_form: FlowForm::Paper,
+            motion_span: 0.0,
+            rebind_every: 500,
+            assoc: assoc::AssocSettings::default(),
+            densify: true,
+            log_every: 10,
+        }
+    }
+}
+
+impl DeformSettings {
+    /// Why the values cannot be used, if they cannot.
+    pub fn validate(&self) -> Result<(), String> {
+        let finite_nonneg = |name: &str, v: f64| {
+            if v.is_finite() && v >= 0.0 {
+                Ok(())
+            } else {
+                Err(format!("{name} must be finite and ≥ 0 (got {v})"))
+            }
+        };
+        finite_nonneg("schedule.gamma1", self.schedule.gamma1)?;
+        finite_nonneg("schedule.gamma2_max", self.schedule.gamma2_max)?;
+        finite_nonneg("posenet_lr", self.posenet_lr)?;
+        finite_nonneg("contrast_threshold", self.contrast_threshold)?;
+        finite_nonneg("motion_span", self.motion_span)?;
+        if self.counts.bins == 0 {
+            return Err("counts.bins must be at least 1".into());
+        }
+        if self.log_every == 0 {
+            return Err("log_every must be at least 1".into());
+        }
+        self.assoc.validate().map_err(|e| format!("assoc: {e}"))
+    }
+}
+
+impl scene::cli::Settings for DeformSettings {
+    fn validate(&self) -> Result<(), String> {
+        DeformSettings::validate(self)
+    }
+}

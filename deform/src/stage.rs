@@ -1,0 +1,217 @@
+//! The `deform` stage (docs/DESIGN.md §4): `deform train --scene DIR --model DIR
+//! --flows DIR --assoc DIR --out DIR [--config settings.toml]`. Output directory (written
+//! under a temporary name, renamed when complete):
+//!
+//! ```text
+//! OUT/point_cloud.ply, model.json, dynamic.safetensors, field.*   the trained model
+//! OUT/posenet.safetensors (+ .json)                               PoseNet weights
+//! OUT/depth/NNNN.exr      depth at every train frame (for a later association)
+//! OUT/renders/NNNN.png    every test frame
+//! OUT/settings.toml       the resolved settings
+//! OUT/report.json         losses every `log_every` iterations, time per phase, test PSNR/SSIM
+//! ```
+
+use crate::inputs::Inputs;
+use crate::posenet::PoseNet;
+use crate::settings::DeformSettings;
+use crate::trainer::{JointStep, JointTrainer, Timings};
+use gaussians::TileRasterizer;
+use gaussians::model::Model;
+use gaussians::stage::{Evaluation, evaluate, write_depths};
+use safetensors::{Dtype, tensor::TensorView};
+use scene::atomic::{AtomicDir, write_bytes_atomic, write_json_atomic};
+use scene::error::{Error, Result};
+use scene::report::{Phases, peak_rss_mib};
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// Options of `deform train` (flags override the config file).
+#[derive(Clone, Debug, Default, clap::Args)]
+pub struct TrainArgs {
+    /// Scene directory (manifests, images, events)
+    #[arg(long)]
+    pub scene: PathBuf,
+    /// The warm-up's output directory (`gaussians train`)
+    #[arg(long)]
+    pub model: PathBuf,
+    /// The per-event flow (`evflow finetune` output directory)
+    #[arg(long)]
+    pub flows: PathBuf,
+    /// The bindings (`assoc` output directory)
+    #[arg(long)]
+    pub assoc: PathBuf,
+    /// Output directory (written under a temporary name, renamed when complete)
+    #[arg(long)]
+    pub out: PathBuf,
+    /// settings.toml with any DeformSettings (flags below override it)
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Joint iterations after the warm-up
+    #[arg(long)]
+    pub iterations: Option<u32>,
+    /// Seed of the sampling and of the PoseNet
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Plain interpolation of the camera path (no PoseNet)
+    #[arg(long)]
+    pub no_posenet: bool,
+    /// Without the event loss (γ1 = 0)
+    #[arg(long)]
+    pub no_event_loss: bool,
+    /// Without the motion loss (γ2 = 0)
+    #[arg(long)]
+    pub no_motion_loss: bool,
+}
+
+/// Settings from the config file (if any) with the flags applied, validated.
+pub fn resolve_settings(a: &TrainArgs) -> Result<DeformSettings> {
+    scene::cli::settings::resolve(a.config.as_deref(), |s: &mut DeformSettings| {
+        if let Some(n) = a.iterations {
+            s.iterations = n;
+        }
+        if let Some(n) = a.seed {
+            s.seed = n;
+        }
+        if a.no_posenet {
+            s.posenet = false;
+        }
+        if a.no_event_loss {
+            s.schedule.gamma1 = 0.0;
+        }
+        if a.no_motion_loss {
+            s.schedule.gamma2_max = 0.0;
+        }
+    })
+}
+
+/// One point of the loss curves.
+#[derive(Clone, Debug, Serialize)]
+pub struct CurvePoint {
+    pub iteration: u32,
+    pub l_rgb: f64,
+    pub l_event: f64,
+    pub l_motion: f64,
+    pub total: f64,
+    pub psnr: f64,
+    pub bound: usize,
+}
+
+/// `report.json` of `deform train`.
+#[derive(Clone, Debug, Serialize)]
+pub struct TrainReport {
+    pub stage: &'static str,
+    pub version: &'static str,
+    pub settings: DeformSettings,
+    pub scene: PathBuf,
+    pub phases: Phases,
+    pub wall_seconds: f64,
+    pub peak_memory_mib: Option<f64>,
+    pub iterations: u32,
+    pub warmup_iterations: u32,
+    pub interrupted: bool,
+    pub seconds_per_iteration: f64,
+    /// Seconds per part of the joint iterations (RGB, event, motion, update, rebinding).
+    pub timings: Timings,
+    pub rebinds: u32,
+    pub contrast_threshold: f64,
+    pub frames_srgb: bool,
+    pub gaussians: usize,
+    pub curve: Vec<CurvePoint>,
+    pub test: Evaluation,
+}
+
+/// What a finished (or interrupted) run produced.
+pub struct TrainOutcome {
+    pub out: PathBuf,
+    pub report: TrainReport,
+}
+
+/// Write `posenet.safetensors` (one tensor `params`) and `posenet.json` (its settings).
+pub fn save_posenet(p: &PoseNet<f32>, dir: &Path) -> Result<()> {
+    let path = dir.join("posenet.safetensors");
+    let bytes: Vec<u8> = p.params().iter().flat_map(|v| v.to_le_bytes()).collect();
+    let view = TensorView::new(Dtype::F32, vec![p.params().len()], &bytes)
+        .map_err(|e| Error::invalid(&path, format!("tensor: {e}")))?;
+    let data = safetensors::serialize(vec![("params".to_string(), view)], None)
+        .map_err(|e| Error::invalid(&path, format!("serialising: {e}")))?;
+    write_bytes_atomic(&path, &data)?;
+    write_json_atomic(&dir.join("posenet.json"), p.settings())
+}
+
+/// `deform train`: load everything, train until done or until `stop` is set, write
+/// every output. `on_step` sees each iteration's figures (progress display).
+pub fn train(
+    args: &TrainArgs,
+    stop: &AtomicBool,
+    mut on_step: impl FnMut(&JointStep),
+) -> Result<TrainOutcome> {
+    let start = std::time::Instant::now();
+    let mut phases = Phases::new();
+    phases.start("load");
+    let settings = resolve_settings(args)?;
+    let d = Inputs::load(&args.scene, &args.model, &args.flows, &args.assoc, &settings)?;
+    let out = AtomicDir::new(&args.out)?;
+    phases.start("train");
+    let mut tr = JointTrainer::new(&d, settings.clone());
+    let warmup_iterations = tr.inner.iteration;
+    let r = TileRasterizer;
+    let mut curve = Vec::new();
+    let mut interrupted = false;
+    let train_clock = std::time::Instant::now();
+    while tr.iteration < settings.iterations {
+        if stop.load(Ordering::Relaxed) {
+            interrupted = true;
+            break;
+        }
+        let s = tr.step(&r, &d);
+        if s.iteration.is_multiple_of(settings.log_every) || s.iteration == settings.iterations {
+            curve.push(CurvePoint {
+                iteration: s.iteration,
+                l_rgb: s.l_rgb,
+                l_event: s.l_event,
+                l_motion: s.l_motion,
+                total: s.total,
+                psnr: s.psnr,
+                bound: s.bound,
+            });
+        }
+        on_step(&s);
+    }
+    let train_seconds = train_clock.elapsed().as_secs_f64();
+    phases.start("save");
+    let model = Model::from_trainer(&tr.inner);
+    model.save(out.path())?;
+    if let Some(p) = &tr.posenet {
+        save_posenet(p, out.path())?;
+    }
+    scene::cli::settings::write_resolved(out.path(), &settings)?;
+    phases.start("depth");
+    write_depths(&model, &d.views, &out.path().join("depth"))?;
+    phases.start("evaluate");
+    let test = evaluate(&model, &d.test, "test", Some(&out.path().join("renders")))?;
+    phases.stop();
+    let report = TrainReport {
+        stage: "deform train",
+        version: env!("CARGO_PKG_VERSION"),
+        scene: args.scene.clone(),
+        phases,
+        wall_seconds: start.elapsed().as_secs_f64(),
+        peak_memory_mib: peak_rss_mib(),
+        iterations: tr.iteration,
+        warmup_iterations,
+        interrupted,
+        seconds_per_iteration: train_seconds / tr.iteration.max(1) as f64,
+        timings: tr.timings,
+        rebinds: tr.rebinds,
+        contrast_threshold: d.contrast,
+        frames_srgb: d.srgb,
+        gaussians: model.splats.len(),
+        curve,
+        test,
+        settings,
+    };
+    write_json_atomic(&out.path().join("report.json"), &report)?;
+    let out = out.commit()?;
+    Ok(TrainOutcome { out, report })
+}

@@ -1,0 +1,454 @@
+//! The joint training loop (DEGS §3.5, Eq. 13): every iteration renders one train frame
+//! for `L_rgb` (whose render also gives the motion loss its depth and deformed centres),
+//! one in-between time `t_e` for `L_event`, and adds `γ2·L_motion` over the Gaussians
+//! bound to events near that frame; one Adam step then updates the canonical Gaussians,
+//! the deformation field and the PoseNet. Bindings are rebuilt every `rebind_every`
+//! iterations and whenever densification changes the Gaussians.
+//!
+//! Simplifications (documented in docs/DESIGN.md §9): the rendered depth in `F_ego` is
+//! detached; `F_ego` uses the velocity of the interpolated camera path (the PoseNet is
+//! trained by `L_event` through the camera of the render at `t_e`); frames keep their
+//! recorded poses (the PoseNet corrects in-between times only).
+
+use crate::event_image::{
+    PseudoImage, PseudoInputs, PseudoMode, event_loss, pseudo_image, srgb_to_linear,
+};
+use crate::flow::{EgoPoints, Flow2, GsCameras, GsGrad, Pinhole, ProjCam};
+use crate::flow::{ego_flow, gaussian_flow, gaussian_flow_backward};
+use crate::inputs::Inputs;
+use crate::motion_loss::{CsrBindings, MotionGrad, MotionInputs, PerGaussian, motion_loss};
+use crate::posenet::{PoseNet, apply_correction, correction_backward};
+use crate::settings::{DeformSettings, FlowForm};
+use gaussians::field::{Deformation, Deltas};
+use gaussians::train::{ModelGrads, Trainer, ViewRender};
+use gaussians::{Rasterizer, RenderedImage, TileRasterizer};
+use rand::{RngExt, SeedableRng};
+use scene::Camera;
+use scene::metrics::psnr_u8;
+use scene::optim::Adam;
+use std::time::Instant;
+
+/// Near plane (scene units) below which a centre or depth is not used by the motion loss.
+const NEAR: f64 = 1e-3;
+
+/// Seconds spent per part of the iteration.
+#[derive(Clone, Copy, Debug, Default, serde::Serialize)]
+pub struct Timings {
+    pub rgb: f64,
+    pub event: f64,
+    pub motion: f64,
+    pub update: f64,
+    pub rebind: f64,
+}
+
+/// One iteration's figures.
+#[derive(Clone, Copy, Debug, Default, serde::Serialize)]
+pub struct JointStep {
+    pub iteration: u32,
+    pub l_rgb: f64,
+    pub l_event: f64,
+    pub l_motion: f64,
+    pub total: f64,
+    pub psnr: f64,
+    /// Gaussians bound at the frame of this iteration's motion loss.
+    pub bound: usize,
+    pub gaussians: usize,
+}
+
+/// The joint training state around the warm-up's trainer.
+pub struct JointTrainer {
+    pub inner: Trainer,
+    pub settings: DeformSettings,
+    pub posenet: Option<PoseNet<f32>>,
+    posenet_adam: Adam,
+    posenet_grad: Vec<f32>,
+    /// Bindings per train frame (for the current Gaussians).
+    pub bindings: Vec<assoc::Bindings>,
+    pub iteration: u32,
+    pub timings: Timings,
+    pub rebinds: u32,
+    rng: rand_chacha::ChaCha8Rng,
+    pseudo: PseudoImage<f32>,
+    span: f64,
+}
+
+/// Add `w·src` to the parameter gradients of `dst` (not its densification statistics).
+fn add_scaled(dst: &mut ModelGrads, src: &ModelGrads, w: f32) {
+    let d = &mut dst.splats;
+    let s = &src.splats;
+    let add = |a: &mut [f32], b: &[f32]| a.iter_mut().zip(b).for_each(|(x, y)| *x += w * y);
+    add(d.means.as_flattened_mut(), s.means.as_flattened());
+    add(d.log_scales.as_flattened_mut(), s.log_scales.as_flattened());
+    add(d.rotations.as_flattened_mut(), s.rotations.as_flattened());
+    add(&mut d.opacity_logits, &s.opacity_logits);
+    add(d.sh_dc.as_flattened_mut(), s.sh_dc.as_flattened());
+    add(d.sh_rest.as_flattened_mut(), s.sh_rest.as_flattened());
+    if dst.field.len() == src.field.len() {
+        add(&mut dst.field, &src.field);
+    } else if dst.field.is_empty() {
+        dst.field = src.field.iter().map(|g| w * g).collect();
+    }
+}
+
+/// `d linear / d encoded` of the sRGB curve (IEC 61966-2-1), the linear segment below
+/// 0.04045 extended to negative values.
+fn srgb_slope(c: f32) -> f32 {
+    if c <= 0.040_45 {
+        1.0 / 12.92
+    } else {
+        2.4 / 1.055 * ((c + 0.055) / 1.055).powf(1.4)
+    }
+}
+
+/// Normalised time of the field at `t` seconds: linear between the neighbouring train
+/// frames' `(timestamp, time)`.
+pub fn field_time(d: &Inputs, t: f64) -> f32 {
+    let n = d.times.len();
+    let j = d.times.partition_point(|&k| k <= t).clamp(1, n.max(2) - 1) - 1;
+    if n < 2 || d.times[j + 1] <= d.times[j] {
+        return d.views[j.min(n - 1)].time;
+    }
+    let s = ((t - d.times[j]) / (d.times[j + 1] - d.times[j])).clamp(0.0, 1.0) as f32;
+    d.views[j].time + s * (d.views[j + 1].time - d.views[j].time)
+}
+
+impl JointTrainer {
+    /// Start from the warm-up model in `d` (its settings continue: learning rates,
+    /// densification, field).
+    pub fn new(d: &Inputs, settings: DeformSettings) -> Self {
+        let mut warm = d.warmup.clone();
+        let done = d.model.info.iterations;
+        warm.iterations = done + settings.iterations;
+        if !settings.densify {
+            warm.densify.until_iter = 0;
+        }
+        let cams: Vec<Camera> = d.views.iter().map(|v| v.camera).collect();
+        let extent = gaussians::stage::scene_extent(&warm, &cams);
+        let mut inner = Trainer::new(warm, d.model.splats.clone(), extent);
+        match &d.model.field {
+            Some(f) => inner.field = f.clone(),
+            None => inner.settings.deform = false,
+        }
+        inner.iteration = done;
+        let posenet = settings
+            .posenet
+            .then(|| PoseNet::<f32>::new(settings.posenet_net));
+        let mut posenet_adam = Adam::default();
+        let np = posenet.as_ref().map_or(0, |p| p.params().len());
+        posenet_adam.add_group("posenet", settings.posenet_lr, 1e-15, 1, np);
+        let span = if settings.motion_span > 0.0 {
+            settings.motion_span
+        } else {
+            d.assoc_delta_t
+        };
+        JointTrainer {
+            inner,
+            posenet,
+            posenet_adam,
+            posenet_grad: vec![0.0; np],
+            bindings: d.bindings.clone(),
+            iteration: 0,
+            timings: Timings::default(),
+            rebinds: 0,
+            rng: rand_chacha::ChaCha8Rng::seed_from_u64(settings.seed),
+            pseudo: PseudoImage::default(),
+            span,
+            settings,
+        }
+    }
+
+    /// The camera at `t` seconds (interpolated, PoseNet-corrected) and the correction.
+    pub fn camera_at(&self, d: &Inputs, t: f64) -> (Camera, [f64; 6]) {
+        let pose = d.path.pose_at(t);
+        let xi = match &self.posenet {
+            Some(p) => p.forward(d.path.normalised_time(t) as f32).map(f64::from),
+            None => [0.0; 6],
+        };
+        let camera = Camera {
+            intrinsics: d.views[0].camera.intrinsics,
+            cam_to_world: apply_correction(&pose, xi),
+        };
+        (camera, xi)
+    }
+
+    /// One joint iteration.
+    pub fn step(&mut self, r: &TileRasterizer, d: &Inputs) -> JointStep {
+        let it = self.iteration as u64;
+        let (g1, g2) = (
+            self.settings.schedule.gamma1(it),
+            self.settings.schedule.gamma2(it),
+        );
+        let clock = Instant::now();
+        let i = self.inner.next_view(d.views.len());
+        let view = &d.views[i];
+        self.inner.resolve_cap(view.rgb.len() / 3);
+        let rv = self.inner.render_view(r, &view.camera, view.time);
+        let (l_rgb, grad) = self.inner.rgb_loss(&rv.image, &view.rgb);
+        let psnr = psnr_u8(&rv.image.rgb, &view.rgb);
+        let mut grads = self.inner.view_backward(r, &rv, &grad, None);
+        self.timings.rgb += clock.elapsed().as_secs_f64();
+
+        let clock = Instant::now();
+        let (l_motion, bound) = if g2 > 0.0 {
+            self.motion_term(d, i, &rv, g2 as f32, &mut grads)
+        } else {
+            (0.0, 0)
+        };
+        drop(rv);
+        self.timings.motion += clock.elapsed().as_secs_f64();
+
+        let clock = Instant::now();
+        self.posenet_grad.fill(0.0);
+        let l_event = if g1 > 0.0 && d.views.len() >= 2 {
+            self.event_term(r, d, g1 as f32, &mut grads)
+        } else {
+            0.0
+        };
+        self.timings.event += clock.elapsed().as_secs_f64();
+
+        let clock = Instant::now();
+        let before = self.inner.splats.len();
+        self.inner.apply_gradients(&grads);
+        if let Some(p) = &mut self.posenet {
+            self.posenet_adam.step(0, p.params_mut(), &self.posenet_grad);
+        }
+        self.iteration += 1;
+        self.timings.update += clock.elapsed().as_secs_f64();
+        let every = self.settings.rebind_every;
+        let changed = self.inner.splats.len() != before;
+        if changed || (every > 0 && self.iteration.is_multiple_of(every)) {
+            self.rebind(r, d);
+        }
+        JointStep {
+            iteration: self.iteration,
+            l_rgb,
+            l_event,
+            l_motion,
+            total: l_rgb + g1 * l_event + g2 * l_motion,
+            psnr,
+            bound,
+            gaussians: self.inner.splats.len(),
+        }
+    }
+
+    /// Eq. 11 at a random `t_e` between two neighbouring train frames: adds `γ1·∂L/∂θ` to
+    /// `grads` and the PoseNet's gradient; returns `L_event`.
+    fn event_term(&mut self, r: &TileRasterizer, d: &Inputs, g1: f32, grads: &mut ModelGrads) -> f64 {
+        let j = self.rng.random_range(0..d.views.len() - 1);
+        let (ta, tb) = (d.times[j], d.times[j + 1]);
+        if tb <= ta {
+            return 0.0;
+        }
+        let t_e = ta + self.rng.random::<f64>() * (tb - ta);
+        let all = d.events.as_slice();
+        let inp = PseudoInputs {
+            counts: &d.counts.intervals()[j],
+            events: Some(&all),
+            left: &d.linear[j],
+            right: &d.linear[j + 1],
+            channels: 3,
+            contrast: d.contrast as f32,
+        };
+        pseudo_image(&inp, t_e, PseudoMode::Nearest, &self.settings.pseudo, &mut self.pseudo);
+        let (camera, xi) = self.camera_at(d, t_e);
+        let rv = self.inner.render_view(r, &camera, field_time(d, t_e));
+        let rgb = &rv.image.rgb;
+        let linear: Vec<f32> = if d.srgb {
+            rgb.iter().map(|&c| srgb_to_linear(c)).collect()
+        } else {
+            rgb.clone()
+        };
+        let mut g = vec![0.0f32; linear.len()];
+        let el = event_loss(&linear, &self.pseudo, Some(&mut g));
+        if el.valid == 0 {
+            return 0.0;
+        }
+        for (gi, &c) in g.iter_mut().zip(rgb) {
+            *gi *= g1 * if d.srgb { srgb_slope(c) } else { 1.0 };
+        }
+        let ge = self.inner.view_backward(r, &rv, &g, None);
+        add_scaled(grads, &ge, 1.0);
+        if let Some(p) = &self.posenet {
+            let g_eps = crate::lie::world_left_grad_to_camera_right(&camera.cam_to_world, ge.camera);
+            let g_xi = correction_backward(xi, g_eps).map(|v| v as f32);
+            p.backward(d.path.normalised_time(t_e) as f32, g_xi, &mut self.posenet_grad);
+        }
+        el.loss as f64
+    }
+
+    /// Eq. 12 over the Gaussians bound at train frame `i` (rendered as `rv`): adds
+    /// `γ2·∂L/∂θ` to `grads`; returns `(L_motion, bound Gaussians)`.
+    fn motion_term(
+        &self,
+        d: &Inputs,
+        i: usize,
+        rv: &ViewRender<<TileRasterizer as Rasterizer>::State>,
+        g2: f32,
+        grads: &mut ModelGrads,
+    ) -> (f64, usize) {
+        let b = &self.bindings[i];
+        if b.gaussians() != self.inner.splats.len() {
+            return (0.0, 0);
+        }
+        let idx: Vec<usize> = (0..b.gaussians()).filter(|&g| !b.of(g).0.is_empty()).collect();
+        if idx.is_empty() {
+            return (0.0, 0);
+        }
+        let t0 = d.times[i];
+        let t1 = if i + 1 < d.times.len() { t0 + self.span } else { t0 - self.span };
+        let (tau0, tau1) = (d.views[i].time, field_time(d, t1));
+        // Compact CSR over the bound Gaussians.
+        let (mut offsets, mut events, mut weights) = (vec![0u32], Vec::new(), Vec::new());
+        for &g in &idx {
+            let (e, w) = b.of(g);
+            events.extend_from_slice(e);
+            weights.extend_from_slice(w);
+            offsets.push(events.len() as u32);
+        }
+        // Deformed centres at t0 and t1 (the field sees canonical positions detached).
+        let xs: Vec<[f32; 3]> = idx.iter().map(|&g| self.inner.splats.means[g]).collect();
+        let field_on = self.inner.field_on();
+        let dynamic_only = self.inner.settings.dynamic_only;
+        let moves = |k: usize| !dynamic_only || self.inner.splats.is_dynamic(idx[k]);
+        let deform = |t: f32| {
+            let (dl, cache) = Deformation::forward(&self.inner.field, &xs, &[t]);
+            let x = (0..xs.len())
+                .map(|k| {
+                    let dx = if moves(k) { dl.dx[k] } else { [0.0; 3] };
+                    std::array::from_fn(|c| xs[k][c] + dx[c])
+                })
+                .collect::<Vec<[f32; 3]>>();
+            (x, cache)
+        };
+        let (x0, x1, caches) = if field_on {
+            let (x0, c0) = deform(tau0);
+            let (x1, c1) = deform(tau1);
+            (x0, x1, Some((c0, c1)))
+        } else {
+            (xs.clone(), xs.clone(), None)
+        };
+        let k = d.views[i].camera.intrinsics;
+        let cam0 = ProjCam::<f32>::new(&rv.camera.cam_to_world, &k, NEAR);
+        let cam1 = ProjCam::<f32>::new(&d.path.pose_at(t1), &k, NEAR);
+        let cams = match self.settings.flow_form {
+            FlowForm::Paper => GsCameras::Same(&cam0),
+            FlowForm::Exact => GsCameras::Exact(&cam0, &cam1),
+        };
+        let mut fgs = Flow2::default();
+        gaussian_flow(cams, &x0, &x1, &mut fgs);
+        let mut fego = Flow2::default();
+        if self.settings.flow_form == FlowForm::Paper {
+            let (u, v, rho) = ego_points(&rv.image, &cam0, &x0);
+            let vel = d.path.velocity_at(t0).to_array().map(|x| x as f32);
+            let pts = EgoPoints {
+                u: &u,
+                v: &v,
+                inv_depth: &rho,
+            };
+            ego_flow(&Pinhole::from_intrinsics(&k), &vel, pts, (1.0 / NEAR) as f32, &mut fego);
+        }
+        let inp = MotionInputs {
+            dt: (t1 - t0) as f32,
+            bindings: CsrBindings {
+                offsets: &offsets,
+                events: &events,
+                weights: &weights,
+            },
+            flow_u: &d.flow_u,
+            flow_v: &d.flow_v,
+            flow_base: 0,
+            ego: (self.settings.flow_form == FlowForm::Paper).then(|| PerGaussian {
+                u: &fego.u,
+                v: &fego.v,
+                valid: Some(&fego.valid),
+            }),
+            gs: PerGaussian {
+                u: &fgs.u,
+                v: &fgs.v,
+                valid: Some(&fgs.valid),
+            },
+        };
+        let mut mg = MotionGrad::default();
+        let ml = motion_loss(&self.settings.motion, &inp, Some(&mut mg));
+        if ml.bound == 0 {
+            return (0.0, idx.len());
+        }
+        let gu: Vec<f32> = mg.gs_u.iter().map(|g| g * g2).collect();
+        let gv: Vec<f32> = mg.gs_v.iter().map(|g| g * g2).collect();
+        let mut gg = GsGrad::default();
+        gaussian_flow_backward(cams, &x0, &x1, &fgs, &gu, &gv, &mut gg);
+        for (kk, &g) in idx.iter().enumerate() {
+            for c in 0..3 {
+                grads.splats.means[g][c] += gg.x0[kk][c] + gg.x1[kk][c];
+            }
+        }
+        if let Some((c0, c1)) = caches {
+            for (cache, gx) in [(&c0, &gg.x0), (&c1, &gg.x1)] {
+                let mut dl = Deltas::zeros(idx.len());
+                for (kk, g) in gx.iter().enumerate() {
+                    if moves(kk) {
+                        dl.dx[kk] = *g;
+                    }
+                }
+                let fg = Deformation::backward(&self.inner.field, cache, &dl);
+                if grads.field.len() == fg.len() {
+                    grads.field.iter_mut().zip(&fg).for_each(|(a, b)| *a += b);
+                }
+            }
+        }
+        (ml.loss as f64, idx.len())
+    }
+
+    /// Bind events to the current Gaussians at every train frame (§3.3, the `assoc`
+    /// library with the settings' association parameters).
+    pub fn rebind(&mut self, r: &TileRasterizer, d: &Inputs) {
+        let clock = Instant::now();
+        let s = &self.settings.assoc;
+        let mut out = Vec::with_capacity(d.views.len());
+        for (i, v) in d.views.iter().enumerate() {
+            let (splats, _) = self.inner.deformed(v.time);
+            let (image, _) = r.render(&splats, &v.camera, self.inner.sh_degree(), self.inner.settings.background);
+            let depth = image.normalised_depth();
+            let alpha: Vec<f32> = depth.iter().map(|&z| f32::from(z > 0.0)).collect();
+            let t0 = d.times[i];
+            let window = d.events.window(t0 - s.delta_t, (t0 + s.delta_t).next_up());
+            let b = assoc::associate_frame(&v.camera, &depth, &alpha, &window, &splats.means, t0, s)
+                .map(|(b, _)| b)
+                .unwrap_or_else(|_| assoc::Bindings {
+                    offsets: vec![0; splats.len() + 1],
+                    ..Default::default()
+                });
+            out.push(b);
+        }
+        self.bindings = out;
+        self.rebinds += 1;
+        self.timings.rebind += clock.elapsed().as_secs_f64();
+    }
+}
+
+/// Pixel and inverse rendered depth (alpha-normalised; −1 where nothing was rendered) of
+/// each centre `x` under `cam`.
+fn ego_points(img: &RenderedImage, cam: &ProjCam<f32>, x: &[[f32; 3]]) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
+    let (w, h) = (img.width, img.height);
+    let mut out = (Vec::with_capacity(x.len()), Vec::with_capacity(x.len()), Vec::with_capacity(x.len()));
+    for p in x {
+        let (px, rho) = match cam.project(p) {
+            Some((px, _)) => {
+                let (xi, yi) = (px[0].round(), px[1].round());
+                let rho = if xi >= 0.0 && yi >= 0.0 && (xi as usize) < w && (yi as usize) < h {
+                    let k = yi as usize * w + xi as usize;
+                    let a = img.alpha[k];
+                    if a >= 0.5 { a / img.depth[k].max(1e-12) } else { -1.0 }
+                } else {
+                    -1.0
+                };
+                (px, rho)
+            }
+            None => ([0.0; 2], -1.0),
+        };
+        out.0.push(px[0]);
+        out.1.push(px[1]);
+        out.2.push(rho);
+    }
+    out
+}
