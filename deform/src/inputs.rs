@@ -59,7 +59,10 @@ pub fn load_views(scene: &Scene, m: &Manifest) -> Result<Vec<View>> {
             if (img.width, img.height) != (w, h) {
                 return Err(Error::invalid(
                     &path,
-                    format!("image is {}x{} but the camera is {w}x{h}", img.width, img.height),
+                    format!(
+                        "image is {}x{} but the camera is {w}x{h}",
+                        img.width, img.height
+                    ),
                 ));
             }
             Ok(View {
@@ -82,14 +85,20 @@ fn read_flows(flows: &Path, n: usize) -> Result<(Vec<f32>, Vec<f32>)> {
         .collect();
     files.sort();
     if files.is_empty() {
-        return Err(Error::invalid(&dir, "no .evflow files: is this an evflow output?"));
+        return Err(Error::invalid(
+            &dir,
+            "no .evflow files: is this an evflow output?",
+        ));
     }
     let (mut u, mut v) = (vec![f32::NAN; n], vec![f32::NAN; n]);
     for p in files {
         let f = evflow::flowfile::read_evflow(&p)?;
         for (k, &i) in f.index.iter().enumerate() {
             let i = usize::try_from(i).ok().filter(|&i| i < n).ok_or_else(|| {
-                Error::invalid(&p, format!("event index {i} beyond the stream's {n} events"))
+                Error::invalid(
+                    &p,
+                    format!("event index {i} beyond the stream's {n} events"),
+                )
             })?;
             (u[i], v[i]) = (f.u[k], f.v[k]);
         }
@@ -140,14 +149,20 @@ impl Inputs {
         let (flow_u, flow_v) = read_flows(flows, events.len())?;
         let model = Model::load(model_dir)?;
         let settings_file = model_dir.join("settings.toml");
-        let text = std::fs::read_to_string(&settings_file).map_err(|e| Error::io(&settings_file, e))?;
-        let warmup = TrainSettings::from_toml(&text).map_err(|e| Error::invalid(&settings_file, e))?;
+        let text =
+            std::fs::read_to_string(&settings_file).map_err(|e| Error::io(&settings_file, e))?;
+        let warmup =
+            TrainSettings::from_toml(&text).map_err(|e| Error::invalid(&settings_file, e))?;
         let assoc_file = assoc_dir.join("assoc.bin");
         let frames = assoc::read_assoc(&assoc_file)?;
         if frames.len() != views.len() {
             return Err(Error::invalid(
                 &assoc_file,
-                format!("{} frames of bindings for {} train frames", frames.len(), views.len()),
+                format!(
+                    "{} frames of bindings for {} train frames",
+                    frames.len(),
+                    views.len()
+                ),
             ));
         }
         let n = model.splats.len();

@@ -7,7 +7,10 @@ use scene::cli::{Progress, exit_on_error, sigint_flag};
 use std::process::ExitCode;
 
 #[derive(Parser)]
-#[command(version, about = "Joint RGB + event + motion training of the dynamic Gaussians (DEGS)")]
+#[command(
+    version,
+    about = "Joint RGB + event + motion training of the dynamic Gaussians (DEGS)"
+)]
 struct Cli {
     #[command(subcommand)]
     verb: Verb,

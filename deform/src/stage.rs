@@ -150,7 +150,13 @@ pub fn train(
     let mut phases = Phases::new();
     phases.start("load");
     let settings = resolve_settings(args)?;
-    let d = Inputs::load(&args.scene, &args.model, &args.flows, &args.assoc, &settings)?;
+    let d = Inputs::load(
+        &args.scene,
+        &args.model,
+        &args.flows,
+        &args.assoc,
+        &settings,
+    )?;
     let out = AtomicDir::new(&args.out)?;
     phases.start("train");
     let mut tr = JointTrainer::new(&d, settings.clone());

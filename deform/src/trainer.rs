@@ -210,7 +210,8 @@ impl JointTrainer {
         let before = self.inner.splats.len();
         self.inner.apply_gradients(&grads);
         if let Some(p) = &mut self.posenet {
-            self.posenet_adam.step(0, p.params_mut(), &self.posenet_grad);
+            self.posenet_adam
+                .step(0, p.params_mut(), &self.posenet_grad);
         }
         self.iteration += 1;
         self.timings.update += clock.elapsed().as_secs_f64();
@@ -233,7 +234,13 @@ impl JointTrainer {
 
     /// Eq. 11 at a random `t_e` between two neighbouring train frames: adds `γ1·∂L/∂θ` to
     /// `grads` and the PoseNet's gradient; returns `L_event`.
-    fn event_term(&mut self, r: &TileRasterizer, d: &Inputs, g1: f32, grads: &mut ModelGrads) -> f64 {
+    fn event_term(
+        &mut self,
+        r: &TileRasterizer,
+        d: &Inputs,
+        g1: f32,
+        grads: &mut ModelGrads,
+    ) -> f64 {
         let j = self.rng.random_range(0..d.views.len() - 1);
         let (ta, tb) = (d.times[j], d.times[j + 1]);
         if tb <= ta {
@@ -249,7 +256,13 @@ impl JointTrainer {
             channels: 3,
             contrast: d.contrast as f32,
         };
-        pseudo_image(&inp, t_e, PseudoMode::Nearest, &self.settings.pseudo, &mut self.pseudo);
+        pseudo_image(
+            &inp,
+            t_e,
+            PseudoMode::Nearest,
+            &self.settings.pseudo,
+            &mut self.pseudo,
+        );
         let (camera, xi) = self.camera_at(d, t_e);
         let rv = self.inner.render_view(r, &camera, field_time(d, t_e));
         let rgb = &rv.image.rgb;
@@ -269,9 +282,14 @@ impl JointTrainer {
         let ge = self.inner.view_backward(r, &rv, &g, None);
         add_scaled(grads, &ge, 1.0);
         if let Some(p) = &self.posenet {
-            let g_eps = crate::lie::world_left_grad_to_camera_right(&camera.cam_to_world, ge.camera);
+            let g_eps =
+                crate::lie::world_left_grad_to_camera_right(&camera.cam_to_world, ge.camera);
             let g_xi = correction_backward(xi, g_eps).map(|v| v as f32);
-            p.backward(d.path.normalised_time(t_e) as f32, g_xi, &mut self.posenet_grad);
+            p.backward(
+                d.path.normalised_time(t_e) as f32,
+                g_xi,
+                &mut self.posenet_grad,
+            );
         }
         el.loss as f64
     }
@@ -290,12 +308,18 @@ impl JointTrainer {
         if b.gaussians() != self.inner.splats.len() {
             return (0.0, 0);
         }
-        let idx: Vec<usize> = (0..b.gaussians()).filter(|&g| !b.of(g).0.is_empty()).collect();
+        let idx: Vec<usize> = (0..b.gaussians())
+            .filter(|&g| !b.of(g).0.is_empty())
+            .collect();
         if idx.is_empty() {
             return (0.0, 0);
         }
         let t0 = d.times[i];
-        let t1 = if i + 1 < d.times.len() { t0 + self.span } else { t0 - self.span };
+        let t1 = if i + 1 < d.times.len() {
+            t0 + self.span
+        } else {
+            t0 - self.span
+        };
         let (tau0, tau1) = (d.views[i].time, field_time(d, t1));
         // Compact CSR over the bound Gaussians.
         let (mut offsets, mut events, mut weights) = (vec![0u32], Vec::new(), Vec::new());
@@ -345,7 +369,13 @@ impl JointTrainer {
                 v: &v,
                 inv_depth: &rho,
             };
-            ego_flow(&Pinhole::from_intrinsics(&k), &vel, pts, (1.0 / NEAR) as f32, &mut fego);
+            ego_flow(
+                &Pinhole::from_intrinsics(&k),
+                &vel,
+                pts,
+                (1.0 / NEAR) as f32,
+                &mut fego,
+            );
         }
         let inp = MotionInputs {
             dt: (t1 - t0) as f32,
@@ -407,17 +437,23 @@ impl JointTrainer {
         let mut out = Vec::with_capacity(d.views.len());
         for (i, v) in d.views.iter().enumerate() {
             let (splats, _) = self.inner.deformed(v.time);
-            let (image, _) = r.render(&splats, &v.camera, self.inner.sh_degree(), self.inner.settings.background);
+            let (image, _) = r.render(
+                &splats,
+                &v.camera,
+                self.inner.sh_degree(),
+                self.inner.settings.background,
+            );
             let depth = image.normalised_depth();
             let alpha: Vec<f32> = depth.iter().map(|&z| f32::from(z > 0.0)).collect();
             let t0 = d.times[i];
             let window = d.events.window(t0 - s.delta_t, (t0 + s.delta_t).next_up());
-            let b = assoc::associate_frame(&v.camera, &depth, &alpha, &window, &splats.means, t0, s)
-                .map(|(b, _)| b)
-                .unwrap_or_else(|_| assoc::Bindings {
-                    offsets: vec![0; splats.len() + 1],
-                    ..Default::default()
-                });
+            let b =
+                assoc::associate_frame(&v.camera, &depth, &alpha, &window, &splats.means, t0, s)
+                    .map(|(b, _)| b)
+                    .unwrap_or_else(|_| assoc::Bindings {
+                        offsets: vec![0; splats.len() + 1],
+                        ..Default::default()
+                    });
             out.push(b);
         }
         self.bindings = out;
@@ -428,9 +464,17 @@ impl JointTrainer {
 
 /// Pixel and inverse rendered depth (alpha-normalised; −1 where nothing was rendered) of
 /// each centre `x` under `cam`.
-fn ego_points(img: &RenderedImage, cam: &ProjCam<f32>, x: &[[f32; 3]]) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
+fn ego_points(
+    img: &RenderedImage,
+    cam: &ProjCam<f32>,
+    x: &[[f32; 3]],
+) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
     let (w, h) = (img.width, img.height);
-    let mut out = (Vec::with_capacity(x.len()), Vec::with_capacity(x.len()), Vec::with_capacity(x.len()));
+    let mut out = (
+        Vec::with_capacity(x.len()),
+        Vec::with_capacity(x.len()),
+        Vec::with_capacity(x.len()),
+    );
     for p in x {
         let (px, rho) = match cam.project(p) {
             Some((px, _)) => {
@@ -438,7 +482,11 @@ fn ego_points(img: &RenderedImage, cam: &ProjCam<f32>, x: &[[f32; 3]]) -> (Vec<f
                 let rho = if xi >= 0.0 && yi >= 0.0 && (xi as usize) < w && (yi as usize) < h {
                     let k = yi as usize * w + xi as usize;
                     let a = img.alpha[k];
-                    if a >= 0.5 { a / img.depth[k].max(1e-12) } else { -1.0 }
+                    if a >= 0.5 {
+                        a / img.depth[k].max(1e-12)
+                    } else {
+                        -1.0
+                    }
                 } else {
                     -1.0
                 };

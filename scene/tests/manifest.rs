@@ -59,7 +59,6 @@ fn write_scene(dir: &Path, n_train: usize) -> Manifest {
         frames: frames(1),
         events: None,
         ..m.clone()
-        frame_encoding: None,
     };
     test.write(dir.join("transforms_test.json")).unwrap();
     let mut ev = EventStream::new(8, 6);
@@ -388,7 +387,6 @@ fn scene_open_checks_images_and_events() {
     Manifest {
         frames: vec![],
         ..manifest(0)
-        frame_encoding: None,
     }
     .write(dir.path().join("transforms_train.json"))
     .unwrap();
@@ -434,5 +432,27 @@ fn manifest_matrix_is_rows_of_camera_to_world() {
             .to_cols_array()
             .iter()
             .all(|&d| d < 1e-12)
+    );
+}
+
+#[test]
+fn frame_encoding_round_trips_and_an_unknown_one_names_the_file() {
+    use scene::manifest::FrameEncoding;
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("transforms_train.json");
+    for enc in [None, Some(FrameEncoding::Srgb), Some(FrameEncoding::Linear)] {
+        let m = Manifest {
+            frame_encoding: enc,
+            ..manifest(2)
+        };
+        m.write(&p).unwrap();
+        assert_eq!(Manifest::read(&p).unwrap().frame_encoding, enc);
+    }
+    let text = std::fs::read_to_string(&p).unwrap();
+    std::fs::write(&p, text.replace("\"linear\"", "\"gamma22\"")).unwrap();
+    let e = Manifest::read(&p).unwrap_err().to_string();
+    assert!(
+        e.contains("transforms_train.json") && e.contains("gamma22"),
+        "{e}"
     );
 }

@@ -1,6 +1,6 @@
 //! `degs run` over the real stage binaries on a tiny synthetic scene (32×32 px, three
-//! train and two test frames, one LoCM epoch, 200 warm-up iterations: a few seconds on
-//! two cores): every built stage leaves a cache entry with its report, a second run
+//! train and two test frames, one LoCM epoch, 200 warm-up and 30 joint iterations: a few seconds
+//! on two cores): every built stage leaves a cache entry with its report, a second run
 //! runs nothing, and the warm-up beats the mean-colour baseline on the test frames.
 
 use degs_tests::{Workspace, entry, read_json, stage_record, stderr};
@@ -37,9 +37,14 @@ depth = 2
 from_iter = 50
 interval = 50
 until_iter = 150
+
+[deform]
+iterations = 30
+rebind_every = 10
+log_every = 5
 "#;
 
-const BUILT: [&str; 4] = ["synth", "evflow", "gaussians", "assoc"];
+const BUILT: [&str; 5] = ["synth", "evflow", "gaussians", "assoc", "deform"];
 
 #[test]
 fn degs_run_builds_every_stage_once_and_beats_the_mean_colour() {
@@ -71,6 +76,30 @@ fn degs_run_builds_every_stage_once_and_beats_the_mean_colour() {
     assert!(
         psnr.is_finite() && psnr > baseline,
         "test PSNR {psnr} dB, mean colour {baseline} dB"
+    );
+
+    // the joint training: finite losses of every term, rebinding, a PoseNet, a test PSNR
+    let dir = entry(&first, "deform");
+    let report = read_json(&dir.join("report.json"));
+    assert_eq!(report["iterations"], 30, "{report}");
+    assert!(report["rebinds"].as_u64().unwrap() >= 3, "{report}");
+    let curve = report["curve"].as_array().unwrap();
+    assert_eq!(curve.len(), 6, "{report}");
+    for p in curve {
+        for k in ["l_rgb", "l_event", "l_motion", "total"] {
+            let v = p[k].as_f64().unwrap();
+            assert!(v.is_finite() && v >= 0.0, "{k} = {v} at {p}");
+        }
+    }
+    assert!(
+        curve.iter().any(|p| p["l_event"].as_f64().unwrap() > 0.0),
+        "{report}"
+    );
+    assert!(dir.join("posenet.safetensors").is_file());
+    let psnr = report["test"]["psnr_mean"].as_f64().unwrap();
+    assert!(
+        psnr.is_finite() && psnr > baseline,
+        "deform test PSNR {psnr} dB"
     );
 
     // everything is cached: the second run runs nothing
