@@ -167,8 +167,11 @@ pub enum Command {
         /// LoCM fine-tuning epochs of the evflow stage
         #[arg(long, default_value_t = crate::demo::DEMO_EVFLOW_EPOCHS)]
         epochs: usize,
-        /// Use every stage's default settings (3500 iterations, 3 epochs) instead
-        #[arg(long, conflicts_with_all = ["iterations", "epochs"])]
+        /// Joint iterations of the deform stage
+        #[arg(long, default_value_t = crate::demo::DEMO_DEFORM_ITERATIONS)]
+        deform_iterations: u32,
+        /// Use every stage's default settings (3500 + 2000 iterations, 3 epochs) instead
+        #[arg(long, conflicts_with_all = ["iterations", "epochs", "deform_iterations"])]
         full: bool,
         /// Stages to run at the same time
         #[arg(short = 'j', long, default_value_t = 2)]

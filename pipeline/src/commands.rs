@@ -85,6 +85,7 @@ pub fn execute(command: Command) -> Result<()> {
             set,
             iterations,
             epochs,
+            deform_iterations,
             full,
             jobs,
         } => {
@@ -95,6 +96,7 @@ pub fn execute(command: Command) -> Result<()> {
                 scene: synth::load_config(None, Some(&preset), &all)?,
                 gaussians_iterations: (!full).then_some(iterations),
                 evflow_epochs: (!full).then_some(epochs),
+                deform_iterations: (!full).then_some(deform_iterations),
                 jobs,
             };
             let place = Where {

@@ -25,6 +25,8 @@ pub const DEMO_SIZE: u32 = 96;
 pub const DEMO_GAUSSIANS_ITERATIONS: u32 = 1500;
 /// LoCM epochs of the demo (the stage default is 3).
 pub const DEMO_EVFLOW_EPOCHS: usize = 1;
+/// Joint iterations of the demo (the stage default is 2000).
+pub const DEMO_DEFORM_ITERATIONS: u32 = 300;
 
 /// What the demo runs.
 #[derive(Clone, Debug)]
@@ -34,6 +36,8 @@ pub struct DemoOptions {
     pub gaussians_iterations: Option<u32>,
     /// `[evflow] epochs`; None leaves the stage default.
     pub evflow_epochs: Option<usize>,
+    /// `[deform] iterations`; None leaves the stage default.
+    pub deform_iterations: Option<u32>,
     pub jobs: usize,
 }
 
@@ -81,6 +85,10 @@ pub fn demo_experiment(opts: &DemoOptions) -> Experiment {
         let t = exp.stages.entry("evflow".into()).or_default();
         t.insert("epochs".into(), toml::Value::Integer(n as i64));
     }
+    if let Some(n) = opts.deform_iterations {
+        let t = exp.stages.entry("deform".into()).or_default();
+        t.insert("iterations".into(), toml::Value::Integer(n.into()));
+    }
     exp
 }
 
@@ -93,6 +101,9 @@ pub fn describe(opts: &DemoOptions, experiment_file: &Path) -> String {
     }
     if let Some(n) = opts.evflow_epochs {
         reduced.push(format!("evflow epochs = {n} (default 3)"));
+    }
+    if let Some(n) = opts.deform_iterations {
+        reduced.push(format!("deform iterations = {n} (default 2000)"));
     }
     format!(
         "degs demo: synthetic `{}` scene {}x{}, {} s, train frames at {} fps, {} test frames; {}; \
