@@ -7,12 +7,11 @@ use crate::event_counts::EventCounts;
 use crate::event_image::srgb_to_linear;
 use crate::settings::{DeformSettings, FrameEncoding};
 use gaussians::model::Model;
+use gaussians::stage::load_views;
 use gaussians::train::{TrainSettings, View};
 use scene::error::{Error, Result};
 use scene::events::EventStream;
-use scene::image_io::read_image;
-use scene::manifest::{Manifest, Scene};
-use scene::metrics::interleaved_to_planar;
+use scene::manifest::Scene;
 use std::path::Path;
 
 /// Everything the joint training needs from the files, in memory.
@@ -42,36 +41,6 @@ pub struct Inputs {
     pub bindings: Vec<assoc::Bindings>,
     /// Half-width δt of the association window.
     pub assoc_delta_t: f64,
-}
-
-/// Planar RGB views of a manifest's frames (images checked against the camera size).
-pub fn load_views(scene: &Scene, m: &Manifest) -> Result<Vec<View>> {
-    m.frames
-        .iter()
-        .map(|f| {
-            let camera = scene::Camera {
-                intrinsics: m.camera,
-                cam_to_world: f.cam_to_world,
-            };
-            let path = scene.image_path(f);
-            let img = read_image(&path)?;
-            let (w, h) = (m.camera.width, m.camera.height);
-            if (img.width, img.height) != (w, h) {
-                return Err(Error::invalid(
-                    &path,
-                    format!(
-                        "image is {}x{} but the camera is {w}x{h}",
-                        img.width, img.height
-                    ),
-                ));
-            }
-            Ok(View {
-                camera,
-                time: f.time as f32,
-                rgb: interleaved_to_planar(&img.data, w as usize, h as usize, 3),
-            })
-        })
-        .collect()
 }
 
 /// Per-event flow of every `flow/NNNN.evflow` in `flows` spread over the stream's

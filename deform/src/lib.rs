@@ -34,6 +34,7 @@
 //! `scene`, `glam`, `rayon` and `serde`. Imports between modules go one way only: any module may use the leaves
 //! `real` and `lie`, and `event_image` uses `event_counts`.
 
+pub mod baselines;
 pub mod camera_path;
 pub mod event_counts;
 pub mod event_image;

@@ -11,6 +11,7 @@
 //! OUT/report.json         losses every `log_every` iterations, time per phase, test PSNR/SSIM
 //! ```
 
+use crate::baselines::{Baselines, Recording};
 use crate::inputs::Inputs;
 use crate::posenet::PoseNet;
 use crate::settings::DeformSettings;
@@ -119,6 +120,9 @@ pub struct TrainReport {
     pub gaussians: usize,
     pub curve: Vec<CurvePoint>,
     pub test: Evaluation,
+    /// The 2D baselines on the same test frames (nearest frame, linear blend, event
+    /// pseudo image).
+    pub baselines: Baselines,
 }
 
 /// What a finished (or interrupted) run produced.
@@ -196,6 +200,16 @@ pub fn train(
     write_depths(&model, &d.views, &out.path().join("depth"))?;
     phases.start("evaluate");
     let test = evaluate(&model, &d.test, "test", Some(&out.path().join("renders")))?;
+    phases.start("baselines");
+    let test_times: Vec<f64> = d.scene.test.frames.iter().map(|f| f.timestamp).collect();
+    let rec = Recording {
+        train: &d.views,
+        times: &d.times,
+        events: Some(&d.events),
+        contrast: d.contrast,
+        srgb: d.srgb,
+    };
+    let baselines = crate::baselines::evaluate(&rec, &d.test, &test_times);
     phases.stop();
     let report = TrainReport {
         stage: "deform train",
@@ -215,6 +229,7 @@ pub fn train(
         gaussians: model.splats.len(),
         curve,
         test,
+        baselines,
         settings,
     };
     write_json_atomic(&out.path().join("report.json"), &report)?;

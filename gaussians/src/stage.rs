@@ -165,7 +165,7 @@ fn load_rgb(
 }
 
 /// Views (camera, time, planar RGB) of a manifest's frames.
-fn load_views(scene: &Scene, m: &Manifest) -> Result<Vec<View>> {
+pub fn load_views(scene: &Scene, m: &Manifest) -> Result<Vec<View>> {
     m.frames
         .iter()
         .map(|f| {

@@ -187,6 +187,8 @@ pub const STAGES: &[Stage] = &[
         figures: &[
             Figure::new("test/psnr_mean", "test PSNR", "dB"),
             Figure::plain("test/ssim_mean", "SSIM"),
+            Figure::new("baselines/blend/psnr_mean", "linear blend", "dB"),
+            Figure::new("baselines/events/psnr_mean", "event pseudo image", "dB"),
             Figure::new("psnr", "PSNR", "dB"),
             Figure::plain("ssim", "SSIM"),
         ],
