@@ -20,6 +20,16 @@ pub fn parse<S: Settings>(text: &str, origin: &Path) -> Result<S> {
     toml::from_str(text).map_err(|e| Error::invalid(origin, e.message().trim()))
 }
 
+/// Settings from a TOML table (a file's keys with `--set key=value` overrides merged
+/// in), then [`Settings::validate`]; errors name `origin`.
+pub fn from_table<S: Settings>(table: toml::Table, origin: &Path) -> Result<S> {
+    let s: S = toml::Value::Table(table)
+        .try_into()
+        .map_err(|e: toml::de::Error| Error::invalid(origin, e.message().trim()))?;
+    s.validate().map_err(|e| Error::invalid(origin, e))?;
+    Ok(s)
+}
+
 /// The settings of a run: `config` (or the defaults), then `overrides` (the flags),
 /// then [`Settings::validate`]. Errors name the file, or "command line" when there is none.
 pub fn resolve<S: Settings>(config: Option<&Path>, overrides: impl FnOnce(&mut S)) -> Result<S> {
@@ -127,5 +137,16 @@ mod tests {
         assert!(e.contains("stepz") && e.contains("s.toml"), "{e}");
         let e = resolve::<Demo>(Some(&dir.path().join("missing.toml")), |_| {}).unwrap_err();
         assert!(e.to_string().contains("missing.toml"), "{e}");
+    }
+
+    #[test]
+    fn from_table_checks_keys_and_values_and_names_the_origin() {
+        let origin = Path::new("d.toml");
+        let s: Demo = from_table("steps = 4".parse().unwrap(), origin).unwrap();
+        assert_eq!((s.steps, s.rate), (4, 2e-4));
+        let e = from_table::<Demo>("stepz = 4".parse().unwrap(), origin).unwrap_err();
+        assert!(e.to_string().starts_with("d.toml: ") && e.to_string().contains("stepz"));
+        let e = from_table::<Demo>("steps = 0".parse().unwrap(), origin).unwrap_err();
+        assert_eq!(e.to_string(), "d.toml: steps must be at least 1");
     }
 }
