@@ -4,7 +4,7 @@
 //! given, so the flags stay `Option<T>` without a clap default.)
 
 use super::settings::{Settings, tidy_floats};
-use clap::{Command, Parser};
+use clap::{Arg, Command, Parser};
 
 /// Append ` [default: VALUE]` to the help of each flag in `flags`: pairs of a clap
 /// argument id (the field name, `lr_start`) and the setting it overrides, a dotted path
@@ -26,7 +26,7 @@ pub fn show_defaults<S: Settings>(cmd: Command, flags: &[(&str, &str)]) -> Comma
                 toml::Value::String(s) => s.clone(),
                 v => v.to_string(),
             };
-            (id, format!(" [default: {text}]"))
+            (id, text)
         })
         .collect();
     let mut found = vec![false; shown.len()];
@@ -35,14 +35,7 @@ pub fn show_defaults<S: Settings>(cmd: Command, flags: &[(&str, &str)]) -> Comma
             return a;
         };
         found[k] = true;
-        let tail = &shown[k].1;
-        let help = a.get_help().map(ToString::to_string).unwrap_or_default();
-        let long = a.get_long_help().map(|h| format!("{h}{tail}"));
-        let a = a.help(format!("{help}{tail}"));
-        match long {
-            Some(l) => a.long_help(l),
-            None => a,
-        }
+        with_default(a, &shown[k].1)
     });
     if let Some(k) = found.iter().position(|f| !f) {
         panic!(
@@ -52,6 +45,19 @@ pub fn show_defaults<S: Settings>(cmd: Command, flags: &[(&str, &str)]) -> Comma
         );
     }
     cmd
+}
+
+/// `arg` with ` [default: VALUE]` after its help (and its long help, if it has one),
+/// for a default that is not a setting (a constant the code falls back to).
+pub fn with_default(arg: Arg, value: impl std::fmt::Display) -> Arg {
+    let tail = format!(" [default: {value}]");
+    let help = arg.get_help().map(ToString::to_string).unwrap_or_default();
+    let long = arg.get_long_help().map(|h| format!("{h}{tail}"));
+    let arg = arg.help(format!("{help}{tail}"));
+    match long {
+        Some(l) => arg.long_help(l),
+        None => arg,
+    }
 }
 
 /// Parse the command line into `P` after `patch` adjusted its clap command (e.g. with

@@ -6,7 +6,7 @@ pub mod help;
 pub mod progress;
 pub mod settings;
 
-pub use help::{parse_with, show_defaults};
+pub use help::{parse_with, show_defaults, with_default};
 pub use progress::{Progress, sigint_flag};
 pub use settings::Settings;
 
