@@ -46,7 +46,9 @@ fn help_and_errors() {
 
 /// The help of `--flag` in a `--help` text: its line and the wrapped lines after it.
 fn flag_help(help: &str, flag: &str) -> String {
-    let mut lines = help.lines().skip_while(|l| !l.contains(&format!("{flag} <")));
+    let mut lines = help
+        .lines()
+        .skip_while(|l| !l.contains(&format!("{flag} <")));
     let first = lines
         .next()
         .unwrap_or_else(|| panic!("{flag} missing from\n{help}"));
