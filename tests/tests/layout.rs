@@ -499,14 +499,20 @@ fn design_equation_table_names_real_files_and_functions() {
     let mut missing = Vec::new();
     for row in table {
         let ticked: Vec<&str> = row.split('`').skip(1).step_by(2).collect();
-        let files: Vec<&str> = ticked.iter().copied().filter(|t| t.ends_with(".rs")).collect();
+        let files: Vec<&str> = ticked
+            .iter()
+            .copied()
+            .filter(|t| t.ends_with(".rs"))
+            .collect();
         assert!(!files.is_empty(), "no file in row {row}");
         let sources: String = files
             .iter()
-            .map(|f| std::fs::read_to_string(root.join(f)).unwrap_or_else(|_| {
-                missing.push(format!("{f} (file)"));
-                String::new()
-            }))
+            .map(|f| {
+                std::fs::read_to_string(root.join(f)).unwrap_or_else(|_| {
+                    missing.push(format!("{f} (file)"));
+                    String::new()
+                })
+            })
             .collect();
         for name in ticked.iter().filter(|t| !t.ends_with(".rs")) {
             let f = name.rsplit("::").next().unwrap();
@@ -515,5 +521,9 @@ fn design_equation_table_names_real_files_and_functions() {
             }
         }
     }
-    assert!(missing.is_empty(), "docs/DESIGN.md §8 names what does not exist:\n{}", missing.join("\n"));
+    assert!(
+        missing.is_empty(),
+        "docs/DESIGN.md §8 names what does not exist:\n{}",
+        missing.join("\n")
+    );
 }
