@@ -4,6 +4,7 @@
 use serde::Serialize;
 
 use crate::{AssocSettings, Bindings, bind_nearest, footprint_radii, lift_events};
+use scene::cli::Settings;
 use scene::{Camera, EventSlice};
 
 /// Per-frame figures for `report.json`.

@@ -44,9 +44,9 @@ impl Default for AssocSettings {
     }
 }
 
-impl AssocSettings {
+impl scene::cli::Settings for AssocSettings {
     /// Checks every setting is in range; the message names the setting.
-    pub fn validate(&self) -> Result<(), String> {
+    fn validate(&self) -> Result<(), String> {
         if !(self.delta_t.is_finite() && self.delta_t > 0.0) {
             return Err(format!(
                 "delta_t = {} must be a positive number of seconds",

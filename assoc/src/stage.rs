@@ -15,7 +15,8 @@ use serde::Serialize;
 use crate::frame::{FrameStats, associate_frame};
 use crate::{AssocSettings, Bindings, FrameBindings, write_assoc};
 use gaussians::model::Model;
-use scene::atomic::{AtomicDir, write_bytes_atomic, write_json_atomic};
+use scene::atomic::{AtomicDir, write_json_atomic};
+use scene::cli::{Settings, settings::write_resolved};
 use scene::image_io::{Image, read_exr_depth, read_image, write_png};
 use scene::report::{Phases, peak_rss_mib};
 use scene::{Error, Result, Scene};
@@ -122,8 +123,7 @@ pub fn run(
     }
     phases.start("write");
     write_assoc(&out.path().join("assoc.bin"), &sections)?;
-    let toml = toml::to_string(settings).map_err(|e| Error::Other(e.to_string()))?;
-    write_bytes_atomic(&out.path().join("settings.toml"), toml.as_bytes())?;
+    write_resolved(out.path(), settings)?;
     phases.stop();
     let n = model.splats.len();
     let report = AssocReport {

@@ -273,3 +273,38 @@ fn binary_writes_bindings_report_and_previews_and_fails_cleanly() {
     // The earlier good output is untouched by the failed runs.
     assert_eq!(read_assoc(&out.join("assoc.bin")).unwrap(), sections);
 }
+
+/// The help of `--flag` in a `--help` text: its line and the wrapped lines after it.
+fn flag_help(help: &str, flag: &str) -> String {
+    let mut lines = help
+        .lines()
+        .skip_while(|l| !l.contains(&format!("{flag} <")));
+    let first = lines
+        .next()
+        .unwrap_or_else(|| panic!("{flag} missing from\n{help}"));
+    let rest = lines.take_while(|l| !l.trim_start().starts_with('-'));
+    std::iter::once(first)
+        .chain(rest)
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// `--help` shows each setting's current default, from `AssocSettings::default()`.
+#[test]
+fn help_shows_the_settings_defaults() {
+    let o = Command::new(env!("CARGO_BIN_EXE_assoc"))
+        .arg("--help")
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    let help = String::from_utf8_lossy(&o.stdout);
+    let d = assoc::AssocSettings::default();
+    for (flag, default) in [
+        ("--delta-t", d.delta_t.to_string()),
+        ("--k", d.k.to_string()),
+        ("--min-alpha", d.min_alpha.to_string()),
+    ] {
+        let line = flag_help(&help, flag);
+        assert!(line.contains(&format!("[default: {default}]")), "{line}");
+    }
+}

@@ -120,8 +120,7 @@ impl Inputs {
         let settings_file = model_dir.join("settings.toml");
         let text =
             std::fs::read_to_string(&settings_file).map_err(|e| Error::io(&settings_file, e))?;
-        let warmup =
-            TrainSettings::from_toml(&text).map_err(|e| Error::invalid(&settings_file, e))?;
+        let warmup: TrainSettings = scene::cli::settings::parse(&text, &settings_file)?;
         let assoc_file = assoc_dir.join("assoc.bin");
         let frames = assoc::read_assoc(&assoc_file)?;
         if frames.len() != views.len() {

@@ -115,7 +115,7 @@ impl DeformSettings {
         if self.log_every == 0 {
             return Err("log_every must be at least 1".into());
         }
-        self.assoc.validate().map_err(|e| format!("assoc: {e}"))
+        scene::cli::Settings::validate(&self.assoc).map_err(|e| format!("assoc: {e}"))
     }
 }
 

@@ -12,18 +12,15 @@
 use burn::tensor::{DType, Device};
 use evflow::net::FlowNet;
 use evflow::pretrain::{PretrainSettings, evaluate, make_held_out};
+use scene::cli::settings::resolve;
+use std::path::Path;
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some((cfg, weights)) = args.split_first() else {
         anyhow::bail!("usage: heldout SETTINGS.toml|- WEIGHTS…");
     };
-    let s: PretrainSettings = if cfg == "-" {
-        PretrainSettings::default()
-    } else {
-        toml::from_str(&std::fs::read_to_string(cfg)?).map_err(|e| anyhow::anyhow!("{cfg}: {e}"))?
-    };
-    s.validate().map_err(|e| anyhow::anyhow!("{cfg}: {e}"))?;
+    let s: PretrainSettings = resolve((cfg != "-").then_some(Path::new(cfg)), |_| {})?;
     let held = make_held_out(&s)?;
     for w in weights {
         let net = FlowNet::load(w.as_ref(), None, &Device::flex(), DType::F32)?;

@@ -3,6 +3,8 @@
 //! `-` for the defaults). Progress every 25 steps on stderr; the held-out figures at the end.
 
 use evflow::pretrain::{PretrainSettings, run};
+use scene::cli::settings::resolve;
+use std::path::Path;
 use std::time::Instant;
 
 fn main() -> anyhow::Result<()> {
@@ -10,14 +12,10 @@ fn main() -> anyhow::Result<()> {
     let [cfg, out] = args.as_slice() else {
         anyhow::bail!("usage: pretrain SETTINGS.toml|- OUT_DIR");
     };
-    let settings: PretrainSettings = if cfg == "-" {
-        PretrainSettings::default()
-    } else {
-        toml::from_str(&std::fs::read_to_string(cfg)?).map_err(|e| anyhow::anyhow!("{cfg}: {e}"))?
-    };
+    let settings: PretrainSettings = resolve((cfg != "-").then_some(Path::new(cfg)), |_| {})?;
     let start = Instant::now();
     let mut avg = 0.0;
-    let report = run(&settings, std::path::Path::new(out), &mut |k, n, loss| {
+    let report = run(&settings, Path::new(out), &mut |k, n, loss| {
         avg += loss;
         if k % 25 == 0 || k == n {
             eprintln!(

@@ -11,10 +11,12 @@
 //! Windows without events are skipped (nothing to sharpen).
 
 use crate::net::io::BareWeights;
-use crate::net::{FlowNet, NetConfig, to_f32, to_f64};
+use crate::net::{FlowNet, NetConfig, adam_step, to_f64};
 use crate::source::Source;
-use burn::tensor::{Gradients, Tensor, TensorData};
+use burn::tensor::Tensor;
+use scene::cli::Settings;
 use scene::error::{Error, Result};
+use scene::optim::Adam;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 use std::time::Instant;
@@ -110,9 +112,9 @@ impl Default for FlowSettings {
     }
 }
 
-impl FlowSettings {
+impl Settings for FlowSettings {
     /// `Err` with a sentence when a setting is out of range.
-    pub fn validate(&self) -> std::result::Result<(), String> {
+    fn validate(&self) -> std::result::Result<(), String> {
         let pos = |v: f64| v.is_finite() && v > 0.0;
         if !pos(self.lr_start) || !pos(self.lr_end) {
             return Err("lr_start and lr_end must be finite and > 0".into());
@@ -131,7 +133,9 @@ impl FlowSettings {
         }
         Ok(())
     }
+}
 
+impl FlowSettings {
     /// Settings for base weights without a sidecar.
     pub fn bare_weights(&self) -> BareWeights {
         BareWeights {
@@ -198,45 +202,6 @@ pub struct FinetuneReport {
     /// Mean CM loss over the windows before and after training (no gradient).
     pub cm_loss_before: f64,
     pub cm_loss_after: f64,
-}
-
-/// Adam moments of one tensor.
-struct Slot {
-    m: Vec<f32>,
-    v: Vec<f32>,
-}
-
-const BETA1: f64 = 0.9;
-const BETA2: f64 = 0.999;
-const ADAM_EPS: f64 = 1e-8;
-
-/// One Adam update of `t` from its gradient in `grads` (no gradient: unchanged).
-fn adam<const D: usize>(t: &mut Tensor<D>, grads: &Gradients, slot: &mut Slot, lr: f64, k: i32) {
-    let Some(g) = t.grad(grads) else {
-        return;
-    };
-    let g = to_f32(g);
-    let shape = t.dims();
-    let (device, dtype) = (t.device(), t.dtype());
-    let mut p = to_f32(t.clone().detach());
-    if slot.m.len() != g.len() {
-        slot.m = vec![0.0; g.len()];
-        slot.v = vec![0.0; g.len()];
-    }
-    let (c1, c2) = (1.0 - BETA1.powi(k), 1.0 - BETA2.powi(k));
-    for i in 0..p.len() {
-        let gi = g[i] as f64;
-        let m = BETA1 * slot.m[i] as f64 + (1.0 - BETA1) * gi;
-        let v = BETA2 * slot.v[i] as f64 + (1.0 - BETA2) * gi * gi;
-        slot.m[i] = m as f32;
-        slot.v[i] = v as f32;
-        p[i] -= (lr * (m / c1) / ((v / c2).sqrt() + ADAM_EPS)) as f32;
-    }
-    *t = Tensor::<D>::from_data(
-        TensorData::new(p, shape).convert_dtype(dtype),
-        (&device, dtype),
-    )
-    .require_grad();
 }
 
 /// Dense flow (px per window) of a window as f64 `(u, v)`, and the output tensor.
@@ -336,13 +301,8 @@ pub fn finetune(
     let n = wd * ht;
     let cfg = s.cm_config();
     let total = (s.epochs * trained.len()) as f64;
-    let mut slots: Vec<Slot> = (0..2 * net.convs.len())
-        .map(|_| Slot {
-            m: Vec::new(),
-            v: Vec::new(),
-        })
-        .collect();
-    let mut k = 0i32;
+    let mut adam = Adam::default();
+    let mut k = 0usize;
     let mut step_time = 0.0;
     for epoch in 0..s.epochs {
         let start = Instant::now();
@@ -370,16 +330,22 @@ pub fn finetune(
             }
             let grads = crate::cm::cm_surrogate(flow, &l.grad_u, &l.grad_v).backward();
             k += 1;
-            for (ci, c) in net.convs.iter_mut().enumerate() {
-                let (s0, s1) = slots[2 * ci..].split_at_mut(1);
+            for c in &mut net.convs {
+                let name = &c.name;
                 match (s.mode, c.lora.as_mut()) {
                     (Mode::Lora, Some(lo)) => {
-                        adam(&mut lo.a, &grads, &mut s0[0], lr, k);
-                        adam(&mut lo.b, &grads, &mut s1[0], lr, k);
+                        adam_step(&mut adam, &format!("{name}.lora_a"), &mut lo.a, &grads, lr);
+                        adam_step(&mut adam, &format!("{name}.lora_b"), &mut lo.b, &grads, lr);
                     }
                     _ => {
-                        adam(&mut c.weight, &grads, &mut s0[0], lr, k);
-                        adam(&mut c.bias, &grads, &mut s1[0], lr, k);
+                        adam_step(
+                            &mut adam,
+                            &format!("{name}.weight"),
+                            &mut c.weight,
+                            &grads,
+                            lr,
+                        );
+                        adam_step(&mut adam, &format!("{name}.bias"), &mut c.bias, &grads, lr);
                     }
                 }
             }

@@ -5,6 +5,7 @@ use clap::{Parser, Subcommand};
 use evflow::cli::flow::{EvalArgs, FinetuneArgs, PredictArgs};
 use evflow::cli::pretrain::PretrainArgs;
 use evflow::cli::simulate::SimulateArgs;
+use std::process::ExitCode;
 
 /// Event-based optical flow for degs: EV-FlowNet adapted to one recording by LoCM
 /// (LoRA + contrast maximisation). Outputs per-event flow files (`flow/NNNN.evflow`,
@@ -41,20 +42,18 @@ enum Cmd {
     Pretrain(PretrainArgs),
 }
 
-fn run(cli: Cli) -> anyhow::Result<()> {
+fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.cmd {
         Cmd::Simulate(a) => a.run(),
         Cmd::Finetune(a) => a.run(),
         Cmd::Predict(a) => a.run(),
         Cmd::Eval(a) => a.run(),
         Cmd::Pretrain(a) => a.run(),
-    }
+    }?;
+    Ok(ExitCode::SUCCESS)
 }
 
-fn main() {
-    let cli = Cli::parse();
-    if let Err(e) = run(cli) {
-        eprintln!("evflow: error: {e:#}");
-        std::process::exit(1);
-    }
+fn main() -> ExitCode {
+    let cli: Cli = scene::cli::parse_with(evflow::cli::show_defaults);
+    scene::cli::exit_on_error("evflow", || run(cli))
 }

@@ -15,6 +15,7 @@ use crate::finetune::{FinetuneReport, FlowSettings, Mode, Step, for_inference};
 use crate::predict::PredictReport;
 use crate::source::{Source, WindowSpec};
 use burn::tensor::{DType, Device};
+use scene::cli::Settings;
 use scene::error::{Error, IoContext, Result};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -201,9 +202,7 @@ pub fn run(
     phases.start("write");
     let mut resolved = s.clone();
     resolved.weights = Some(weights.clone());
-    let text = toml::to_string(&resolved)
-        .map_err(|e| Error::Other(format!("cannot serialise settings: {e}")))?;
-    scene::atomic::write_bytes_atomic(&dir.path().join("settings.toml"), text.as_bytes())?;
+    scene::cli::settings::write_resolved(dir.path(), &resolved)?;
     phases.stop();
     let report = StageReport {
         stage: if train { "finetune" } else { "predict" }.into(),

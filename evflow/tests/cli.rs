@@ -44,6 +44,50 @@ fn help_and_errors() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("bad.txt"));
 }
 
+/// The help of `--flag` in a `--help` text: its line and the wrapped lines after it.
+fn flag_help(help: &str, flag: &str) -> String {
+    let mut lines = help
+        .lines()
+        .skip_while(|l| !l.contains(&format!("{flag} <")));
+    let first = lines
+        .next()
+        .unwrap_or_else(|| panic!("{flag} missing from\n{help}"));
+    let rest = lines.take_while(|l| !l.trim_start().starts_with('-'));
+    std::iter::once(first)
+        .chain(rest)
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// `finetune --help` and `pretrain --help` show the defaults of the settings their flags
+/// override, from the settings types' `Default`.
+#[test]
+fn help_shows_the_settings_defaults() {
+    let help = |cmd: &str| {
+        let out = evflow().args([cmd, "--help"]).output().unwrap();
+        assert!(out.status.success());
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let f = evflow::finetune::FlowSettings::default();
+    let finetune = help("finetune");
+    for (flag, default) in [
+        ("--epochs", f.epochs.to_string()),
+        ("--lr-start", f.lr_start.to_string()),
+        ("--lr-end", f.lr_end.to_string()),
+        ("--rank", f.rank.to_string()),
+        ("--max-flow", evflow::net::io::DEFAULT_MAX_FLOW.to_string()),
+    ] {
+        let line = flag_help(&finetune, flag);
+        assert!(line.contains(&format!("[default: {default}]")), "{line}");
+    }
+    let p = evflow::pretrain::PretrainSettings::default();
+    let pretrain = help("pretrain");
+    for (flag, default) in [("--base", p.base), ("--iterations", p.iterations)] {
+        let line = flag_help(&pretrain, flag);
+        assert!(line.contains(&format!("[default: {default}]")), "{line}");
+    }
+}
+
 #[test]
 fn bare_event_file_windows_and_calibration() {
     assert_eq!(parse_sensor("240x180"), Ok((240, 180)));

@@ -2,7 +2,10 @@
 //! model (`render`). Logic lives in [`gaussians::stage`].
 
 use clap::{Parser, Subcommand};
-use gaussians::stage::{self, Progress, Split, TrainArgs};
+use gaussians::progress::TrainProgress;
+use gaussians::stage::{self, Split, TrainArgs};
+use gaussians::train::TrainSettings;
+use scene::cli::{exit_on_error, parse_with, show_defaults, sigint_flag};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -52,71 +55,62 @@ enum Verb {
 }
 
 fn main() -> ExitCode {
-    match Cli::parse().verb {
+    let cli: Cli = parse_with(|c| {
+        c.mut_subcommand("train", |t| {
+            show_defaults::<TrainSettings>(t, stage::SETTING_FLAGS)
+        })
+    });
+    exit_on_error("gaussians", || run(cli.verb))
+}
+
+fn run(verb: Verb) -> scene::Result<ExitCode> {
+    match verb {
         Verb::Train(args) => {
-            let total = match stage::resolve_settings(&args) {
-                Ok(s) => s.iterations,
-                Err(e) => return fail(e),
-            };
-            let stop = stage::sigint_flag();
-            let mut progress = Progress::new(total);
-            let result = stage::train(&args, stop, |s| progress.step(s));
+            let total = stage::resolve_settings(&args)?.iterations;
+            let progress = TrainProgress::new(total);
+            let result = stage::train(&args, sigint_flag(), |s| progress.step(s));
             progress.finish();
-            match result {
-                Ok(o) => {
-                    let r = &o.report;
-                    eprintln!(
-                        "{}: {} iterations, {} Gaussians, test PSNR {:.2} dB, SSIM {:.4}{}",
-                        o.out.display(),
-                        r.iterations,
-                        r.gaussians,
-                        r.test.psnr_mean,
-                        r.test.ssim_mean,
-                        if r.interrupted { " (interrupted)" } else { "" }
-                    );
-                    if r.interrupted {
-                        ExitCode::from(130)
-                    } else {
-                        ExitCode::SUCCESS
-                    }
-                }
-                Err(e) => fail(e),
-            }
+            let o = result?;
+            let r = &o.report;
+            eprintln!(
+                "{}: {} iterations, {} Gaussians, test PSNR {:.2} dB, SSIM {:.4}{}",
+                o.out.display(),
+                r.iterations,
+                r.gaussians,
+                r.test.psnr_mean,
+                r.test.ssim_mean,
+                if r.interrupted { " (interrupted)" } else { "" }
+            );
+            Ok(if r.interrupted {
+                ExitCode::from(130)
+            } else {
+                ExitCode::SUCCESS
+            })
         }
         Verb::Render {
             model,
             scene,
             out,
             split,
-        } => match stage::render(&model, &scene, &out, split) {
-            Ok(r) => {
-                eprintln!(
-                    "{}: {} frames, PSNR {:.2} dB, SSIM {:.4}",
-                    out.display(),
-                    r.evaluation.frames,
-                    r.evaluation.psnr_mean,
-                    r.evaluation.ssim_mean
-                );
-                ExitCode::SUCCESS
-            }
-            Err(e) => fail(e),
-        },
+        } => {
+            let r = stage::render(&model, &scene, &out, split)?;
+            eprintln!(
+                "{}: {} frames, PSNR {:.2} dB, SSIM {:.4}",
+                out.display(),
+                r.evaluation.frames,
+                r.evaluation.psnr_mean,
+                r.evaluation.ssim_mean
+            );
+            Ok(ExitCode::SUCCESS)
+        }
         Verb::SynthRgb { preset, out, size } => {
-            let Some(mut cfg) = synth::SynthConfig::preset(&preset) else {
-                return fail(format!("unknown preset {preset}"));
-            };
+            let mut cfg = synth::SynthConfig::preset(&preset)
+                .ok_or_else(|| scene::Error::Other(format!("unknown preset {preset}")))?;
             if let Some(n) = size {
                 (cfg.width, cfg.height) = (n, n);
             }
-            match synth::write_rgb_synthetic_scene(&cfg, &out) {
-                Ok(()) => ExitCode::SUCCESS,
-                Err(e) => fail(e),
-            }
+            synth::write_rgb_synthetic_scene(&cfg, &out)?;
+            Ok(ExitCode::SUCCESS)
         }
     }
-}
-
-fn fail(e: impl std::fmt::Display) -> ExitCode {
-    eprintln!("error: {e}");
-    ExitCode::from(1)
 }

@@ -12,7 +12,8 @@ use crate::raster::TileRasterizer;
 use crate::splats::Splats;
 use crate::train::settings::Init;
 use crate::train::{StepInfo, TrainSettings, Trainer, View, init};
-use scene::atomic::{AtomicDir, write_bytes_atomic, write_json_atomic};
+use scene::atomic::{AtomicDir, write_json_atomic};
+use scene::cli::settings::{resolve, write_resolved};
 use scene::error::{Error, Result};
 use scene::image_io::{read_image, write_exr_depth, write_png};
 use scene::manifest::{Manifest, Scene};
@@ -21,8 +22,6 @@ use scene::report::{Phases, peak_rss_mib};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
-
-pub use crate::progress::{Progress, sigint_flag};
 
 /// Options of `gaussians train` (flags override the config file).
 #[derive(Clone, Debug, Default, clap::Args)]
@@ -37,22 +36,22 @@ pub struct TrainArgs {
     /// settings are written to OUT/settings.toml)
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Training iterations [default: 3500, the DEGS warm-up; more = the RGB-only baseline]
+    /// Training iterations (the default is the DEGS warm-up; more = the RGB-only baseline)
     #[arg(long)]
     pub iterations: Option<u32>,
-    /// Seed of the initialisation, frame order and field weights [default: 0]
+    /// Seed of the initialisation, frame order and field weights
     #[arg(long)]
     pub seed: Option<u64>,
     /// Initial Gaussians from a 3DGS PLY (e.g. SfM points) instead of `--init`
     #[arg(long)]
     pub init_ply: Option<PathBuf>,
-    /// Initial Gaussians without a PLY [default: stereo]
+    /// Initial Gaussians without a PLY
     #[arg(long, value_enum)]
     pub init: Option<Init>,
-    /// Hidden width of the deformation field MLP [default: 64]
+    /// Hidden width of the deformation field MLP
     #[arg(long)]
     pub field_width: Option<usize>,
-    /// Hidden layers of the deformation field MLP [default: 4]
+    /// Hidden layers of the deformation field MLP
     #[arg(long)]
     pub field_depth: Option<usize>,
     /// Static 3DGS: no deformation field
@@ -60,40 +59,39 @@ pub struct TrainArgs {
     pub no_deform: bool,
 }
 
+/// The flags of [`TrainArgs`] that override a setting, each with its key in
+/// [`TrainSettings`] (their `--help` shows its default: [`scene::cli::show_defaults`]).
+pub const SETTING_FLAGS: &[(&str, &str)] = &[
+    ("iterations", "iterations"),
+    ("seed", "seed"),
+    ("init", "init"),
+    ("field_width", "field.width"),
+    ("field_depth", "field.depth"),
+];
+
 /// Settings from the config file (if any) with the flags applied, validated.
 pub fn resolve_settings(args: &TrainArgs) -> Result<TrainSettings> {
-    let mut s = match &args.config {
-        Some(p) => {
-            let text = std::fs::read_to_string(p).map_err(|e| Error::io(p, e))?;
-            TrainSettings::from_toml(&text).map_err(|e| Error::invalid(p, e.trim()))?
+    resolve(args.config.as_deref(), |s: &mut TrainSettings| {
+        if let Some(n) = args.iterations {
+            s.iterations = n;
         }
-        None => TrainSettings::default(),
-    };
-    if let Some(n) = args.iterations {
-        s.iterations = n;
-    }
-    if let Some(seed) = args.seed {
-        s.seed = seed;
-        s.field.seed = seed;
-    }
-    if let Some(init) = args.init {
-        s.init = init;
-    }
-    if let Some(w) = args.field_width {
-        s.field.width = w;
-    }
-    if let Some(d) = args.field_depth {
-        s.field.depth = d;
-    }
-    if args.no_deform {
-        s.deform = false;
-    }
-    let origin = args
-        .config
-        .clone()
-        .unwrap_or_else(|| PathBuf::from("command line"));
-    s.validate().map_err(|e| Error::invalid(origin, e))?;
-    Ok(s)
+        if let Some(seed) = args.seed {
+            s.seed = seed;
+            s.field.seed = seed;
+        }
+        if let Some(init) = args.init {
+            s.init = init;
+        }
+        if let Some(w) = args.field_width {
+            s.field.width = w;
+        }
+        if let Some(d) = args.field_depth {
+            s.field.depth = d;
+        }
+        if args.no_deform {
+            s.deform = false;
+        }
+    })
 }
 
 /// PSNR / SSIM of renders against the frames of a split.
@@ -351,10 +349,7 @@ pub fn train(
     let settings = trainer.settings.clone();
     drop(trainer);
     model.save(out.path())?;
-    write_bytes_atomic(
-        &out.path().join("settings.toml"),
-        settings.to_toml().as_bytes(),
-    )?;
+    write_resolved(out.path(), &settings)?;
     phases.start("depth");
     write_depths(&model, &views, &out.path().join("depth"))?;
     phases.start("evaluate");

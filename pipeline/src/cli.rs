@@ -22,6 +22,17 @@ pub struct Cli {
     pub command: Command,
 }
 
+/// The help of `degs demo --full`, with the stages' defaults it stands for (from their
+/// settings types, so that it cannot drift).
+fn full_help() -> String {
+    format!(
+        "Use every stage's default settings ({} + {} iterations, {} epochs) instead",
+        gaussians::train::TrainSettings::default().iterations,
+        deform::settings::DeformSettings::default().iterations,
+        evflow::finetune::FlowSettings::default().epochs
+    )
+}
+
 #[derive(Args, Clone)]
 pub struct Where {
     /// Cache root: holds cache/<stage>/<key>/ and runs/<name>/ [env: DEGS_CACHE]
@@ -170,8 +181,8 @@ pub enum Command {
         /// Joint iterations of the deform stage
         #[arg(long, default_value_t = crate::demo::DEMO_DEFORM_ITERATIONS)]
         deform_iterations: u32,
-        /// Use every stage's default settings (3500 + 2000 iterations, 3 epochs) instead
-        #[arg(long, conflicts_with_all = ["iterations", "epochs", "deform_iterations"])]
+        // Help: "Use every stage's default settings (… + … iterations, … epochs) instead".
+        #[arg(long, conflicts_with_all = ["iterations", "epochs", "deform_iterations"], help = full_help())]
         full: bool,
         /// Stages to run at the same time
         #[arg(short = 'j', long, default_value_t = 2)]

@@ -29,6 +29,7 @@ pub use crate::overrides::{merge, parse_set};
 use crate::settings::toml_section;
 use crate::stages::{self, STAGES};
 use anyhow::{Context, Result, anyhow, bail};
+use scene::cli::Settings;
 use serde::Deserialize;
 use serde::de::{self, Deserializer, MapAccess, Visitor};
 use std::collections::BTreeMap;

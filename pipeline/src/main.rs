@@ -3,10 +3,11 @@
 
 use clap::Parser;
 use pipeline::cli::Cli;
+use std::process::ExitCode;
 
-fn main() {
-    if let Err(e) = pipeline::commands::execute(Cli::parse().command) {
-        eprintln!("degs: {e:#}");
-        std::process::exit(1);
-    }
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    scene::cli::exit_on_error("degs", || {
+        pipeline::commands::execute(cli.command).map(|()| ExitCode::SUCCESS)
+    })
 }

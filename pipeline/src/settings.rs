@@ -3,6 +3,7 @@
 
 use crate::canon;
 use crate::overrides::merge;
+use scene::cli::Settings;
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 use toml::{Table, Value};
@@ -18,8 +19,9 @@ pub struct SettingsType {
 }
 
 impl SettingsType {
-    /// The settings type `T` (deserialised by the stage binary from its `--config`).
-    pub const fn of<T: Serialize + DeserializeOwned + Default>() -> SettingsType {
+    /// The settings type `T` (deserialised by the stage binary from its `--config` with
+    /// [`scene::cli::settings::resolve`]).
+    pub const fn of<T: Settings>() -> SettingsType {
         SettingsType {
             defaults: defaults_of::<T>,
             check: check_as::<T>,
@@ -85,6 +87,12 @@ mod tests {
     #[serde(default, deny_unknown_fields)]
     struct Inner {
         on: bool,
+    }
+
+    impl Settings for Example {
+        fn validate(&self) -> Result<(), String> {
+            Ok(())
+        }
     }
 
     #[test]

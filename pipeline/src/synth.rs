@@ -22,15 +22,7 @@ pub fn load_config(
                 anyhow!("{}: {}", path.display(), e.message().trim())
             })?;
             merge(&mut table, &overrides);
-            let cfg: SynthConfig =
-                toml::Value::Table(table)
-                    .try_into()
-                    .map_err(|e: toml::de::Error| {
-                        anyhow!("{}: {}", path.display(), e.message().trim())
-                    })?;
-            cfg.validate()
-                .map_err(|e| anyhow!("{}: {e}", path.display()))?;
-            Ok(cfg)
+            Ok(scene::cli::settings::from_table(table, path)?)
         }
         None => {
             let preset = preset.unwrap_or("rigid");

@@ -272,7 +272,10 @@ fn a_failing_stage_leaves_its_error_in_the_log_and_in_status() {
     assert!(!out.status.success());
     let err = stderr(&out);
     let last = err.lines().last().unwrap();
-    assert!(last.starts_with("degs: stage gaussians failed"), "{err}");
+    assert!(
+        last.starts_with("degs: error: stage gaussians failed"),
+        "{err}"
+    );
     assert!(last.contains("seed = 666 asks for a failure"), "{err}");
     assert_eq!(
         f.actions("a"),

@@ -195,9 +195,9 @@ pub struct ObjectSpec {
     pub deform: Deform,
 }
 
-impl SynthConfig {
+impl scene::cli::Settings for SynthConfig {
     /// `Err` with a sentence when a setting is out of range.
-    pub fn validate(&self) -> Result<(), String> {
+    fn validate(&self) -> Result<(), String> {
         if self.width == 0 || self.height == 0 || self.width > 8192 || self.height > 8192 {
             return Err(format!(
                 "image size {}x{} must be within 1..=8192",
@@ -292,7 +292,9 @@ impl SynthConfig {
         }
         Ok(())
     }
+}
 
+impl SynthConfig {
     /// Times of the training frames: `k / train_fps` for `k = 0 …` up to `duration`.
     pub fn train_times(&self) -> Vec<f64> {
         let n = (self.duration * self.train_fps + 1e-9).floor() as usize;

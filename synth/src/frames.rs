@@ -3,6 +3,7 @@
 //! [`crate::sim::Simulator`].
 
 use crate::sim::{SimConfig, Simulator, luminance};
+use scene::cli::Settings;
 use scene::error::{Error, IoContext, Result};
 use scene::events::EventStream;
 use serde::{Deserialize, Serialize};

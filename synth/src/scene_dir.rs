@@ -32,6 +32,7 @@ use crate::gt::{EventFlowGt, NOISE_ID, write_event_flow_gt, write_object_png};
 use crate::sim::{Simulator, luminance};
 use crate::world::{Render, SynthWorld};
 use scene::atomic::{AtomicDir, write_json_atomic};
+use scene::cli::Settings;
 use scene::error::{Error, Result};
 use scene::events::EventStream;
 use scene::image_io::{Image, write_exr_depth, write_exr_flow, write_png};

@@ -29,6 +29,7 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Poisson, StandardNormal};
 use rayon::prelude::*;
+use scene::cli::Settings;
 use scene::error::{Error, Result};
 use scene::events::EventStream;
 use serde::{Deserialize, Serialize};
@@ -82,9 +83,11 @@ impl SimConfig {
     pub fn nominal_threshold(&self) -> f64 {
         0.5 * (self.threshold_pos + self.threshold_neg)
     }
+}
 
+impl scene::cli::Settings for SimConfig {
     /// `Err` with a sentence (starting with the key) when a setting is out of range.
-    pub fn validate(&self) -> std::result::Result<(), String> {
+    fn validate(&self) -> std::result::Result<(), String> {
         let checks = [
             ("threshold_pos", self.threshold_pos, 0.0),
             ("threshold_neg", self.threshold_neg, 0.0),

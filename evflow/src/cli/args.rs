@@ -4,8 +4,7 @@ use crate::finetune::FlowSettings;
 use crate::source::{WindowSpec, parse_sensor, parse_window};
 use crate::stage::Input;
 use clap::Args;
-use serde::de::DeserializeOwned;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// Where the events come from: a scene directory, or a bare event file.
 #[derive(Args, Debug)]
@@ -80,7 +79,7 @@ pub struct CommonArgs {
     /// gives it when omitted.
     #[arg(long, requires = "weights")]
     pub width: Option<usize>,
-    /// Largest flow of bare --weights' tanh heads, px per window [default 32].
+    /// Largest flow of bare --weights' tanh heads, px per window.
     #[arg(long, requires = "weights")]
     pub max_flow: Option<f64>,
     /// Skip the dense previews (.flo, EXR, PNG).
@@ -89,31 +88,23 @@ pub struct CommonArgs {
 }
 
 impl CommonArgs {
-    /// The settings of `--config` (or the defaults) with the flags applied.
-    pub fn settings(&self) -> anyhow::Result<FlowSettings> {
-        let mut s = match &self.config {
-            Some(path) => read_toml::<FlowSettings>(path)?,
-            None => FlowSettings::default(),
-        };
-        if let Some(w) = &self.weights {
-            s.weights = Some(w.clone());
-        }
-        if self.width.is_some() {
-            s.weights_width = self.width;
-        }
-        if self.max_flow.is_some() {
-            s.weights_max_flow = self.max_flow;
-        }
-        if self.no_previews {
-            s.previews = false;
-        }
-        Ok(s)
+    /// The settings of `--config` (or the defaults) with these flags and then `more`
+    /// (the command's own flags) applied, validated; errors name the file.
+    pub fn settings(&self, more: impl FnOnce(&mut FlowSettings)) -> scene::Result<FlowSettings> {
+        scene::cli::settings::resolve(self.config.as_deref(), |s: &mut FlowSettings| {
+            if let Some(w) = &self.weights {
+                s.weights = Some(w.clone());
+            }
+            if self.width.is_some() {
+                s.weights_width = self.width;
+            }
+            if self.max_flow.is_some() {
+                s.weights_max_flow = self.max_flow;
+            }
+            if self.no_previews {
+                s.previews = false;
+            }
+            more(s);
+        })
     }
-}
-
-/// A settings file (TOML); errors name the file.
-pub fn read_toml<T: DeserializeOwned>(path: &Path) -> anyhow::Result<T> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| anyhow::anyhow!("{}: cannot read: {e}", path.display()))?;
-    toml::from_str::<T>(&text).map_err(|e| anyhow::anyhow!("{}: {}", path.display(), e.message()))
 }

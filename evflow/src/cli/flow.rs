@@ -5,7 +5,7 @@ use super::args::{CommonArgs, InputArgs};
 use crate::finetune::{FlowSettings, Mode};
 use crate::stage::{Event, Input};
 use clap::Args;
-use std::io::IsTerminal;
+use scene::cli::Progress;
 use std::path::{Path, PathBuf};
 
 #[derive(Args, Debug)]
@@ -14,48 +14,48 @@ pub struct FinetuneArgs {
     pub input: InputArgs,
     #[command(flatten)]
     pub common: CommonArgs,
-    /// What to train: lora (adapters r=16, default), full (all weights), none.
+    /// What to train: lora (LoRA adapters of --rank), full (all weights), none.
     #[arg(long)]
     pub mode: Option<Mode>,
-    /// Passes over the windows [default 3].
+    /// Passes over the windows.
     #[arg(long)]
     pub epochs: Option<usize>,
-    /// Adam learning rate at the first step [default 5e-4].
+    /// Adam learning rate at the first step.
     #[arg(long)]
     pub lr_start: Option<f64>,
-    /// Learning rate at the last step, exponential decay in between [default 1e-4].
+    /// Learning rate at the last step, exponential decay in between.
     #[arg(long)]
     pub lr_end: Option<f64>,
-    /// LoRA rank [default 16].
+    /// LoRA rank.
     #[arg(long)]
     pub rank: Option<usize>,
-    /// Seed of the LoRA initialisation [default 0].
+    /// Seed of the LoRA initialisation.
     #[arg(long)]
     pub seed: Option<u64>,
 }
 
+/// The flags of [`FinetuneArgs`] that override a setting, each with its key in
+/// [`FlowSettings`] (their `--help` shows its default: [`scene::cli::show_defaults`]).
+pub const FINETUNE_SETTING_FLAGS: &[(&str, &str)] = &[
+    ("mode", "mode"),
+    ("epochs", "epochs"),
+    ("lr_start", "lr_start"),
+    ("lr_end", "lr_end"),
+    ("rank", "rank"),
+    ("seed", "seed"),
+];
+
 impl FinetuneArgs {
     /// Fine-tune, then predict into `--out`.
     pub fn run(&self) -> anyhow::Result<()> {
-        let mut s = self.common.settings()?;
-        if let Some(v) = self.mode {
-            s.mode = v;
-        }
-        if let Some(v) = self.epochs {
-            s.epochs = v;
-        }
-        if let Some(v) = self.lr_start {
-            s.lr_start = v;
-        }
-        if let Some(v) = self.lr_end {
-            s.lr_end = v;
-        }
-        if let Some(v) = self.rank {
-            s.rank = v;
-        }
-        if let Some(v) = self.seed {
-            s.seed = v;
-        }
+        let s = self.common.settings(|s| {
+            s.mode = self.mode.unwrap_or(s.mode);
+            s.epochs = self.epochs.unwrap_or(s.epochs);
+            s.lr_start = self.lr_start.unwrap_or(s.lr_start);
+            s.lr_end = self.lr_end.unwrap_or(s.lr_end);
+            s.rank = self.rank.unwrap_or(s.rank);
+            s.seed = self.seed.unwrap_or(s.seed);
+        })?;
         run_stage(&self.input.input()?, &self.common.out, &s, true, None)
     }
 }
@@ -75,8 +75,7 @@ pub struct PredictArgs {
 impl PredictArgs {
     /// Predict into `--out` without training.
     pub fn run(&self) -> anyhow::Result<()> {
-        let mut s = self.common.settings()?;
-        s.mode = Mode::None;
+        let s = self.common.settings(|s| s.mode = Mode::None)?;
         run_stage(
             &self.input.input()?,
             &self.common.out,
@@ -117,7 +116,8 @@ impl EvalArgs {
     }
 }
 
-/// Run the stage with a progress bar on a terminal, plain lines otherwise.
+/// Run the stage with a progress display per phase that has steps (fine-tuning,
+/// prediction): a bar on a terminal, plain lines otherwise.
 fn run_stage(
     input: &Input,
     out: &Path,
@@ -125,51 +125,45 @@ fn run_stage(
     train: bool,
     adapter: Option<&Path>,
 ) -> anyhow::Result<()> {
-    let terminal = std::io::stderr().is_terminal();
-    let bar = indicatif::ProgressBar::new(0);
-    if !terminal {
-        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
-    }
-    bar.set_style(
-        indicatif::ProgressStyle::with_template("{prefix:>9} [{bar:30}] {pos}/{len} {msg}")
-            .expect("valid template")
-            .progress_chars("=> "),
-    );
+    let mut phase = String::new();
+    let mut bar: Option<Progress> = None;
     let report = crate::stage::run(input, out, s, train, adapter, |e| match e {
         Event::Phase(p) => {
-            bar.set_prefix(p.to_string());
-            bar.set_position(0);
-            if !terminal {
-                eprintln!("evflow: {p}");
+            if let Some(b) = bar.take() {
+                b.finish();
             }
+            phase = p.to_string();
         }
         Event::Step(st) => {
-            bar.set_length((st.epochs * st.steps) as u64);
-            bar.set_position((st.epoch * st.steps + st.step + 1) as u64);
-            bar.set_message(format!("epoch {} loss {:.4}", st.epoch + 1, st.loss));
-            if !terminal {
-                eprintln!(
-                    "evflow: epoch {}/{} window {} ({}/{}) loss {:.5} lr {:.2e}",
+            let b = bar.get_or_insert_with(|| Progress::new(&phase, 0));
+            b.set_length((st.epochs * st.steps) as u64);
+            b.set((st.epoch * st.steps + st.step + 1) as u64, || {
+                format!(
+                    "epoch {}/{} window {} loss {:.5} lr {:.2e}",
                     st.epoch + 1,
                     st.epochs,
                     st.window,
-                    st.step + 1,
-                    st.steps,
                     st.loss,
                     st.lr
-                );
-            }
+                )
+            });
         }
         Event::Predicted(d, t) => {
-            bar.set_length(t as u64);
-            bar.set_position(d as u64);
-            if !terminal {
-                eprintln!("evflow: predicted window {d}/{t}");
+            let b = bar.get_or_insert_with(|| Progress::new(&phase, 0));
+            b.set_length(t as u64);
+            b.set(d as u64, String::new);
+        }
+        Event::Warning(w) => {
+            let line = format!("evflow: warning: {w}");
+            match &bar {
+                Some(b) => b.println(&line),
+                None => eprintln!("{line}"),
             }
         }
-        Event::Warning(w) => bar.suspend(|| eprintln!("evflow: warning: {w}")),
     })?;
-    bar.finish_and_clear();
+    if let Some(b) = bar {
+        b.finish();
+    }
     let ft = &report.finetune;
     eprintln!(
         "evflow: {} windows, {} events, CM loss {:.4} -> {:.4}, warp gain {:.3}{}, {:.1} s -> {}",

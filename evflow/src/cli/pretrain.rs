@@ -1,10 +1,10 @@
 //! `evflow pretrain`: pretraining on synthetic scenes ([`crate::pretrain::run`]) with a
-//! progress bar on a terminal.
+//! progress display.
 
-use super::args::read_toml;
 use crate::pretrain::PretrainSettings;
 use clap::Args;
-use std::io::IsTerminal;
+use scene::cli::Progress;
+use scene::cli::settings::{resolve, write_resolved};
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]
@@ -23,36 +23,25 @@ pub struct PretrainArgs {
     pub iterations: Option<usize>,
 }
 
+/// The flags of [`PretrainArgs`] that override a setting, each with its key in
+/// [`PretrainSettings`] (their `--help` shows its default).
+pub const PRETRAIN_SETTING_FLAGS: &[(&str, &str)] =
+    &[("base", "base"), ("iterations", "iterations")];
+
 impl PretrainArgs {
     /// Pretrain into `--out` and write the resolved settings beside the weights.
     pub fn run(&self) -> anyhow::Result<()> {
         let out = &self.out;
-        let mut s = match &self.config {
-            Some(p) => read_toml::<PretrainSettings>(p)?,
-            None => PretrainSettings::default(),
-        };
-        if let Some(b) = self.base {
-            s.base = b;
-        }
-        if let Some(i) = self.iterations {
-            s.iterations = i;
-        }
-        let terminal = std::io::stderr().is_terminal();
-        let bar = indicatif::ProgressBar::new(0);
-        if !terminal {
-            bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
-        }
-        let r = crate::pretrain::run(&s, out, &mut |k, n, loss| {
-            bar.set_length(n as u64);
-            bar.set_position(k as u64);
-            bar.set_message(format!("loss {loss:.4}"));
-            if !terminal && (k % 25 == 0 || k == n) {
-                eprintln!("evflow: pretrain step {k}/{n} loss {loss:.4}");
-            }
+        let s = resolve(self.config.as_deref(), |s: &mut PretrainSettings| {
+            s.base = self.base.unwrap_or(s.base);
+            s.iterations = self.iterations.unwrap_or(s.iterations);
         })?;
-        bar.finish_and_clear();
-        let text = toml::to_string(&s)?;
-        scene::atomic::write_bytes_atomic(&out.join("settings.toml"), text.as_bytes())?;
+        let progress = Progress::new("pretrain", s.iterations as u64);
+        let r = crate::pretrain::run(&s, out, &mut |k, _, loss| {
+            progress.set(k as u64, || format!("loss {loss:.4}"));
+        })?;
+        progress.finish();
+        write_resolved(out, &s)?;
         eprintln!(
             "evflow: pretrained {} params in {:.1} s ({:.3} s/step) -> {}",
             r.params,

@@ -1,8 +1,8 @@
 //! `evflow simulate`: events from a directory of frames ([`synth::frames::simulate_frames`]).
 
-use super::args::read_toml;
 use clap::Args;
 use std::path::PathBuf;
+use synth::sim::SimConfig;
 
 #[derive(Args, Debug)]
 pub struct SimulateArgs {
@@ -23,10 +23,7 @@ pub struct SimulateArgs {
 impl SimulateArgs {
     /// Simulate and write the event file.
     pub fn run(&self) -> anyhow::Result<()> {
-        let cfg = match &self.config {
-            Some(p) => read_toml(p)?,
-            None => synth::sim::SimConfig::default(),
-        };
+        let cfg = scene::cli::settings::resolve::<SimConfig>(self.config.as_deref(), |_| {})?;
         let s = synth::frames::simulate_frames(&self.frames, &self.out, &cfg, self.seed)?;
         eprintln!(
             "evflow: {} frames -> {} events ({}x{}) in {:.2} s -> {}",

@@ -6,6 +6,7 @@ use crate::cm::CmEvents;
 use glam::DVec3;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use scene::cli::Settings;
 use scene::error::{Error, Result};
 use scene::events::EventStream;
 use synth::gt::NOISE_ID;

@@ -28,11 +28,13 @@
 
 use crate::cm::{CmConfig, CmEvents, cm_loss};
 use crate::eval::{FlowMetrics, FlowWarpLoss, flow_metrics, flow_warp_loss};
-use crate::net::{FlowNet, NetConfig, tensor4, to_f32, to_f64};
-use burn::tensor::{DType, Device, Tensor, TensorData};
+use crate::net::{FlowNet, NetConfig, adam_step, tensor4, to_f64};
+use burn::tensor::{DType, Device};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use scene::cli::Settings;
 use scene::error::{Error, Result};
+use scene::optim::Adam;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -82,40 +84,6 @@ pub struct PretrainReport {
     pub held_out: Vec<HeldOut>,
     /// The weights file written (inside the output directory).
     pub weights: PathBuf,
-}
-
-/// Adam state of one parameter tensor.
-#[derive(Default)]
-struct Moments {
-    m: Vec<f32>,
-    v: Vec<f32>,
-}
-
-/// One Adam step on `t` from `grad` (values), step number `k ≥ 1`.
-fn adam_step<const D: usize>(t: &mut Tensor<D>, grad: Vec<f32>, mo: &mut Moments, lr: f64, k: i32) {
-    const B1: f64 = 0.9;
-    const B2: f64 = 0.999;
-    let shape = t.dims();
-    let (device, dtype) = (t.device(), t.dtype());
-    let mut p = to_f32(t.clone().detach());
-    if mo.m.len() != p.len() {
-        mo.m = vec![0.0; p.len()];
-        mo.v = vec![0.0; p.len()];
-    }
-    let (c1, c2) = (1.0 - B1.powi(k), 1.0 - B2.powi(k));
-    for i in 0..p.len() {
-        let g = grad[i] as f64;
-        let m = B1 * mo.m[i] as f64 + (1.0 - B1) * g;
-        let v = B2 * mo.v[i] as f64 + (1.0 - B2) * g * g;
-        mo.m[i] = m as f32;
-        mo.v[i] = v as f32;
-        p[i] -= (lr * (m / c1) / ((v / c2).sqrt() + 1e-8)) as f32;
-    }
-    *t = Tensor::<D>::from_data(
-        TensorData::new(p, shape).convert_dtype(dtype),
-        (&device, dtype),
-    )
-    .require_grad();
 }
 
 /// A copy of `net` on the inference (non-autodiff) device.
@@ -204,7 +172,7 @@ pub fn run(
     let device = Device::flex().autodiff();
     let mut net = FlowNet::new(s.net_config(), s.seed, &device, DType::F32);
     net.set_trainable(true, false);
-    let mut moments: Vec<[Moments; 2]> = net.convs.iter().map(|_| Default::default()).collect();
+    let mut adam = Adam::default();
     let mut rng = ChaCha8Rng::seed_from_u64(s.seed ^ 0xda7a);
     let res = s.resolution as usize;
     let (bins, nb) = (s.bins, s.batch);
@@ -294,14 +262,16 @@ pub fn run(
             )));
         }
         let grads = total.backward();
-        let k = step as i32 + 1;
-        for (c, mo) in net.convs.iter_mut().zip(&mut moments) {
-            if let Some(g) = c.weight.grad(&grads) {
-                adam_step(&mut c.weight, to_f32(g), &mut mo[0], lr, k);
-            }
-            if let Some(g) = c.bias.grad(&grads) {
-                adam_step(&mut c.bias, to_f32(g), &mut mo[1], lr, k);
-            }
+        for c in &mut net.convs {
+            let name = &c.name;
+            adam_step(
+                &mut adam,
+                &format!("{name}.weight"),
+                &mut c.weight,
+                &grads,
+                lr,
+            );
+            adam_step(&mut adam, &format!("{name}.bias"), &mut c.bias, &grads, lr);
         }
         loss_curve.push(loss_value);
         progress(step + 1, s.iterations, loss_value);

@@ -104,9 +104,9 @@ impl Default for PretrainSettings {
     }
 }
 
-impl PretrainSettings {
+impl scene::cli::Settings for PretrainSettings {
     /// `Err` with a sentence naming the first bad setting.
-    pub fn validate(&self) -> std::result::Result<(), String> {
+    fn validate(&self) -> std::result::Result<(), String> {
         if self.base == 0 || self.bins < 2 {
             return Err("base must be ≥ 1 and bins ≥ 2".into());
         }
@@ -179,7 +179,9 @@ impl PretrainSettings {
         }
         Ok(())
     }
+}
 
+impl PretrainSettings {
     pub fn net_config(&self) -> NetConfig {
         NetConfig {
             base: self.base,

@@ -118,15 +118,11 @@ impl TrainSettings {
             n => n,
         }
     }
-    /// Parse a `settings.toml`; unknown keys are errors.
-    pub fn from_toml(text: &str) -> Result<Self, String> {
-        toml::from_str(text).map_err(|e| e.to_string())
-    }
-    pub fn to_toml(&self) -> String {
-        toml::to_string(self).expect("settings serialise")
-    }
+}
+
+impl scene::cli::Settings for TrainSettings {
     /// Reject settings that cannot train.
-    pub fn validate(&self) -> Result<(), String> {
+    fn validate(&self) -> Result<(), String> {
         if self.iterations == 0 {
             return Err("iterations must be positive".into());
         }
@@ -159,24 +155,31 @@ impl TrainSettings {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use scene::cli::Settings;
+    use scene::cli::settings::to_toml;
+
+    /// Parse a `settings.toml`; unknown keys are errors.
+    fn from_toml(text: &str) -> scene::Result<TrainSettings> {
+        scene::cli::settings::parse(text, std::path::Path::new("settings.toml"))
+    }
 
     #[test]
     fn toml_round_trip_and_partial_files() {
         let s = TrainSettings::default();
-        let back = TrainSettings::from_toml(&s.to_toml()).unwrap();
+        let back = from_toml(&to_toml(&s).unwrap()).unwrap();
         assert_eq!(back, s);
-        let p = TrainSettings::from_toml("iterations = 100\n[field]\nwidth = 32\n").unwrap();
+        let p = from_toml("iterations = 100\n[field]\nwidth = 32\n").unwrap();
         assert_eq!((p.iterations, p.field.width, p.field.depth), (100, 32, 4));
         // A partial table keeps the warm-up's values for the keys it does not name.
-        let d = TrainSettings::from_toml("[densify]\nuntil_iter = 5000\n").unwrap();
+        let d = from_toml("[densify]\nuntil_iter = 5000\n").unwrap();
         assert_eq!(d.densify.until_iter, 5000);
         assert_eq!(
             (d.densify.opacity_reset_interval, d.densify.max_gaussians),
             (0, 0)
         );
         assert_eq!(d.densify.interval, s.densify.interval);
-        assert!(TrainSettings::from_toml("iteratons = 1").is_err());
-        assert!(TrainSettings::from_toml("iterations = -1").is_err());
+        assert!(from_toml("iteratons = 1").is_err());
+        assert!(from_toml("iterations = -1").is_err());
         let bad = TrainSettings {
             dssim_weight: 2.0,
             ..Default::default()

@@ -1,9 +1,12 @@
-//! What every degs binary does the same way: settings files ([`settings`]), progress on
-//! stderr and Ctrl-C ([`progress`]), and the one-line error exit ([`exit_on_error`]).
+//! What every degs binary does the same way: settings files ([`settings`]) and the
+//! defaults their flags show in `--help` ([`help`]), progress on stderr and Ctrl-C
+//! ([`progress`]), and the one-line error exit ([`exit_on_error`]).
 
+pub mod help;
 pub mod progress;
 pub mod settings;
 
+pub use help::{parse_with, show_defaults, with_default};
 pub use progress::{Progress, sigint_flag};
 pub use settings::Settings;
 

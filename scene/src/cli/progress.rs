@@ -63,15 +63,9 @@ impl Progress {
                 }
             }
             None => {
-                let every = (self.total / 20).max(1);
-                if pos.is_multiple_of(every) || pos == self.total {
-                    eprintln!(
-                        "[{:7.1} s] {} {pos}/{}: {}",
-                        self.start.elapsed().as_secs_f64(),
-                        self.label,
-                        self.total,
-                        msg()
-                    );
+                if shows_line(pos, self.total) {
+                    let secs = self.start.elapsed().as_secs_f64();
+                    eprintln!("{}", plain_line(secs, &self.label, pos, self.total, &msg()));
                 }
             }
         }
@@ -92,6 +86,22 @@ impl Progress {
     }
 }
 
+/// Whether step `pos` of `total` gets a plain line: every twentieth of the work (every
+/// step when there are fewer than 20) and the last step.
+fn shows_line(pos: u64, total: u64) -> bool {
+    pos.is_multiple_of((total / 20).max(1)) || pos == total
+}
+
+/// `[   12.3 s] LABEL POS/TOTAL: MSG` (without `: MSG` when the message is empty).
+fn plain_line(secs: f64, label: &str, pos: u64, total: u64, msg: &str) -> String {
+    let mut line = format!("[{secs:7.1} s] {label} {pos}/{total}");
+    if !msg.is_empty() {
+        line += ": ";
+        line += msg;
+    }
+    line
+}
+
 static INTERRUPTED: AtomicBool = AtomicBool::new(false);
 
 extern "C" fn on_sigint(_: libc::c_int) {
@@ -109,4 +119,31 @@ pub fn sigint_flag() -> &'static AtomicBool {
         );
     }
     &INTERRUPTED
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn plain_lines_every_twentieth_and_at_the_end() {
+        let shown: Vec<u64> = (1..=100).filter(|&p| shows_line(p, 100)).collect();
+        assert_eq!(shown, (1..=20).map(|k| 5 * k).collect::<Vec<_>>());
+        let shown: Vec<u64> = (1..=7).filter(|&p| shows_line(p, 7)).collect();
+        assert_eq!(
+            shown,
+            (1..=7).collect::<Vec<_>>(),
+            "every step of short work"
+        );
+        assert!(shows_line(43, 43) && !shows_line(41, 43));
+    }
+
+    #[test]
+    fn plain_line_format() {
+        assert_eq!(
+            plain_line(12.34, "iteration", 5, 10, "loss 0.1"),
+            "[   12.3 s] iteration 5/10: loss 0.1"
+        );
+        assert_eq!(plain_line(0.0, "frame", 1, 3, ""), "[    0.0 s] frame 1/3");
+    }
 }

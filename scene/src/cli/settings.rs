@@ -20,6 +20,16 @@ pub fn parse<S: Settings>(text: &str, origin: &Path) -> Result<S> {
     toml::from_str(text).map_err(|e| Error::invalid(origin, e.message().trim()))
 }
 
+/// Settings from a TOML table (a file's keys with `--set key=value` overrides merged
+/// in), then [`Settings::validate`]; errors name `origin`.
+pub fn from_table<S: Settings>(table: toml::Table, origin: &Path) -> Result<S> {
+    let s: S = toml::Value::Table(table)
+        .try_into()
+        .map_err(|e: toml::de::Error| Error::invalid(origin, e.message().trim()))?;
+    s.validate().map_err(|e| Error::invalid(origin, e))?;
+    Ok(s)
+}
+
 /// The settings of a run: `config` (or the defaults), then `overrides` (the flags),
 /// then [`Settings::validate`]. Errors name the file, or "command line" when there is none.
 pub fn resolve<S: Settings>(config: Option<&Path>, overrides: impl FnOnce(&mut S)) -> Result<S> {
@@ -33,13 +43,12 @@ pub fn resolve<S: Settings>(config: Option<&Path>, overrides: impl FnOnce(&mut S
     Ok(s)
 }
 
-/// TOML text of `s`, with values that came from `f32` fields written as the shortest
-/// decimal that reads back to the same `f32` (`0.0002`, not `0.00019999999494757503`).
+/// TOML text of `s`, keys in the order of the fields, with values that came from `f32`
+/// fields written as the shortest decimal that reads back to the same `f32` (`0.0002`,
+/// not `0.00019999999494757503`: the text writer sees the `f32`, unlike
+/// `toml::Value::try_from`, which widens it; see [`tidy_floats`]).
 pub fn to_toml<S: Serialize>(s: &S) -> Result<String> {
-    let mut value = toml::Value::try_from(s)
-        .map_err(|e| Error::Other(format!("cannot write settings: {e}")))?;
-    tidy_floats(&mut value);
-    toml::to_string(&value).map_err(|e| Error::Other(format!("cannot write settings: {e}")))
+    toml::to_string(s).map_err(|e| Error::Other(format!("cannot write settings: {e}")))
 }
 
 /// Write the resolved settings as `dir/settings.toml` (atomically).
@@ -97,8 +106,19 @@ mod tests {
     #[test]
     fn f32_values_print_short_and_read_back_exactly() {
         let text = to_toml(&Demo::default()).unwrap();
-        assert!(text.contains("rate = 0.0002\n"), "{text}");
-        assert!(text.contains("span = 0.1\n"), "{text}");
+        assert_eq!(text, "rate = 0.0002\nspan = 0.1\nsteps = 10\n", "{text}");
+        // Keys come in the order of the fields, not sorted.
+        #[derive(Serialize)]
+        struct Ordered {
+            zeta: f32,
+            alpha: u8,
+        }
+        let ordered = to_toml(&Ordered {
+            zeta: 0.3,
+            alpha: 1,
+        })
+        .unwrap();
+        assert_eq!(ordered, "zeta = 0.3\nalpha = 1\n");
         let back: Demo = parse(&text, Path::new("x.toml")).unwrap();
         assert_eq!(back, Demo::default());
         assert_eq!(back.rate.to_bits(), 2e-4f32.to_bits());
@@ -127,5 +147,16 @@ mod tests {
         assert!(e.contains("stepz") && e.contains("s.toml"), "{e}");
         let e = resolve::<Demo>(Some(&dir.path().join("missing.toml")), |_| {}).unwrap_err();
         assert!(e.to_string().contains("missing.toml"), "{e}");
+    }
+
+    #[test]
+    fn from_table_checks_keys_and_values_and_names_the_origin() {
+        let origin = Path::new("d.toml");
+        let s: Demo = from_table("steps = 4".parse().unwrap(), origin).unwrap();
+        assert_eq!((s.steps, s.rate), (4, 2e-4));
+        let e = from_table::<Demo>("stepz = 4".parse().unwrap(), origin).unwrap_err();
+        assert!(e.to_string().starts_with("d.toml: ") && e.to_string().contains("stepz"));
+        let e = from_table::<Demo>("steps = 0".parse().unwrap(), origin).unwrap_err();
+        assert_eq!(e.to_string(), "d.toml: steps must be at least 1");
     }
 }
