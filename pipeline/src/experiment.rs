@@ -421,7 +421,8 @@ mod tests {
              [gaussians.field]\nwidth = 32\n[deform]\nanything = 1\n",
         )
         .unwrap();
-        e.check_stage_settings().unwrap();
+        let err = e.check_stage_settings().unwrap_err().to_string();
+        assert!(err.contains("[deform]") && err.contains("anything"), "{err}");
     }
 
     #[test]

@@ -333,7 +333,10 @@ mod tests {
             defaults("assoc").unwrap().get("k"),
             Some(&Value::Integer(3))
         );
-        assert!(defaults("deform").is_none());
+        assert_eq!(
+            defaults("deform").unwrap().get("iterations"),
+            Some(&Value::Integer(2000))
+        );
     }
 
     #[test]
