@@ -422,7 +422,10 @@ mod tests {
         )
         .unwrap();
         let err = e.check_stage_settings().unwrap_err().to_string();
-        assert!(err.contains("[deform]") && err.contains("anything"), "{err}");
+        assert!(
+            err.contains("[deform]") && err.contains("anything"),
+            "{err}"
+        );
     }
 
     #[test]
