@@ -1,5 +1,5 @@
 //! The `degs` command line (clap): every sub-command with its flags and help text.
-//! What each does is in [`crate::commands`].
+//! What each does is in `commands.rs`.
 // The doc comments below are the help text clap prints, written for a terminal.
 #![allow(rustdoc::broken_intra_doc_links, rustdoc::invalid_html_tags)]
 

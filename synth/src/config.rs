@@ -1,7 +1,7 @@
 //! Settings of a synthetic scene: the types, their validation and the frame times.
 //! Every field is defaulted in files (a missing key takes the `rigid` preset's value,
-//! see [`crate::presets`]); the keys and the flat simulator keys of older files are
-//! handled in [`crate::keys`].
+//! see the `presets` module); the keys and the flat simulator keys of older files are
+//! handled in the `keys` module.
 
 use crate::sim::SimConfig;
 use glam::DVec3;
@@ -12,7 +12,7 @@ use serde::{Deserialize, Serialize};
 ///
 /// Serialised with the simulator's settings as a nested table (`[events]`); reading also
 /// accepts the flat keys of before (`contrast_threshold`, `threshold_sigma`, …), see
-/// [`crate::keys`].
+/// the `keys` module.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(remote = "Self", default, deny_unknown_fields)]
 pub struct SynthConfig {

@@ -22,8 +22,8 @@
 //! independent of the number of threads: rows are processed in parallel with rayon,
 //! then the events of a frame interval are merged sorted by `(t, y, x, p)`.
 //!
-//! A directory of frames is simulated by [`crate::frames`], a synthetic world by
-//! [`crate::scene_dir`].
+//! A directory of frames is simulated by the `frames` module, a synthetic world by
+//! the `scene_dir` module.
 
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;

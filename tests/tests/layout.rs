@@ -95,6 +95,21 @@ fn strip(src: &str) -> String {
                 .position(|&c| c == b'\n')
                 .map_or(b.len(), |p| i + p);
             blank(&mut out, i, end);
+            // Doc comments keep their intra-doc links (`[`crate::x`]`): rustdoc resolves
+            // them, so they are dependencies too.
+            if b[i..].starts_with(b"///") || b[i..].starts_with(b"//!") {
+                for kw in [&b"crate::"[..], &b"super::"[..]] {
+                    let mut j = i;
+                    while let Some(p) = (j..end).find(|&k| b[k..end].starts_with(kw)) {
+                        let mut e = p + kw.len();
+                        while e < end && (is_ident(b[e]) || b[e] == b':') {
+                            e += 1;
+                        }
+                        out[p..e].copy_from_slice(&b[p..e]);
+                        j = e;
+                    }
+                }
+            }
             i = end;
         } else if b[i..].starts_with(b"/*") {
             let mut depth = 0;
@@ -415,7 +430,7 @@ fn the_cycle_check_finds_cycles() {
     let write = |p: &str, s: &str| std::fs::write(src.join(p), s).unwrap();
     write(
         "lib.rs",
-        "pub mod a;\npub mod b;\npub mod c;\npub mod net;\n",
+        "pub mod a;\npub mod b;\npub mod c;\npub mod d;\npub mod e;\npub mod net;\n",
     );
     // a → b directly, b → c in an expression, c → a through a grouped use tree: a circle.
     write(
@@ -423,6 +438,9 @@ fn the_cycle_check_finds_cycles() {
         "use crate::b::Thing;\n// use crate::c; (a comment is no import)\n",
     );
     write("b.rs", "pub struct Thing;\nfn f() { crate::c::g(); }\n");
+    // A doc link is a dependency too (rustdoc resolves it).
+    write("d.rs", "//! See [`crate::e`].\n");
+    write("e.rs", "use crate::d;\n");
     write(
         "c.rs",
         "use crate::{a::{self}, net::flow};\npub fn g() {}\n",
@@ -438,12 +456,14 @@ fn the_cycle_check_finds_cycles() {
         "use super::flow::Net;\nuse super::*;\npub struct Lora;\n#[cfg(test)]\nmod tests { use super::Lora; }\n",
     );
     let cycles = sibling_cycles(src);
-    assert_eq!(cycles.len(), 2, "{cycles:#?}");
+    assert_eq!(cycles.len(), 3, "{cycles:#?}");
     assert!(cycles[0].starts_with("in crate root: a → b"), "{cycles:#?}");
     assert!(cycles[0].contains("c → a"), "{cycles:#?}");
-    assert!(cycles[1].starts_with("in net: flow → lora"), "{cycles:#?}");
+    assert!(cycles[1].starts_with("in crate root: d → e"), "{cycles:#?}");
+    assert!(cycles[2].starts_with("in net: flow → lora"), "{cycles:#?}");
     // Without the back edges there is none.
     write("c.rs", "pub fn g() {}\n");
+    write("d.rs", "//! See the e module.\n");
     write("net/lora.rs", "use super::*;\npub struct Lora;\n");
     assert!(sibling_cycles(src).is_empty());
 }
