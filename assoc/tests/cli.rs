@@ -4,6 +4,7 @@
 //! renders itself go in; the output directory, its `report.json` figures and the exit
 //! status of bad inputs are checked.
 
+use scene::cli::help::flag_help;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -272,21 +273,6 @@ fn binary_writes_bindings_report_and_previews_and_fails_cleanly() {
     assert!(!missing.exists());
     // The earlier good output is untouched by the failed runs.
     assert_eq!(read_assoc(&out.join("assoc.bin")).unwrap(), sections);
-}
-
-/// The help of `--flag` in a `--help` text: its line and the wrapped lines after it.
-fn flag_help(help: &str, flag: &str) -> String {
-    let mut lines = help
-        .lines()
-        .skip_while(|l| !l.contains(&format!("{flag} <")));
-    let first = lines
-        .next()
-        .unwrap_or_else(|| panic!("{flag} missing from\n{help}"));
-    let rest = lines.take_while(|l| !l.trim_start().starts_with('-'));
-    std::iter::once(first)
-        .chain(rest)
-        .collect::<Vec<_>>()
-        .join(" ")
 }
 
 /// `--help` shows each setting's current default, from `AssocSettings::default()`.

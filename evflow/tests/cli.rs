@@ -2,6 +2,7 @@
 //! bare-event-file source (calibration, window tiling).
 
 use evflow::source::{Source, WindowSpec, parse_sensor, parse_window, read_calib};
+use scene::cli::help::flag_help;
 use std::process::Command;
 
 fn evflow() -> Command {
@@ -42,21 +43,6 @@ fn help_and_errors() {
         .unwrap();
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("bad.txt"));
-}
-
-/// The help of `--flag` in a `--help` text: its line and the wrapped lines after it.
-fn flag_help(help: &str, flag: &str) -> String {
-    let mut lines = help
-        .lines()
-        .skip_while(|l| !l.contains(&format!("{flag} <")));
-    let first = lines
-        .next()
-        .unwrap_or_else(|| panic!("{flag} missing from\n{help}"));
-    let rest = lines.take_while(|l| !l.trim_start().starts_with('-'));
-    std::iter::once(first)
-        .chain(rest)
-        .collect::<Vec<_>>()
-        .join(" ")
 }
 
 /// `finetune --help` and `pretrain --help` show the defaults of the settings their flags

@@ -3,25 +3,11 @@
 //! `gaussians: error: …` naming the file.
 
 use gaussians::train::TrainSettings;
+use scene::cli::help::flag_help;
 use std::process::Command;
 
 fn gaussians() -> Command {
     Command::new(env!("CARGO_BIN_EXE_gaussians"))
-}
-
-/// The help of `--flag` in a `--help` text: its line and the wrapped lines after it.
-fn flag_help(help: &str, flag: &str) -> String {
-    let mut lines = help
-        .lines()
-        .skip_while(|l| !l.contains(&format!("{flag} <")));
-    let first = lines
-        .next()
-        .unwrap_or_else(|| panic!("{flag} missing from\n{help}"));
-    let rest = lines.take_while(|l| !l.trim_start().starts_with('-'));
-    std::iter::once(first)
-        .chain(rest)
-        .collect::<Vec<_>>()
-        .join(" ")
 }
 
 #[test]

@@ -68,6 +68,23 @@ pub fn parse_with<P: Parser>(patch: impl FnOnce(Command) -> Command) -> P {
     P::from_arg_matches_mut(&mut matches).unwrap_or_else(|e| e.format(&mut cmd).exit())
 }
 
+/// The help of `--flag` in a rendered `--help` text: its line and the wrapped lines after
+/// it, joined by spaces (for tests that check what a user reads). Panics naming the flag
+/// when the text lacks it.
+pub fn flag_help(help: &str, flag: &str) -> String {
+    let mut lines = help
+        .lines()
+        .skip_while(|l| !l.contains(&format!("{flag} <")));
+    let first = lines
+        .next()
+        .unwrap_or_else(|| panic!("{flag} missing from\n{help}"));
+    let rest = lines.take_while(|l| !l.trim_start().starts_with('-'));
+    std::iter::once(first)
+        .chain(rest)
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
