@@ -189,6 +189,13 @@ impl CameraPath {
         }
     }
 
+    /// The key times `(ta, tb)` of the segment holding `t` (`None` outside the covered
+    /// time, for a single key or a NaN time).
+    pub fn bracket(&self, t: f64) -> Option<(f64, f64)> {
+        self.segment(t)
+            .map(|(i, _)| (self.times[i], self.times[i + 1]))
+    }
+
     /// Segment `i` and fraction `s ∈ [0, 1]` of `t`, or `None` outside the covered time
     /// (or for a single key, or a NaN time).
     fn segment(&self, t: f64) -> Option<(usize, f64)> {

@@ -46,6 +46,11 @@ pub struct PseudoSettings {
     pub black_level: f64,
     /// Predicted values above this (linear) are saturated: masked.
     pub saturation: f64,
+    /// Half-width `b` of a dead zone around the pseudo image, in units of `C`: the render
+    /// is penalised only outside `[(P + ε)·e^(−b·C) − ε, (P + ε)·e^(b·C) − ε]`. 0 is the
+    /// paper's L1 (Eq. 11); 1 accepts the quantisation of the event model (a pixel's log
+    /// change is known only to within about `C` of `C·N`).
+    pub band: f64,
 }
 
 impl Default for PseudoSettings {
@@ -54,6 +59,7 @@ impl Default for PseudoSettings {
             log_eps: 0.0,
             black_level: 0.01,
             saturation: 1.0,
+            band: 0.0,
         }
     }
 }
@@ -96,6 +102,9 @@ pub struct PseudoImage<R> {
     pub valid: Vec<bool>,
     pub n_eff: Vec<R>,
     pub log_eps: R,
+    /// Dead-zone half-width `b` in units of `C` ([`PseudoSettings::band`]) and `b·C`.
+    pub band_per_c: R,
+    pub band: R,
     left_counts: Vec<f32>,
     right_counts: Vec<f32>,
 }
@@ -156,6 +165,8 @@ pub fn pseudo_image<R: Real>(
     out.valid.resize(ch * n, false);
     out.n_eff.resize(ch * n, R::ZERO);
     out.log_eps = R::from_f64(s.log_eps);
+    out.band_per_c = R::from_f64(s.band.max(0.0));
+    out.band = out.band_per_c * inp.contrast;
     let (eps, black, sat) = (
         out.log_eps,
         R::from_f64(s.black_level),
@@ -207,9 +218,50 @@ pub struct EventLoss<R> {
     pub valid: usize,
 }
 
+/// The band `[lo, hi]` around value `i` of the pseudo image (`lo = hi = P` at `b = 0`).
+#[inline(always)]
+fn band_edges<R: Real>(p: &PseudoImage<R>, i: usize) -> (R, R) {
+    let base = p.data[i] + p.log_eps;
+    if p.band > R::ZERO {
+        let e = p.band.exp();
+        (base / e - p.log_eps, base * e - p.log_eps)
+    } else {
+        (p.data[i], p.data[i])
+    }
+}
+
+/// `sign` of the render's distance outside the band (0 inside it).
+#[inline(always)]
+fn band_sign<R: Real>(p: &PseudoImage<R>, i: usize, x: R) -> R {
+    let (lo, hi) = band_edges(p, i);
+    if x > hi {
+        R::ONE
+    } else if x < lo {
+        -R::ONE
+    } else {
+        R::ZERO
+    }
+}
+
+/// Distance of `x` outside the band of value `i` and its derivative w.r.t. `C`
+/// (`∂hi/∂C = (hi + ε)·(n_eff + b)`, `∂lo/∂C = (lo + ε)·(n_eff − b)`).
+#[inline(always)]
+fn band_residual<R: Real>(p: &PseudoImage<R>, i: usize, x: R) -> (R, R) {
+    let (lo, hi) = band_edges(p, i);
+    let (eps, n, b) = (p.log_eps, p.n_eff[i], p.band_per_c);
+    if x > hi {
+        (x - hi, -(hi + eps) * (n + b))
+    } else if x < lo {
+        (lo - x, (lo + eps) * (n - b))
+    } else {
+        (R::ZERO, R::ZERO)
+    }
+}
+
 /// Eq. 11: `L_event = (1/M)·Σ_valid |R − P|` for a render `R` (planar, same layout as
-/// the pseudo image); with `grad_render`, writes `∂L/∂R` (0 on masked values). No valid
-/// value gives a zero loss and zero gradients.
+/// the pseudo image), or with a dead zone ([`PseudoSettings::band`]) the distance of `R`
+/// outside `[lo, hi]`; with `grad_render`, writes `∂L/∂R` (0 on masked values and inside
+/// the band). No valid value gives a zero loss and zero gradients.
 pub fn event_loss<R: Real>(
     render: &[R],
     pseudo: &PseudoImage<R>,
@@ -226,9 +278,9 @@ pub fn event_loss<R: Real>(
             for (j, &x) in rr.iter().enumerate() {
                 let i = r * chunk + j;
                 if pseudo.valid[i] {
-                    let d = x - pseudo.data[i];
-                    acc.0 += d.abs();
-                    acc.1 -= d.sign0() * (pseudo.data[i] + pseudo.log_eps) * pseudo.n_eff[i];
+                    let (e, dl) = band_residual(pseudo, i, x);
+                    acc.0 += e;
+                    acc.1 += dl;
                     acc.2 += 1;
                 }
             }
@@ -252,7 +304,7 @@ pub fn event_loss<R: Real>(
             for (j, v) in gg.iter_mut().enumerate() {
                 let i = r * chunk + j;
                 *v = if pseudo.valid[i] {
-                    (render[i] - pseudo.data[i]).sign0() * inv
+                    band_sign(pseudo, i, render[i]) * inv
                 } else {
                     R::ZERO
                 };

@@ -199,6 +199,37 @@ impl<R: Real> PoseNet<R> {
     }
 }
 
+impl<R: Real> PoseNet<R> {
+    /// Weights `(w_t, w_a, w_b)` of `ξ(t) − (1 − s)·ξ(ta) − s·ξ(tb)`.
+    fn anchor_weights(t: R, ta: R, tb: R) -> [(R, R); 3] {
+        let s = if tb > ta {
+            ((t - ta) / (tb - ta)).max(R::ZERO).min(R::ONE)
+        } else {
+            R::ZERO
+        };
+        [(t, R::ONE), (ta, s - R::ONE), (tb, -s)]
+    }
+
+    /// The correction at `t` anchored to zero at the neighbouring key times `ta ≤ t ≤ tb`
+    /// (where the poses are known): `ξ(t) − (1 − s)·ξ(ta) − s·ξ(tb)`,
+    /// `s = (t − ta)/(tb − ta)`. All times normalised.
+    pub fn forward_anchored(&self, t: R, ta: R, tb: R) -> [R; 6] {
+        let mut out = [R::ZERO; 6];
+        for (tk, w) in Self::anchor_weights(t, ta, tb) {
+            let x = self.forward(tk);
+            out.iter_mut().zip(x).for_each(|(o, v)| *o += w * v);
+        }
+        out
+    }
+
+    /// [`Self::backward`] of [`Self::forward_anchored`].
+    pub fn backward_anchored(&self, t: R, ta: R, tb: R, g: [R; 6], grad: &mut [R]) {
+        for (tk, w) in Self::anchor_weights(t, ta, tb) {
+            self.backward(tk, g.map(|x| w * x), grad);
+        }
+    }
+}
+
 /// The corrected pose `T·[Exp(ω) | v]`: `R' = R·Exp(ω)`, `c' = c + R·v`.
 pub fn apply_correction(pose: &Pose, xi: [f64; 6]) -> Pose {
     let (v, w) = split(xi);

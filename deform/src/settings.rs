@@ -2,7 +2,7 @@
 //! a default, unknown keys are errors).
 
 use crate::event_counts::CountSettings;
-use crate::event_image::PseudoSettings;
+use crate::event_image::{PseudoMode, PseudoSettings};
 use crate::motion_loss::MotionSettings;
 use crate::posenet::PoseNetSettings;
 use crate::schedule::LossSchedule;
@@ -47,6 +47,10 @@ pub struct DeformSettings {
     /// interpolation).
     pub posenet: bool,
     pub posenet_net: PoseNetSettings,
+    /// Anchor the correction to zero at the train frames (whose poses are known):
+    /// `ξ(t) − (1 − s)·ξ(ta) − s·ξ(tb)` between frames `ta`, `tb`; `false` is the paper's
+    /// free correction (a jump at the frames, where the recorded poses are used).
+    pub posenet_anchor: bool,
     /// Adam learning rate of the PoseNet.
     pub posenet_lr: f64,
     /// Contrast threshold C; 0 takes the manifest's.
@@ -55,6 +59,9 @@ pub struct DeformSettings {
     /// Fine time bins of the per-pixel event counts.
     pub counts: CountSettings,
     pub pseudo: PseudoSettings,
+    /// Which frame(s) predict the pseudo image of `L_event`: `nearest` (Eq. 11) or
+    /// `two_sided` (both neighbours, blended in log space by the distance in time).
+    pub pseudo_mode: PseudoMode,
     pub motion: MotionSettings,
     pub flow_form: FlowForm,
     /// Span Δt of the motion loss in seconds (`t1 = t0 + Δt`); 0 takes the
@@ -78,11 +85,13 @@ impl Default for DeformSettings {
             schedule: LossSchedule::default(),
             posenet: true,
             posenet_net: PoseNetSettings::default(),
+            posenet_anchor: false,
             posenet_lr: 1e-4,
             contrast_threshold: 0.0,
             frame_encoding: FrameEncoding::Auto,
             counts: CountSettings::default(),
             pseudo: PseudoSettings::default(),
+            pseudo_mode: PseudoMode::Nearest,
             motion: MotionSettings::default(),
             flow_form: FlowForm::Paper,
             motion_span: 0.0,
@@ -109,6 +118,7 @@ impl DeformSettings {
         finite_nonneg("posenet_lr", self.posenet_lr)?;
         finite_nonneg("contrast_threshold", self.contrast_threshold)?;
         finite_nonneg("motion_span", self.motion_span)?;
+        finite_nonneg("pseudo.band", self.pseudo.band)?;
         if self.counts.bins == 0 {
             return Err("counts.bins must be at least 1".into());
         }

@@ -10,9 +10,7 @@
 //! trained by `L_event` through the camera of the render at `t_e`); frames keep their
 //! recorded poses (the PoseNet corrects in-between times only).
 
-use crate::event_image::{
-    PseudoImage, PseudoInputs, PseudoMode, event_loss, pseudo_image, srgb_to_linear,
-};
+use crate::event_image::{PseudoImage, PseudoInputs, event_loss, pseudo_image, srgb_to_linear};
 use crate::flow::{EgoPoints, Flow2, GsCameras, GsGrad, Pinhole, ProjCam};
 use crate::flow::{ego_flow, gaussian_flow, gaussian_flow_backward};
 use crate::inputs::Inputs;
@@ -161,7 +159,11 @@ impl JointTrainer {
     pub fn camera_at(&self, d: &Inputs, t: f64) -> (Camera, [f64; 6]) {
         let pose = d.path.pose_at(t);
         let xi = match &self.posenet {
-            Some(p) => p.forward(d.path.normalised_time(t) as f32).map(f64::from),
+            Some(p) => match self.posenet_times(d, t) {
+                (tn, Some((ta, tb))) => p.forward_anchored(tn, ta, tb),
+                (tn, None) => p.forward(tn),
+            }
+            .map(f64::from),
             None => [0.0; 6],
         };
         let camera = Camera {
@@ -169,6 +171,14 @@ impl JointTrainer {
             cam_to_world: apply_correction(&pose, xi),
         };
         (camera, xi)
+    }
+
+    /// Normalised `t` and, when the correction is anchored at the train frames
+    /// ([`DeformSettings::posenet_anchor`]), the normalised times of the two frames around it.
+    fn posenet_times(&self, d: &Inputs, t: f64) -> (f32, Option<(f32, f32)>) {
+        let n = |x: f64| d.path.normalised_time(x) as f32;
+        let frames = d.path.bracket(t).filter(|_| self.settings.posenet_anchor);
+        (n(t), frames.map(|(a, b)| (n(a), n(b))))
     }
 
     /// One joint iteration.
@@ -259,7 +269,7 @@ impl JointTrainer {
         pseudo_image(
             &inp,
             t_e,
-            PseudoMode::Nearest,
+            self.settings.pseudo_mode,
             &self.settings.pseudo,
             &mut self.pseudo,
         );
@@ -285,11 +295,12 @@ impl JointTrainer {
             let g_eps =
                 crate::lie::world_left_grad_to_camera_right(&camera.cam_to_world, ge.camera);
             let g_xi = correction_backward(xi, g_eps).map(|v| v as f32);
-            p.backward(
-                d.path.normalised_time(t_e) as f32,
-                g_xi,
-                &mut self.posenet_grad,
-            );
+            match self.posenet_times(d, t_e) {
+                (tn, Some((ta, tb))) => {
+                    p.backward_anchored(tn, ta, tb, g_xi, &mut self.posenet_grad)
+                }
+                (tn, None) => p.backward(tn, g_xi, &mut self.posenet_grad),
+            }
         }
         el.loss as f64
     }

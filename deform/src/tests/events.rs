@@ -216,6 +216,7 @@ fn pseudo_image_follows_eq_11_and_both_sides_agree_on_consistent_data() {
             log_eps: eps,
             black_level: 0.0,
             saturation: 10.0,
+            band: 0.0,
         };
         let inp = PseudoInputs {
             counts: &k,
@@ -344,16 +345,19 @@ fn event_loss_gradients_match_finite_differences() {
     // A mismatched right frame so the two sides disagree.
     let right: Vec<f64> = d.right.iter().map(|&v| v * rng.uniform(0.8, 1.2)).collect();
     let render: Vec<f64> = (0..3 * n).map(|_| rng.uniform(0.0, 0.8)).collect();
-    for (mode, te, eps) in [
-        (PseudoMode::Nearest, 0.3, 0.0),
-        (PseudoMode::Nearest, 0.8, 1e-3),
-        (PseudoMode::TwoSided, 0.45, 0.0),
-        (PseudoMode::TwoSided, 0.7, 1e-3),
+    for (mode, te, eps, band) in [
+        (PseudoMode::Nearest, 0.3, 0.0, 0.0),
+        (PseudoMode::Nearest, 0.8, 1e-3, 0.0),
+        (PseudoMode::TwoSided, 0.45, 0.0, 0.0),
+        (PseudoMode::TwoSided, 0.7, 1e-3, 0.0),
+        (PseudoMode::Nearest, 0.3, 0.0, 1.0),
+        (PseudoMode::TwoSided, 0.7, 1e-3, 0.5),
     ] {
         let s = PseudoSettings {
             log_eps: eps,
             black_level: 0.01,
             saturation: 100.0,
+            band,
         };
         let at = |c: f64, r: &[f64], g: Option<&mut [f64]>| {
             let inp = PseudoInputs {
@@ -391,6 +395,33 @@ fn event_loss_gradients_match_finite_differences() {
             );
         }
     }
+}
+
+#[test]
+fn band_loss_is_zero_inside_the_quantisation_band_and_l1_outside() {
+    // P = 0.5 with C = 0.2, b = 1: band [0.5·e^−0.2, 0.5·e^0.2] = [0.40937, 0.61070].
+    let mut p = PseudoImage::<f64>::default();
+    p.data = vec![0.5; 4];
+    p.valid = vec![true, true, true, false];
+    p.n_eff = vec![2.0; 4];
+    p.band_per_c = 1.0;
+    p.band = 0.2;
+    let (lo, hi) = (0.5 * (-0.2f64).exp(), 0.5 * 0.2f64.exp());
+    let render = [0.45, 0.7, 0.3, 9.0];
+    let mut g = vec![0.0; 4];
+    let l = event_loss(&render, &p, Some(&mut g));
+    assert_eq!(l.valid, 3);
+    let want = ((0.7 - hi) + (lo - 0.3)) / 3.0;
+    assert!((l.loss - want).abs() < 1e-12, "{} vs {want}", l.loss);
+    assert_eq!(g, vec![0.0, 1.0 / 3.0, -1.0 / 3.0, 0.0]);
+    // ∂L/∂C: −hi·(n + b) for the value above, lo·(n − b) for the one below.
+    let want_c = (-hi * 3.0 + lo * 1.0) / 3.0;
+    assert!((l.d_contrast - want_c).abs() < 1e-12);
+    // b = 0 is the paper's L1.
+    p.band = 0.0;
+    p.band_per_c = 0.0;
+    let l0 = event_loss(&render, &p, None);
+    assert!((l0.loss - (0.05 + 0.2 + 0.2) / 3.0).abs() < 1e-12);
 }
 
 #[test]

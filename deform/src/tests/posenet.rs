@@ -82,6 +82,45 @@ fn backward_matches_finite_differences() {
 }
 
 #[test]
+fn anchored_correction_is_zero_at_the_frames_and_its_gradient_matches() {
+    let s = small();
+    let net = trained(s);
+    let (ta, tb) = (0.25, 0.5);
+    // A trained net has a correction at the frames; the anchored one is exactly zero there.
+    assert!(net.forward(ta).iter().any(|v| v.abs() > 1e-3));
+    for t in [ta, tb] {
+        assert!(
+            net.forward_anchored(t, ta, tb)
+                .iter()
+                .all(|v| v.abs() < 1e-12)
+        );
+    }
+    let mid = net.forward_anchored(0.4, ta, tb);
+    let want: Vec<f64> = (0..6)
+        .map(|o| net.forward(0.4)[o] - 0.4 * net.forward(ta)[o] - 0.6 * net.forward(tb)[o])
+        .collect();
+    assert_close("anchored ξ", &mid, &want, 1e-12, 1e-12);
+    let g: [f64; 6] = [0.3, -0.7, 0.2, 0.9, -0.4, 0.5];
+    for &t in &[0.3, 0.41, 0.49] {
+        let loss = |p: &[f64]| {
+            let n = PoseNet::from_params(s, p.to_vec()).unwrap();
+            let x = n.forward_anchored(t, ta, tb);
+            x.iter().zip(&g).map(|(a, b)| a * b).sum::<f64>()
+        };
+        let num = fd_grad(net.params(), 1e-6, loss);
+        let mut an = vec![0.0; net.params().len()];
+        net.backward_anchored(t, ta, tb, g, &mut an);
+        assert_close(
+            &format!("anchored gradient at t={t}"),
+            &an,
+            &num,
+            1e-6,
+            1e-9,
+        );
+    }
+}
+
+#[test]
 fn f32_forward_agrees_with_f64() {
     let s = PoseNetSettings::default();
     let n64 = trained(s);
