@@ -70,6 +70,31 @@ pub struct JointTrainer {
     span: f64,
 }
 
+/// The motion term's gradients: on the centres as rendered at the view's time (`x(t0)`,
+/// taken back with the view's RGB gradient), on the canonical centres and on the field's
+/// parameters (through `x(t1)`). Empty vectors: no contribution.
+#[derive(Default)]
+struct MotionGrads {
+    at_view: Vec<[f32; 3]>,
+    canonical: Vec<[f32; 3]>,
+    field: Vec<f32>,
+}
+
+impl MotionGrads {
+    /// Add the canonical-centre and field parts to `g` (the rendered-centre part goes
+    /// through [`Trainer::view_backward`]).
+    fn add_to(&self, g: &mut ModelGrads) {
+        if self.canonical.len() == g.splats.means.len() {
+            for (a, b) in g.splats.means.iter_mut().zip(&self.canonical) {
+                (0..3).for_each(|c| a[c] += b[c]);
+            }
+        }
+        if !self.field.is_empty() && g.field.len() == self.field.len() {
+            g.field.iter_mut().zip(&self.field).for_each(|(a, b)| *a += b);
+        }
+    }
+}
+
 /// Add `w·src` to the parameter gradients of `dst` (not its densification statistics).
 fn add_scaled(dst: &mut ModelGrads, src: &ModelGrads, w: f32) {
     let d = &mut dst.splats;
@@ -195,16 +220,26 @@ impl JointTrainer {
         let rv = self.inner.render_view(r, &view.camera, view.time);
         let (l_rgb, grad) = self.inner.rgb_loss(&rv.image, &view.rgb);
         let psnr = psnr_u8(&rv.image.rgb, &view.rgb);
-        let mut grads = self.inner.view_backward(r, &rv, &grad, None);
         self.timings.rgb += clock.elapsed().as_secs_f64();
 
+        // The motion term first: its gradient on the centres at the view's time joins the
+        // RGB gradient on the rendered centres (one pass back through the field).
         let clock = Instant::now();
+        let mut motion = MotionGrads::default();
         let (l_motion, bound) = if g2 > 0.0 {
-            self.motion_term(d, i, &rv, g2 as f32, &mut grads)
+            self.motion_term(d, i, &rv, g2 as f32, &mut motion)
         } else {
             (0.0, 0)
         };
+        self.timings.motion += clock.elapsed().as_secs_f64();
+
+        let clock = Instant::now();
+        let d_means = (!motion.at_view.is_empty()).then_some(motion.at_view.as_slice());
+        let mut grads = self.inner.view_backward(r, &rv, &grad, None, d_means);
         drop(rv);
+        self.timings.rgb += clock.elapsed().as_secs_f64();
+        let clock = Instant::now();
+        motion.add_to(&mut grads);
         self.timings.motion += clock.elapsed().as_secs_f64();
 
         let clock = Instant::now();
@@ -289,7 +324,7 @@ impl JointTrainer {
         for (gi, &c) in g.iter_mut().zip(rgb) {
             *gi *= g1 * if d.srgb { srgb_slope(c) } else { 1.0 };
         }
-        let ge = self.inner.view_backward(r, &rv, &g, None);
+        let ge = self.inner.view_backward(r, &rv, &g, None, None);
         add_scaled(grads, &ge, 1.0);
         if let Some(p) = &self.posenet {
             let g_eps =
@@ -305,15 +340,16 @@ impl JointTrainer {
         el.loss as f64
     }
 
-    /// Eq. 12 over the Gaussians bound at train frame `i` (rendered as `rv`): adds
-    /// `γ2·∂L/∂θ` to `grads`; returns `(L_motion, bound Gaussians)`.
+    /// Eq. 12 over the Gaussians bound at train frame `i` (rendered as `rv`, whose
+    /// deformed centres are `x(t0)`): writes `γ2·∂L/∂θ` into `out`; returns
+    /// `(L_motion, bound Gaussians)`.
     fn motion_term(
         &self,
         d: &Inputs,
         i: usize,
         rv: &ViewRender<<TileRasterizer as Rasterizer>::State>,
         g2: f32,
-        grads: &mut ModelGrads,
+        out: &mut MotionGrads,
     ) -> (f64, usize) {
         let b = &self.bindings[i];
         if b.gaussians() != self.inner.splats.len() {
@@ -331,7 +367,7 @@ impl JointTrainer {
         } else {
             t0 - self.span
         };
-        let (tau0, tau1) = (d.views[i].time, field_time(d, t1));
+        let tau1 = field_time(d, t1);
         // Compact CSR over the bound Gaussians.
         let (mut offsets, mut events, mut weights) = (vec![0u32], Vec::new(), Vec::new());
         for &g in &idx {
@@ -355,12 +391,12 @@ impl JointTrainer {
                 .collect::<Vec<[f32; 3]>>();
             (x, cache)
         };
-        let (x0, x1, caches) = if field_on {
-            let (x0, c0) = deform(tau0);
+        let x0: Vec<[f32; 3]> = idx.iter().map(|&g| rv.deformed.means[g]).collect();
+        let (x1, cache1) = if field_on {
             let (x1, c1) = deform(tau1);
-            (x0, x1, Some((c0, c1)))
+            (x1, Some(c1))
         } else {
-            (xs.clone(), xs.clone(), None)
+            (xs.clone(), None)
         };
         let k = d.views[i].camera.intrinsics;
         let cam0 = ProjCam::<f32>::new(&rv.camera.cam_to_world, &k, NEAR);
@@ -418,24 +454,21 @@ impl JointTrainer {
         let gv: Vec<f32> = mg.gs_v.iter().map(|g| g * g2).collect();
         let mut gg = GsGrad::default();
         gaussian_flow_backward(cams, &x0, &x1, &fgs, &gu, &gv, &mut gg);
+        let n = self.inner.splats.len();
+        out.at_view = vec![[0.0; 3]; n];
+        out.canonical = vec![[0.0; 3]; n];
         for (kk, &g) in idx.iter().enumerate() {
-            for c in 0..3 {
-                grads.splats.means[g][c] += gg.x0[kk][c] + gg.x1[kk][c];
-            }
+            out.at_view[g] = gg.x0[kk];
+            out.canonical[g] = gg.x1[kk];
         }
-        if let Some((c0, c1)) = caches {
-            for (cache, gx) in [(&c0, &gg.x0), (&c1, &gg.x1)] {
-                let mut dl = Deltas::zeros(idx.len());
-                for (kk, g) in gx.iter().enumerate() {
-                    if moves(kk) {
-                        dl.dx[kk] = *g;
-                    }
-                }
-                let fg = Deformation::backward(&self.inner.field, cache, &dl);
-                if grads.field.len() == fg.len() {
-                    grads.field.iter_mut().zip(&fg).for_each(|(a, b)| *a += b);
+        if let Some(c1) = cache1 {
+            let mut dl = Deltas::zeros(idx.len());
+            for (kk, g) in gg.x1.iter().enumerate() {
+                if moves(kk) {
+                    dl.dx[kk] = *g;
                 }
             }
+            out.field = Deformation::backward(&self.inner.field, &c1, &dl);
         }
         (ml.loss as f64, idx.len())
     }

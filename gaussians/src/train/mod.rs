@@ -177,17 +177,25 @@ impl Trainer {
         }
     }
 
-    /// Gradients of a loss on a rendered view, from `∂L/∂rgb` (planar) and optionally
-    /// `∂L/∂depth`, taken back through the rasterizer and the field to the canonical
-    /// Gaussians, the field's parameters and the camera.
+    /// Gradients of a loss on a rendered view, from `∂L/∂rgb` (planar), optionally
+    /// `∂L/∂depth` and `∂L/∂(rendered centres)` (from a loss on the deformed centres
+    /// themselves, one per Gaussian), taken back through the rasterizer and the field to the
+    /// canonical Gaussians, the field's parameters and the camera.
     pub fn view_backward<R: Rasterizer>(
         &self,
         r: &R,
         v: &ViewRender<R::State>,
         d_rgb: &[f32],
         d_depth: Option<&[f32]>,
+        d_means: Option<&[[f32; 3]]>,
     ) -> ModelGrads {
         let (mut g, camera) = r.backward_view(&v.deformed, &v.camera, &v.state, d_rgb, d_depth);
+        if let Some(dm) = d_means {
+            assert_eq!(dm.len(), g.means.len(), "view_backward: d_means size");
+            for (a, b) in g.means.iter_mut().zip(dm) {
+                (0..3).for_each(|c| a[c] += b[c]);
+            }
+        }
         let mut field_grads = Vec::new();
         if let Some((d, cache)) = &v.deltas {
             let dg = field::apply_deltas_backward(
@@ -271,7 +279,7 @@ impl Trainer {
         let rendered = self.render_view(r, &view.camera, view.time);
         let (loss, grad) = self.rgb_loss(&rendered.image, &view.rgb);
         let psnr = metrics::psnr_u8(&rendered.image.rgb, &view.rgb);
-        let g = self.view_backward(r, &rendered, &grad, None);
+        let g = self.view_backward(r, &rendered, &grad, None, None);
         drop(rendered);
         self.apply_gradients(&g);
         StepInfo {
