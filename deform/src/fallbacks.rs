@@ -33,7 +33,7 @@ pub enum EventSkip {
 /// image is made).
 pub fn interval_skip(k: &IntervalCounts) -> Option<EventSkip> {
     let (a, b) = k.span();
-    if !(b > a) {
+    if b <= a {
         Some(EventSkip::EmptyInterval)
     } else if k.events() == 0 {
         Some(EventSkip::NoEvents)

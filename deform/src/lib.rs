@@ -33,7 +33,7 @@
 //! [`fallbacks`] says on degenerate inputs; [`stage`] writes the outputs
 //! and `report.json`; [`settings`] holds every setting. The kernels depend only on
 //! `scene`, `glam`, `rayon` and `serde`. Imports between modules go one way only: any module may use the leaves
-//! `real` and `lie`, and `event_image` uses `event_counts`.
+//! `real` and `lie`, and `event_image` and `fallbacks` use `event_counts`.
 
 pub mod baselines;
 pub mod camera_path;
