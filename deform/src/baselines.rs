@@ -10,12 +10,14 @@ use crate::event_image::{
     PseudoImage, PseudoInputs, PseudoMode, PseudoSettings, linear_to_srgb, pseudo_image,
     srgb_to_linear,
 };
+use gaussians::stage::PSNR_CAP;
 use gaussians::train::View;
 use scene::events::EventStream;
 use scene::metrics::{psnr_u8, ssim_u8};
 use serde::Serialize;
 
-/// PSNR/SSIM of one baseline over the test frames.
+/// PSNR (at most `gaussians::stage::PSNR_CAP`) and SSIM of one baseline over the test
+/// frames.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct BaselineScore {
     pub psnr_mean: f64,
@@ -69,7 +71,7 @@ fn score(preds: &[Vec<f32>], targets: &[&View]) -> BaselineScore {
             v.camera.intrinsics.width as usize,
             v.camera.intrinsics.height as usize,
         );
-        out.psnr.push(psnr_u8(p, &v.rgb));
+        out.psnr.push(psnr_u8(p, &v.rgb).min(PSNR_CAP));
         ssim += ssim_u8(p, &v.rgb, w, h);
     }
     let n = preds.len().max(1) as f64;
@@ -180,7 +182,7 @@ mod tests {
         };
         let test = [view(0.3)];
         let b = evaluate(&rec, &test, &[0.25]);
-        assert_eq!(b.blend.psnr[0], f64::INFINITY);
+        assert_eq!(b.blend.psnr[0], PSNR_CAP);
         let want = scene::metrics::psnr_u8(&[0.2; 24], &[0.3; 24]);
         assert!((b.nearest.psnr[0] - want).abs() < 1e-12);
         assert!(b.events.is_none());

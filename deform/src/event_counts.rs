@@ -153,6 +153,11 @@ impl IntervalCounts {
         self.edges.len() - 1
     }
 
+    /// Number of events in the interval (0 for an empty interval or a recording gap).
+    pub fn events(&self) -> usize {
+        self.bin_start[self.bins()] - self.bin_start[0]
+    }
+
     /// Whether the planes are stored as `i16` (else `i32`).
     pub fn is_compact(&self) -> bool {
         matches!(self.planes, Planes::I16(_))

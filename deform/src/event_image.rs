@@ -15,10 +15,14 @@
 //!   that side is used alone.
 //!
 //! Every channel is scaled by the same per-pixel factor (events see brightness, not
-//! colour). A value is **valid** when its source frame value is at least
-//! [`PseudoSettings::black_level`] (and `I + ε > 0`: no log of zero) and the predicted
-//! value lies in `[0, saturation]` and is finite; invalid values are excluded from the
-//! loss (masked per channel). `PseudoImage::n_eff` holds `∂log(P + ε)/∂C` per value, so
+//! colour). A value is **valid** when its source frame value lies in
+//! `[black_level, saturation)` ([`PseudoSettings`]; `I + ε > 0`: no log of zero) and
+//! the predicted value lies in `[black_level, saturation]` and is finite; invalid values
+//! are excluded from the loss (masked per channel). A source value at or above
+//! `saturation` is clipped (its true brightness is unknown, so nothing can be predicted
+//! from it); a prediction outside the range the frames are trusted in — `exp(C·N)`
+//! overflowing to infinity, or underflowing towards 0, as a hot pixel's huge count does —
+//! is masked rather than used. `PseudoImage::n_eff` holds `∂log(P + ε)/∂C` per value, so
 //! `∂P/∂C = (P + ε)·n_eff`.
 //!
 //! [`event_loss`]: `L_event = mean over valid values of |R − P|` (L1, Eq. 11), with its
@@ -42,9 +46,11 @@ const CHUNK: usize = 8192;
 pub struct PseudoSettings {
     /// `ε` of `log(I + ε)` (0: the paper's multiplicative form).
     pub log_eps: f64,
-    /// Frame values below this (linear) carry no usable brightness: masked.
+    /// Frame values, and predictions, below this (linear) carry no usable brightness:
+    /// masked.
     pub black_level: f64,
-    /// Predicted values above this (linear) are saturated: masked.
+    /// Predicted values above this (linear) are saturated, frame values at or above it
+    /// are clipped: masked.
     pub saturation: f64,
     /// Half-width `b` of a dead zone around the pseudo image, in units of `C`: the render
     /// is penalised only outside `[(P + ε)·e^(−b·C) − ε, (P + ε)·e^(b·C) − ε]`. 0 is the
@@ -116,11 +122,12 @@ impl<R: Real> PseudoImage<R> {
     }
 }
 
-/// One side's prediction: `(log(P + ε), n)` or `None` where that side is not usable.
+/// One side's prediction: `(log(P + ε), n)` or `None` where that side is not usable
+/// (source black, clipped or not finite).
 #[inline(always)]
-fn side<R: Real>(i: R, n: R, c: R, eps: R, black: R) -> Option<(R, R)> {
+fn side<R: Real>(i: R, n: R, c: R, eps: R, black: R, sat: R) -> Option<(R, R)> {
     let base = i + eps;
-    if i >= black && base > R::ZERO && i.is_finite() {
+    if i >= black && i < sat && base > R::ZERO && i.is_finite() {
         Some((base.ln() + c * n, n))
     } else {
         None
@@ -184,10 +191,19 @@ pub fn pseudo_image<R: Real>(
             for j in 0..p.len() {
                 let (vi, pi) = (start + j, (start + j) % n);
                 let a = use_left
-                    .then(|| side(inp.left[vi], R::from_f64(lc[pi] as f64), c, eps, black))
+                    .then(|| side(inp.left[vi], R::from_f64(lc[pi] as f64), c, eps, black, sat))
                     .flatten();
                 let b = use_right
-                    .then(|| side(inp.right[vi], -R::from_f64(rc[pi] as f64), c, eps, black))
+                    .then(|| {
+                        side(
+                            inp.right[vi],
+                            -R::from_f64(rc[pi] as f64),
+                            c,
+                            eps,
+                            black,
+                            sat,
+                        )
+                    })
                     .flatten();
                 let blended = match (a, b) {
                     (Some((la, na)), Some((lb, nb))) => {
@@ -198,7 +214,7 @@ pub fn pseudo_image<R: Real>(
                 (p[j], ok[j], ne[j]) = match blended {
                     Some((l, nn)) => {
                         let v = l.exp() - eps;
-                        if v.is_finite() && v >= R::ZERO && v <= sat {
+                        if v.is_finite() && v >= black && v >= R::ZERO && v <= sat {
                             (v, true, nn)
                         } else {
                             (R::ZERO, false, R::ZERO)

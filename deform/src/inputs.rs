@@ -27,9 +27,13 @@ pub struct Inputs {
     pub times: Vec<f64>,
     pub events: EventStream,
     pub counts: EventCounts,
-    /// Per event of the stream: flow in px/s (NaN where `evflow` gave none).
+    /// Per event of the stream: flow in px/s (NaN where `evflow` gave none, or a flow
+    /// beyond the network's range).
     pub flow_u: Vec<f32>,
     pub flow_v: Vec<f32>,
+    /// Events whose flow was beyond the network's range (`motion.flow_range_px`), set
+    /// to NaN.
+    pub flows_out_of_range: usize,
     /// The interpolated camera path through the train frames.
     pub path: CameraPath,
     pub contrast: f64,
@@ -44,8 +48,11 @@ pub struct Inputs {
 }
 
 /// Per-event flow of every `flow/NNNN.evflow` in `flows` spread over the stream's
-/// `n` events (NaN where no window covers an event).
-fn read_flows(flows: &Path, n: usize) -> Result<(Vec<f32>, Vec<f32>)> {
+/// `n` events (NaN where no window covers an event, and where a flow moves an event by
+/// more than `range_px` per component over its window: beyond the flow network's
+/// range, see `MotionSettings::flow_range_px`; 0 checks nothing), and the number of
+/// flows found out of range.
+fn read_flows(flows: &Path, n: usize, range_px: f64) -> Result<(Vec<f32>, Vec<f32>, usize)> {
     let dir = flows.join("flow");
     let mut files: Vec<_> = std::fs::read_dir(&dir)
         .map_err(|e| Error::io(&dir, e))?
@@ -60,8 +67,11 @@ fn read_flows(flows: &Path, n: usize) -> Result<(Vec<f32>, Vec<f32>)> {
         ));
     }
     let (mut u, mut v) = (vec![f32::NAN; n], vec![f32::NAN; n]);
+    let mut out_of_range = 0;
     for p in files {
         let f = evflow::flowfile::read_evflow(&p)?;
+        // Largest |u|, |v| (px/s) the network can give over this window.
+        let limit = range_px * (1.0 + 1e-3) / (f.t_b - f.t_a);
         for (k, &i) in f.index.iter().enumerate() {
             let i = usize::try_from(i).ok().filter(|&i| i < n).ok_or_else(|| {
                 Error::invalid(
@@ -69,10 +79,16 @@ fn read_flows(flows: &Path, n: usize) -> Result<(Vec<f32>, Vec<f32>)> {
                     format!("event index {i} beyond the stream's {n} events"),
                 )
             })?;
-            (u[i], v[i]) = (f.u[k], f.v[k]);
+            let fast = |x: f32| f64::from(x).abs() > limit; // false for a NaN limit
+            if range_px > 0.0 && (fast(f.u[k]) || fast(f.v[k])) {
+                out_of_range += 1;
+                (u[i], v[i]) = (f32::NAN, f32::NAN);
+            } else {
+                (u[i], v[i]) = (f.u[k], f.v[k]);
+            }
         }
     }
-    Ok((u, v))
+    Ok((u, v, out_of_range))
 }
 
 impl Inputs {
@@ -115,7 +131,8 @@ impl Inputs {
         } else {
             scene.contrast_threshold()
         };
-        let (flow_u, flow_v) = read_flows(flows, events.len())?;
+        let (flow_u, flow_v, flows_out_of_range) =
+            read_flows(flows, events.len(), s.motion.flow_range_px)?;
         let model = Model::load(model_dir)?;
         let settings_file = model_dir.join("settings.toml");
         let text =
@@ -154,6 +171,7 @@ impl Inputs {
             counts,
             flow_u,
             flow_v,
+            flows_out_of_range,
             path,
             contrast,
             srgb,

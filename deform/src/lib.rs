@@ -29,15 +29,17 @@
 //!
 //! **The stage**: [`inputs`] reads the scene, the warm-up model, the flows and the
 //! bindings; [`trainer`] runs the joint iterations (Eq. 13) around the warm-up's
-//! `gaussians::train::Trainer`, rebinding through `assoc`; [`stage`] writes the outputs
+//! `gaussians::train::Trainer`, rebinding through `assoc`, and falls back as
+//! [`fallbacks`] says on degenerate inputs; [`stage`] writes the outputs
 //! and `report.json`; [`settings`] holds every setting. The kernels depend only on
 //! `scene`, `glam`, `rayon` and `serde`. Imports between modules go one way only: any module may use the leaves
-//! `real` and `lie`, and `event_image` uses `event_counts`.
+//! `real` and `lie`, and `event_image` and `fallbacks` use `event_counts`.
 
 pub mod baselines;
 pub mod camera_path;
 pub mod event_counts;
 pub mod event_image;
+pub mod fallbacks;
 pub mod flow;
 pub mod inputs;
 pub mod lie;

@@ -10,9 +10,22 @@
 //! when the weights sum to 1, as `assoc` writes them), `F_ego(i)` the ego-motion flow at
 //! the Gaussian's pixel (px/s, Eq. 9), `F_gs^i` its scene flow over the span (px,
 //! Eq. 10), `ρ` a robust norm ([`Norm`]) and `N` the number of Gaussians that
-//! contribute: bound to at least one event whose flow is present, positive weight sum,
-//! valid `F_gs` (and `F_ego` when given), everything finite. With the exact form of
-//! `F_gs` (which already contains the camera's motion) pass no `F_ego`.
+//! contribute: bound to at least one usable event, positive weight sum, valid `F_gs`
+//! (and `F_ego` when given), everything finite. With the exact form of `F_gs` (which
+//! already contains the camera's motion) pass no `F_ego`.
+//!
+//! **Implausible flows are dropped, event by event** (and counted in [`MotionLoss`]);
+//! the sums above run over the events left, their weights renormalised:
+//! - an event with no flow entry (`missing_events`) or a non-finite flow
+//!   (`dropped_non_finite`: `deform` marks events no `.evflow` window covers, and flows
+//!   beyond the flow network's range, with NaN);
+//! - an **outlier** among the events of one Gaussian (`dropped_outliers`): with at least
+//!   three usable events, `m` the component-wise median of their flows and
+//!   `d_k = |f_k − m|`, event `k` is dropped when
+//!   `d_k > max(outlier_px/|Δt|, 3·1.4826·median_j d_j)`: it moves more than
+//!   [`MotionSettings::outlier_px`] pixels over the span away from the others *and* lies
+//!   beyond three robust standard deviations of the group. Two events cannot outvote each
+//!   other and are kept.
 //!
 //! Gradients are w.r.t. `F_ego` (per Gaussian, px/s) and `F_gs` (px), ready for
 //! `flow::ego_flow_backward` and `flow::gaussian_flow_backward`. The flow network is
@@ -48,6 +61,16 @@ pub struct MotionSettings {
     pub epsilon: f64,
     /// `δ` of the Huber norm, px.
     pub huber_delta: f64,
+    /// A bound event whose flow, over the span, lands more than this many pixels from
+    /// the median of its Gaussian's events (and beyond three robust deviations) is an
+    /// outlier and dropped (module docs); 0 keeps every event.
+    pub outlier_px: f64,
+    /// The flow network's range: the largest displacement (px, per component) a
+    /// per-event flow can carry over its `.evflow` window. `evflow`'s tanh heads bound
+    /// it by the network's `max_flow` (32 px per window for the shipped weights); a
+    /// flow beyond it (0.1 % tolerance) is corrupt and its event gets no flow (read by
+    /// `deform`'s inputs). 0: no check.
+    pub flow_range_px: f64,
 }
 
 impl Default for MotionSettings {
@@ -56,6 +79,8 @@ impl Default for MotionSettings {
             norm: Norm::Charbonnier,
             epsilon: 1e-3,
             huber_delta: 1.0,
+            outlier_px: 2.0,
+            flow_range_px: 32.0,
         }
     }
 }
@@ -133,6 +158,10 @@ pub struct MotionLoss<R> {
     pub bound: usize,
     /// Bound event indices with no flow entry.
     pub missing_events: usize,
+    /// Bound events left out because their flow is not finite.
+    pub dropped_non_finite: usize,
+    /// Bound events left out as outliers among their Gaussian's events.
+    pub dropped_outliers: usize,
     /// Mean `|r_i|` over the contributing Gaussians (px), for reports.
     pub mean_residual: R,
 }
@@ -147,37 +176,134 @@ pub struct MotionGrad<R> {
     pub gs_v: Vec<R>,
 }
 
-/// Residual `r_i` of Gaussian `i`, or `None` if it does not contribute; also the number
-/// of its events without flow.
+/// Bound events of one Gaussian left out of its residual, by reason.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct Dropped {
+    missing: usize,
+    non_finite: usize,
+    outliers: usize,
+}
+
+impl Dropped {
+    fn add(&mut self, o: Dropped) {
+        self.missing += o.missing;
+        self.non_finite += o.non_finite;
+        self.outliers += o.outliers;
+    }
+}
+
+/// Groups up to this size are sorted on the stack.
+const STACK_GROUP: usize = 64;
+
+/// Median of finite values (sorts `v`; mean of the middle two for an even count).
+fn median<R: Real>(v: &mut [R]) -> R {
+    v.sort_unstable_by(|a, b| a.partial_cmp(b).unwrap_or(std::cmp::Ordering::Equal));
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        (v[n / 2 - 1] + v[n / 2]) * R::from_f64(0.5)
+    }
+}
+
+/// Threshold (px/s) on `|f_k − m|` above which an event of a group of usable flows
+/// `(u, v)` is an outlier, and the median `m`; `None` when nothing is rejected (fewer
+/// than three events, rejection off, or a zero span).
+fn outlier_test<R: Real>(u: &[R], v: &[R], s: &MotionSettings, dt: R) -> Option<(R, [R; 2])> {
+    let n = u.len();
+    if n < 3 || s.outlier_px <= 0.0 || dt == R::ZERO || !dt.is_finite() {
+        return None;
+    }
+    let mut stack = [R::ZERO; STACK_GROUP];
+    let mut heap = Vec::new();
+    let buf: &mut [R] = if n <= STACK_GROUP {
+        &mut stack[..n]
+    } else {
+        heap.resize(n, R::ZERO);
+        &mut heap
+    };
+    buf.copy_from_slice(u);
+    let mu = median(buf);
+    buf.copy_from_slice(v);
+    let mv = median(buf);
+    for k in 0..n {
+        let (a, b) = (u[k] - mu, v[k] - mv);
+        buf[k] = (a * a + b * b).sqrt();
+    }
+    let mad = median(buf);
+    let floor = R::from_f64(s.outlier_px) / dt.abs();
+    Some((floor.max(R::from_f64(3.0 * 1.4826) * mad), [mu, mv]))
+}
+
+/// Residual `r_i` of Gaussian `i`, or `None` if it does not contribute; also its bound
+/// events left out (module docs).
 #[inline]
-fn residual<R: Real>(inp: &MotionInputs<'_, R>, i: usize) -> (Option<[R; 2]>, usize) {
+fn residual<R: Real>(
+    s: &MotionSettings,
+    inp: &MotionInputs<'_, R>,
+    i: usize,
+) -> (Option<[R; 2]>, Dropped) {
     let b = &inp.bindings;
     let (lo, hi) = (b.offsets[i] as usize, b.offsets[i + 1] as usize);
+    let mut dropped = Dropped::default();
     if hi <= lo {
-        return (None, 0);
+        return (None, dropped);
     }
     let ok = |p: &PerGaussian<'_, R>| p.valid.is_none_or(|v| v[i]);
     if !ok(&inp.gs) || !inp.ego.as_ref().is_none_or(ok) {
-        return (None, 0);
+        return (None, dropped);
     }
-    let (mut su, mut sv, mut sw, mut missing) = (R::ZERO, R::ZERO, R::ZERO, 0);
-    for k in lo..hi {
-        let Some(j) = b.events[k]
+    // The usable events: a flow entry, finite.
+    let flow = |k: usize| -> Result<(R, R), bool> {
+        let j = b.events[k]
             .checked_sub(inp.flow_base)
             .map(|j| j as usize)
             .filter(|&j| j < inp.flow_u.len())
-        else {
-            missing += 1;
-            continue;
-        };
+            .ok_or(false)?;
+        let (u, v) = (inp.flow_u[j], inp.flow_v[j]);
+        if u.is_finite() && v.is_finite() {
+            Ok((u, v))
+        } else {
+            Err(true)
+        }
+    };
+    let (mut us, mut vs) = ([R::ZERO; STACK_GROUP], [R::ZERO; STACK_GROUP]);
+    let mut n = 0;
+    for k in lo..hi {
+        match flow(k) {
+            Ok((u, v)) if n < STACK_GROUP => {
+                (us[n], vs[n]) = (u, v);
+                n += 1;
+            }
+            Ok(_) => n += 1,
+            Err(false) => dropped.missing += 1,
+            Err(true) => dropped.non_finite += 1,
+        }
+    }
+    let test = if n <= STACK_GROUP {
+        outlier_test(&us[..n], &vs[..n], s, inp.dt)
+    } else {
+        let (u, v): (Vec<R>, Vec<R>) = (lo..hi).filter_map(|k| flow(k).ok()).unzip();
+        outlier_test(&u, &v, s, inp.dt)
+    };
+    let (mut su, mut sv, mut sw) = (R::ZERO, R::ZERO, R::ZERO);
+    for k in lo..hi {
+        let Ok((u, v)) = flow(k) else { continue };
+        if let Some((thr, m)) = test {
+            let (a, c) = (u - m[0], v - m[1]);
+            if (a * a + c * c).sqrt() > thr {
+                dropped.outliers += 1;
+                continue;
+            }
+        }
         let w = R::from_f64(b.weights[k] as f64);
-        su += w * inp.flow_u[j];
-        sv += w * inp.flow_v[j];
+        su += w * u;
+        sv += w * v;
         sw += w;
     }
     let positive = sw > R::ZERO; // false for NaN
     if !positive {
-        return (None, missing);
+        return (None, dropped);
     }
     let (mut pu, mut pv) = (inp.gs.u[i], inp.gs.v[i]);
     if let Some(e) = &inp.ego {
@@ -186,9 +312,9 @@ fn residual<R: Real>(inp: &MotionInputs<'_, R>, i: usize) -> (Option<[R; 2]>, us
     }
     let r = [inp.dt * su / sw - pu, inp.dt * sv / sw - pv];
     if r[0].is_finite() && r[1].is_finite() {
-        (Some(r), missing)
+        (Some(r), dropped)
     } else {
-        (None, missing)
+        (None, dropped)
     }
 }
 
@@ -222,13 +348,13 @@ pub fn motion_loss<R: Real>(
     );
 
     // Pass 1: ρ, |r| and counts per chunk.
-    let parts: Vec<(R, R, usize, usize)> = (0..n.div_ceil(CHUNK))
+    let parts: Vec<(R, R, usize, Dropped)> = (0..n.div_ceil(CHUNK))
         .into_par_iter()
         .map(|c| {
-            let mut acc = (R::ZERO, R::ZERO, 0, 0);
+            let mut acc = (R::ZERO, R::ZERO, 0, Dropped::default());
             for i in c * CHUNK..((c + 1) * CHUNK).min(n) {
-                let (r, missing) = residual(inp, i);
-                acc.3 += missing;
+                let (r, dropped) = residual(s, inp, i);
+                acc.3.add(dropped);
                 if let Some(r) = r {
                     acc.0 += robust(s, r).0;
                     acc.1 += (r[0] * r[0] + r[1] * r[1]).sqrt();
@@ -238,12 +364,12 @@ pub fn motion_loss<R: Real>(
             acc
         })
         .collect();
-    let (mut sum, mut sum_r, mut bound, mut missing) = (R::ZERO, R::ZERO, 0, 0);
+    let (mut sum, mut sum_r, mut bound, mut dropped) = (R::ZERO, R::ZERO, 0, Dropped::default());
     for p in parts {
         sum += p.0;
         sum_r += p.1;
         bound += p.2;
-        missing += p.3;
+        dropped.add(p.3);
     }
     let inv = if bound > 0 {
         R::ONE / R::from_f64(bound as f64)
@@ -266,7 +392,7 @@ pub fn motion_loss<R: Real>(
             .enumerate()
             .for_each(|(c, ((eu, ev), (gu, gv)))| {
                 for j in 0..eu.len() {
-                    if let (Some(r), _) = residual(inp, c * CHUNK + j) {
+                    if let (Some(r), _) = residual(s, inp, c * CHUNK + j) {
                         let d = robust(s, r).1;
                         // r = … − F_gs − Δt·F_ego
                         gu[j] = -d[0] * inv;
@@ -282,7 +408,9 @@ pub fn motion_loss<R: Real>(
     MotionLoss {
         loss: sum * inv,
         bound,
-        missing_events: missing,
+        missing_events: dropped.missing,
+        dropped_non_finite: dropped.non_finite,
+        dropped_outliers: dropped.outliers,
         mean_residual: sum_r * inv,
     }
 }

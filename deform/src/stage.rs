@@ -12,6 +12,7 @@
 //! ```
 
 use crate::baselines::{Baselines, Recording};
+use crate::fallbacks::Fallbacks;
 use crate::inputs::Inputs;
 use crate::posenet::PoseNet;
 use crate::settings::DeformSettings;
@@ -115,6 +116,9 @@ pub struct TrainReport {
     /// Seconds per part of the joint iterations (RGB, event, motion, update, rebinding).
     pub timings: Timings,
     pub rebinds: u32,
+    /// What the training left out on degenerate inputs (skipped `L_event`, dropped
+    /// bindings, flows out of range; `deform::fallbacks`).
+    pub fallbacks: Fallbacks,
     pub contrast_threshold: f64,
     pub frames_srgb: bool,
     pub gaussians: usize,
@@ -224,6 +228,7 @@ pub fn train(
         seconds_per_iteration: train_seconds / tr.iteration.max(1) as f64,
         timings: tr.timings,
         rebinds: tr.rebinds,
+        fallbacks: tr.fallbacks,
         contrast_threshold: d.contrast,
         frames_srgb: d.srgb,
         gaussians: model.splats.len(),

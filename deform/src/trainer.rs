@@ -11,6 +11,7 @@
 //! recorded poses (the PoseNet corrects in-between times only).
 
 use crate::event_image::{PseudoImage, PseudoInputs, event_loss, pseudo_image, srgb_to_linear};
+use crate::fallbacks::{EventSkip, Fallbacks, interval_skip};
 use crate::flow::{EgoPoints, Flow2, GsCameras, GsGrad, Pinhole, ProjCam};
 use crate::flow::{ego_flow, gaussian_flow, gaussian_flow_backward};
 use crate::inputs::Inputs;
@@ -18,6 +19,7 @@ use crate::motion_loss::{CsrBindings, MotionGrad, MotionInputs, PerGaussian, mot
 use crate::posenet::{PoseNet, apply_correction, correction_backward};
 use crate::settings::{DeformSettings, FlowForm};
 use gaussians::field::{Deformation, Deltas};
+use gaussians::stage::PSNR_CAP;
 use gaussians::train::{ModelGrads, Trainer, ViewRender};
 use gaussians::{Rasterizer, RenderedImage, TileRasterizer};
 use rand::{RngExt, SeedableRng};
@@ -47,10 +49,15 @@ pub struct JointStep {
     pub l_event: f64,
     pub l_motion: f64,
     pub total: f64,
+    /// PSNR of the train frame's render (dB, at most `gaussians::stage::PSNR_CAP`).
     pub psnr: f64,
     /// Gaussians bound at the frame of this iteration's motion loss.
     pub bound: usize,
     pub gaussians: usize,
+    /// `L_event` was skipped (RGB-only supervision; [`crate::fallbacks`]).
+    pub event_skipped: bool,
+    /// Bound events left out of this iteration's `L_motion` (no flow, outliers).
+    pub bindings_dropped: usize,
 }
 
 /// The joint training state around the warm-up's trainer.
@@ -65,6 +72,8 @@ pub struct JointTrainer {
     pub iteration: u32,
     pub timings: Timings,
     pub rebinds: u32,
+    /// What the training left out so far (degenerate inputs).
+    pub fallbacks: Fallbacks,
     rng: rand_chacha::ChaCha8Rng,
     pseudo: PseudoImage<f32>,
     span: f64,
@@ -90,7 +99,10 @@ impl MotionGrads {
             }
         }
         if !self.field.is_empty() && g.field.len() == self.field.len() {
-            g.field.iter_mut().zip(&self.field).for_each(|(a, b)| *a += b);
+            g.field
+                .iter_mut()
+                .zip(&self.field)
+                .for_each(|(a, b)| *a += b);
         }
     }
 }
@@ -173,6 +185,11 @@ impl JointTrainer {
             iteration: 0,
             timings: Timings::default(),
             rebinds: 0,
+            fallbacks: Fallbacks {
+                flows_out_of_range: d.flows_out_of_range,
+                events_without_flow: d.flow_u.iter().filter(|u| !u.is_finite()).count(),
+                ..Fallbacks::default()
+            },
             rng: rand_chacha::ChaCha8Rng::seed_from_u64(settings.seed),
             pseudo: PseudoImage::default(),
             span,
@@ -219,23 +236,24 @@ impl JointTrainer {
         self.inner.resolve_cap(view.rgb.len() / 3);
         let rv = self.inner.render_view(r, &view.camera, view.time);
         let (l_rgb, grad) = self.inner.rgb_loss(&rv.image, &view.rgb);
-        let psnr = psnr_u8(&rv.image.rgb, &view.rgb);
+        let psnr = psnr_u8(&rv.image.rgb, &view.rgb).min(PSNR_CAP);
         self.timings.rgb += clock.elapsed().as_secs_f64();
 
         // The motion term first: its gradient on the centres at the view's time joins the
         // RGB gradient on the rendered centres (one pass back through the field).
         let clock = Instant::now();
         let mut motion = MotionGrads::default();
-        let (l_motion, bound) = if g2 > 0.0 {
+        let (l_motion, bound, [no_flow, outliers]) = if g2 > 0.0 {
             self.motion_term(d, i, &rv, g2 as f32, &mut motion)
         } else {
-            (0.0, 0)
+            (0.0, 0, [0, 0])
         };
         self.timings.motion += clock.elapsed().as_secs_f64();
 
         let clock = Instant::now();
         let d_means = (!motion.at_view.is_empty()).then_some(motion.at_view.as_slice());
         let mut grads = self.inner.view_backward(r, &rv, &grad, None, d_means);
+        self.fallbacks.drop_bindings(no_flow, outliers);
         drop(rv);
         self.timings.rgb += clock.elapsed().as_secs_f64();
         let clock = Instant::now();
@@ -244,6 +262,7 @@ impl JointTrainer {
 
         let clock = Instant::now();
         self.posenet_grad.fill(0.0);
+        let skipped = self.fallbacks.event_steps_skipped;
         let l_event = if g1 > 0.0 && d.views.len() >= 2 {
             self.event_term(r, d, g1 as f32, &mut grads)
         } else {
@@ -274,11 +293,14 @@ impl JointTrainer {
             psnr,
             bound,
             gaussians: self.inner.splats.len(),
+            event_skipped: self.fallbacks.event_steps_skipped > skipped,
+            bindings_dropped: no_flow + outliers,
         }
     }
 
     /// Eq. 11 at a random `t_e` between two neighbouring train frames: adds `γ1·∂L/∂θ` to
-    /// `grads` and the PoseNet's gradient; returns `L_event`.
+    /// `grads` and the PoseNet's gradient; returns `L_event` (0 when skipped: an empty
+    /// interval, one without events, no valid pixel; counted in `fallbacks`).
     fn event_term(
         &mut self,
         r: &TileRasterizer,
@@ -288,7 +310,8 @@ impl JointTrainer {
     ) -> f64 {
         let j = self.rng.random_range(0..d.views.len() - 1);
         let (ta, tb) = (d.times[j], d.times[j + 1]);
-        if tb <= ta {
+        if let Some(why) = interval_skip(&d.counts.intervals()[j]) {
+            self.fallbacks.skip_event(why);
             return 0.0;
         }
         let t_e = ta + self.rng.random::<f64>() * (tb - ta);
@@ -319,6 +342,7 @@ impl JointTrainer {
         let mut g = vec![0.0f32; linear.len()];
         let el = event_loss(&linear, &self.pseudo, Some(&mut g));
         if el.valid == 0 {
+            self.fallbacks.skip_event(EventSkip::NoValidPixels);
             return 0.0;
         }
         for (gi, &c) in g.iter_mut().zip(rgb) {
@@ -342,7 +366,8 @@ impl JointTrainer {
 
     /// Eq. 12 over the Gaussians bound at train frame `i` (rendered as `rv`, whose
     /// deformed centres are `x(t0)`): writes `γ2·∂L/∂θ` into `out`; returns
-    /// `(L_motion, bound Gaussians)`.
+    /// `(L_motion, bound Gaussians, [bound events left out for want of a flow, as
+    /// outliers])`.
     fn motion_term(
         &self,
         d: &Inputs,
@@ -350,16 +375,16 @@ impl JointTrainer {
         rv: &ViewRender<<TileRasterizer as Rasterizer>::State>,
         g2: f32,
         out: &mut MotionGrads,
-    ) -> (f64, usize) {
+    ) -> (f64, usize, [usize; 2]) {
         let b = &self.bindings[i];
         if b.gaussians() != self.inner.splats.len() {
-            return (0.0, 0);
+            return (0.0, 0, [0, 0]);
         }
         let idx: Vec<usize> = (0..b.gaussians())
             .filter(|&g| !b.of(g).0.is_empty())
             .collect();
         if idx.is_empty() {
-            return (0.0, 0);
+            return (0.0, 0, [0, 0]);
         }
         let t0 = d.times[i];
         let t1 = if i + 1 < d.times.len() {
@@ -447,8 +472,12 @@ impl JointTrainer {
         };
         let mut mg = MotionGrad::default();
         let ml = motion_loss(&self.settings.motion, &inp, Some(&mut mg));
+        let dropped = [
+            ml.missing_events + ml.dropped_non_finite,
+            ml.dropped_outliers,
+        ];
         if ml.bound == 0 {
-            return (0.0, idx.len());
+            return (0.0, idx.len(), dropped);
         }
         let gu: Vec<f32> = mg.gs_u.iter().map(|g| g * g2).collect();
         let gv: Vec<f32> = mg.gs_v.iter().map(|g| g * g2).collect();
@@ -470,7 +499,7 @@ impl JointTrainer {
             }
             out.field = Deformation::backward(&self.inner.field, &c1, &dl);
         }
-        (ml.loss as f64, idx.len())
+        (ml.loss as f64, idx.len(), dropped)
     }
 
     /// Bind events to the current Gaussians at every train frame (§3.3, the `assoc`

@@ -207,8 +207,13 @@ fn input_hashes(scene: &Scene, init_ply: Option<&Path>) -> Result<Vec<InputHash>
     Ok(out)
 }
 
+/// PSNR of identical 8-bit images is reported as this (dB), so means and `report.json`
+/// stay finite (JSON has no infinity: serde_json would write `null`); the same cap as
+/// `degs eval`'s.
+pub const PSNR_CAP: f64 = 100.0;
+
 /// Render `model` at every view, write `renders/NNNN.png` (when `renders` is set) and
-/// return PSNR/SSIM against the views' images.
+/// return PSNR (at most [`PSNR_CAP`]) and SSIM against the views' images.
 pub fn evaluate(
     model: &Model,
     views: &[View],
@@ -226,10 +231,10 @@ pub fn evaluate(
         if let Some(dir) = renders {
             write_png(dir.join(format!("{i:04}.png")), &f.rgb_image())?;
         }
-        ev.psnr.push(metrics::psnr_u8(&f.rgb, &v.rgb));
+        ev.psnr.push(metrics::psnr_u8(&f.rgb, &v.rgb).min(PSNR_CAP));
         ev.ssim
             .push(metrics::ssim_u8(&f.rgb, &v.rgb, f.width, f.height));
-        base.push(metrics::psnr_u8(&mean_colour(&v.rgb), &v.rgb));
+        base.push(metrics::psnr_u8(&mean_colour(&v.rgb), &v.rgb).min(PSNR_CAP));
     }
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
     ev.psnr_mean = mean(&ev.psnr);

@@ -277,6 +277,7 @@ fn masks_black_and_saturated_frames_without_nan() {
     let n = W * H;
     let black = vec![0.0f64; 3 * n];
     let white = vec![1.0f64; 3 * n];
+    let bright = vec![0.9f64; 3 * n];
     let mut out = PseudoImage::default();
     for mode in [PseudoMode::Nearest, PseudoMode::TwoSided] {
         let s = PseudoSettings::default();
@@ -296,23 +297,36 @@ fn masks_black_and_saturated_frames_without_nan() {
         let l = event_loss(&render, &out, Some(&mut g));
         assert_eq!((l.loss, l.d_contrast, l.valid), (0.0, 0.0, 0));
         assert!(g.iter().all(|&v| v == 0.0));
-        // Saturated frame: exactly the pixels whose prediction exceeds 1 are masked.
+        // Saturated (clipped) frames: nothing can be predicted from them.
         let inp = PseudoInputs {
             left: &white,
             right: &white,
             ..inp
         };
         pseudo_image(&inp, 0.4, mode, &s, &mut out);
+        assert_eq!(out.valid_count(), 0, "{mode:?}");
+        assert!(out.data.iter().chain(&out.n_eff).all(|v| v.is_finite()));
+        // Bright frames: exactly the pixels whose prediction exceeds 1 are masked.
+        let inp = PseudoInputs {
+            left: &bright,
+            right: &bright,
+            ..inp
+        };
+        pseudo_image(&inp, 0.4, mode, &s, &mut out);
         let cnt = brute(&d.ev, 0.0, 0.4);
         let cnt_r = brute(&d.ev, 0.4, 1.0);
+        let mut masked = 0;
         for v in 0..3 * n {
-            let up = match mode {
-                PseudoMode::Nearest => cnt[v % n] > 0.0,
-                // blend of +C·N_l and −C·N_r: above 1 iff 0.6·N_l − 0.4·N_r > 0
-                PseudoMode::TwoSided => 0.6 * cnt[v % n] - 0.4 * cnt_r[v % n] > 0.0,
+            let x = match mode {
+                PseudoMode::Nearest => cnt[v % n] as f64,
+                // blend of +C·N_l and −C·N_r in log space
+                PseudoMode::TwoSided => 0.6 * cnt[v % n] as f64 - 0.4 * cnt_r[v % n] as f64,
             };
+            let up = 0.9 * (0.3 * x).exp() > 1.0;
+            masked += usize::from(up);
             assert_eq!(out.valid[v], !up, "{mode:?} value {v}");
         }
+        assert!(masked > 0 && masked < 3 * n, "{mode:?}: {masked} masked");
     }
     // Black on one side only: the two-sided image falls back to the other side.
     let s = PseudoSettings::default();

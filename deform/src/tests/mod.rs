@@ -3,6 +3,7 @@
 
 mod camera_path;
 mod events;
+mod fallbacks;
 mod flow;
 mod motion;
 mod posenet;

@@ -35,6 +35,7 @@ fn settings(norm: Norm) -> MotionSettings {
         norm,
         epsilon: 0.01,
         huber_delta: 0.5,
+        ..MotionSettings::default()
     }
 }
 
