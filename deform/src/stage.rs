@@ -7,9 +7,16 @@
 //! OUT/posenet.safetensors (+ .json)                               PoseNet weights
 //! OUT/depth/NNNN.exr      depth at every train frame (for a later association)
 //! OUT/renders/NNNN.png    every test frame
+//! OUT/renders/novel/NNNN.png  every novel view (when the scene has that split)
 //! OUT/settings.toml       the resolved settings
 //! OUT/report.json         losses every `log_every` iterations, time per phase, test PSNR/SSIM
+//!                         (`test`), novel-view PSNR/SSIM (`novel`), the 2D baselines on
+//!                         the test frames (`baselines`)
 //! ```
+//!
+//! The 2D baselines (nearest frame, linear blend, event pseudo image) predict an image
+//! of the recorded camera only; they cannot render a new viewpoint, so the novel
+//! section has no baselines.
 
 use crate::baselines::{Baselines, Recording};
 use crate::fallbacks::Fallbacks;
@@ -19,7 +26,7 @@ use crate::settings::DeformSettings;
 use crate::trainer::{JointStep, JointTrainer, Timings};
 use gaussians::TileRasterizer;
 use gaussians::model::Model;
-use gaussians::stage::{Evaluation, evaluate, write_depths};
+use gaussians::stage::{Evaluation, evaluate, evaluate_novel, write_depths};
 use safetensors::{Dtype, tensor::TensorView};
 use scene::atomic::{AtomicDir, write_bytes_atomic, write_json_atomic};
 use scene::error::{Error, Result};
@@ -124,8 +131,11 @@ pub struct TrainReport {
     pub gaussians: usize,
     pub curve: Vec<CurvePoint>,
     pub test: Evaluation,
+    /// The same on the novel-view split; absent when the scene has none.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub novel: Option<Evaluation>,
     /// The 2D baselines on the same test frames (nearest frame, linear blend, event
-    /// pseudo image).
+    /// pseudo image); none on the novel views, which they cannot render.
     pub baselines: Baselines,
 }
 
@@ -204,6 +214,7 @@ pub fn train(
     write_depths(&model, &d.views, &out.path().join("depth"))?;
     phases.start("evaluate");
     let test = evaluate(&model, &d.test, "test", Some(&out.path().join("renders")))?;
+    let novel = evaluate_novel(&model, &d.scene, out.path())?;
     phases.start("baselines");
     let test_times: Vec<f64> = d.scene.test.frames.iter().map(|f| f.timestamp).collect();
     let rec = Recording {
@@ -234,6 +245,7 @@ pub fn train(
         gaussians: model.splats.len(),
         curve,
         test,
+        novel,
         baselines,
         settings,
     };

@@ -21,8 +21,8 @@ enum Verb {
     /// Train canonical Gaussians + deformation field on a scene's RGB frames (the DEGS
     /// warm-up; with more iterations, the RGB-only baseline). Writes point_cloud.ply,
     /// dynamic.safetensors, model.json, field.safetensors, depth/NNNN.exr (train
-    /// frames), renders/NNNN.png (test frames) and report.json (test PSNR/SSIM, time
-    /// per phase). Ctrl-C stops at the next iteration and still writes a usable model.
+    /// frames), renders/NNNN.png (test frames), renders/novel/NNNN.png (novel views, if
+    /// the scene has them) and report.json (test and novel PSNR/SSIM, time per phase). Ctrl-C stops at the next iteration and still writes a usable model.
     Train(TrainArgs),
     /// Render a saved model at the frames of a scene split, with PSNR/SSIM.
     Render {
@@ -72,8 +72,11 @@ fn run(verb: Verb) -> scene::Result<ExitCode> {
             progress.finish();
             let o = result?;
             let r = &o.report;
+            let novel = r.novel.as_ref().map_or(String::new(), |n| {
+                format!(", novel views {:.2} dB / {:.4}", n.psnr_mean, n.ssim_mean)
+            });
             eprintln!(
-                "{}: {} iterations, {} Gaussians, test PSNR {:.2} dB, SSIM {:.4}{}",
+                "{}: {} iterations, {} Gaussians, test PSNR {:.2} dB, SSIM {:.4}{novel}{}",
                 o.out.display(),
                 r.iterations,
                 r.gaussians,

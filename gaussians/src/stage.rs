@@ -5,7 +5,9 @@
 //! Outputs are written into a temp directory renamed at the end ([`AtomicDir`]):
 //! the model ([`Model::save`]), `depth/NNNN.exr` (alpha-normalised depth at every train
 //! frame, 0 where alpha < 0.5; NNNN = train frame index), `renders/NNNN.png` (every
-//! test frame), `settings.toml` (resolved settings) and `report.json`.
+//! test frame), `renders/novel/NNNN.png` (every frame of the scene's novel-view split,
+//! if it has one), `settings.toml` (resolved settings) and `report.json` (PSNR/SSIM of
+//! the test frames in `test`, of the novel views in `novel`).
 
 use crate::model::Model;
 use crate::raster::TileRasterizer;
@@ -137,6 +139,9 @@ pub struct TrainReport {
     /// Initial Gaussians placed on surfaces (from the PLY or stereo; the rest random).
     pub init_surface_points: usize,
     pub test: Evaluation,
+    /// The same on the novel-view split; absent when the scene has none.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub novel: Option<Evaluation>,
 }
 
 /// Planar RGB of a frame's image, checked against the camera size.
@@ -192,13 +197,15 @@ fn hash_file(path: &Path) -> Result<InputHash> {
 /// Hashes of the manifests, every image and the initial point cloud.
 fn input_hashes(scene: &Scene, init_ply: Option<&Path>) -> Result<Vec<InputHash>> {
     let mut out = Vec::new();
-    for name in [scene::manifest::TRAIN_FILE, scene::manifest::TEST_FILE] {
+    use scene::manifest::{NOVEL_FILE, TEST_FILE, TRAIN_FILE};
+    for name in [TRAIN_FILE, TEST_FILE, NOVEL_FILE] {
         let p = scene.root.join(name);
         if p.is_file() {
             out.push(hash_file(&p)?);
         }
     }
-    for f in scene.train.frames.iter().chain(&scene.test.frames) {
+    let frames = scene.train.frames.iter().chain(&scene.test.frames);
+    for f in frames.chain(&scene.novel.frames) {
         out.push(hash_file(&scene.image_path(f))?);
     }
     if let Some(p) = init_ply {
@@ -252,6 +259,17 @@ fn mean_colour(rgb: &[f32]) -> Vec<f32> {
         out.extend(std::iter::repeat_n(m as f32, c.len()));
     }
     out
+}
+
+/// PSNR/SSIM of `model` on the scene's novel-view split, its renders written to
+/// `renders/novel/NNNN.png` under `out`; None when the scene has no novel views.
+pub fn evaluate_novel(model: &Model, scene: &Scene, out: &Path) -> Result<Option<Evaluation>> {
+    if scene.novel.frames.is_empty() {
+        return Ok(None);
+    }
+    let views = load_views(scene, &scene.novel)?;
+    let dir = out.join("renders").join("novel");
+    evaluate(model, &views, "novel", Some(&dir)).map(Some)
 }
 
 /// Write `depth/NNNN.exr` for every view.
@@ -364,6 +382,7 @@ pub fn train(
         "test",
         Some(&out.path().join("renders")),
     )?;
+    let novel = evaluate_novel(&model, &scene, out.path())?;
     phases.stop();
     let report = TrainReport {
         stage: "gaussians train",
@@ -385,6 +404,7 @@ pub fn train(
         train_frames: views.len(),
         init_surface_points,
         test,
+        novel,
         settings,
     };
     write_json_atomic(&out.path().join("report.json"), &report)?;
@@ -399,6 +419,8 @@ pub enum Split {
     #[default]
     Test,
     Train,
+    /// The novel-view split (`transforms_novel.json`).
+    Novel,
 }
 
 /// `report.json` of `gaussians render`.
@@ -430,7 +452,14 @@ pub fn render(
     let (m, name) = match split {
         Split::Test => (&scene.test, "test"),
         Split::Train => (&scene.train, "train"),
+        Split::Novel => (&scene.novel, "novel"),
     };
+    if split == Split::Novel && m.frames.is_empty() {
+        return Err(Error::invalid(
+            scene.root.join(scene::manifest::NOVEL_FILE),
+            "the scene has no novel-view split to render",
+        ));
+    }
     let views = load_views(&scene, m)?;
     let out = AtomicDir::new(out_dir)?;
     phases.start("render");

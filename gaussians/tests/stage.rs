@@ -157,6 +157,68 @@ fn trains_writes_every_output_and_reloads_identically() {
     let rr = stage::render(&out, &scene_dir, &rendered, Split::Test).unwrap();
     assert_eq!(rr.evaluation.psnr, r.test.psnr);
     assert!(rendered.join("renders/0002.png").is_file());
+
+    // the novel views (15° off the path at the test times): scored and rendered beside
+    // the test frames, and reproduced by `render --split novel`
+    assert_eq!(sc.novel.frames.len(), 3);
+    let novel = r.novel.as_ref().expect("a novel section");
+    assert_eq!((novel.split.as_str(), novel.frames), ("novel", 3));
+    let psnr = report["novel"]["psnr_mean"].as_f64().unwrap();
+    assert!(psnr.is_finite() && psnr == novel.psnr_mean, "{psnr}");
+    assert_eq!(report["novel"]["ssim"].as_array().unwrap().len(), 3);
+    eprintln!(
+        "tiny scene: novel-view PSNR {:.2} dB (mean colour {:.2} dB)",
+        novel.psnr_mean, novel.mean_colour_psnr_mean
+    );
+    assert!(novel.psnr_mean > novel.mean_colour_psnr_mean, "{novel:?}");
+    for i in 0..3 {
+        assert!(out.join(format!("renders/novel/{i:04}.png")).is_file());
+    }
+    assert!(!out.join("renders/0003.png").exists());
+    let rendered = tmp.path().join("rendered-novel");
+    let rn = stage::render(&out, &scene_dir, &rendered, Split::Novel).unwrap();
+    assert_eq!(rn.evaluation.psnr, novel.psnr);
+    assert_ne!(rn.evaluation.psnr, r.test.psnr);
+    let inputs = report["inputs"].as_array().unwrap();
+    assert!(
+        inputs.iter().any(|i| i["path"]
+            .as_str()
+            .unwrap()
+            .ends_with("transforms_novel.json")),
+        "{inputs:?}"
+    );
+}
+
+#[test]
+fn without_a_novel_split_the_report_has_no_novel_section() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene_dir = tmp.path().join("scene");
+    let cfg = SynthConfig {
+        novel_angle_deg: 0.0,
+        ..tiny_config()
+    };
+    synth::write_rgb_synthetic_scene(&cfg, &scene_dir).unwrap();
+    let out = tmp.path().join("out");
+    let args = TrainArgs {
+        scene: scene_dir.clone(),
+        out: out.clone(),
+        iterations: Some(3),
+        ..TrainArgs::default()
+    };
+    let o = stage::train(&args, &AtomicBool::new(false), |_| {}).unwrap();
+    assert!(o.report.novel.is_none());
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert!(report.get("novel").is_none(), "{}", report["novel"]);
+    assert_eq!(report["test"]["frames"], 3);
+    assert!(!out.join("renders/novel").exists());
+    let e = stage::render(&out, &scene_dir, &tmp.path().join("r"), Split::Novel)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("transforms_novel.json") && e.contains("no novel-view split"),
+        "{e}"
+    );
 }
 
 #[test]

@@ -22,6 +22,16 @@ pub struct Cli {
     pub command: Command,
 }
 
+/// The help of `degs synth --set`, with the default novel-view angle (from the
+/// synthetic scene's settings type, so that it cannot drift).
+fn synth_set_help() -> String {
+    format!(
+        "Override a setting, e.g. --set width=64 --set camera.sway_hz=0.5; \
+         --set novel_angle_deg=0 writes no novel-view split [novel_angle_deg default: {}]",
+        synth::SynthConfig::default().novel_angle_deg
+    )
+}
+
 /// The help of `degs demo --full`, with the stages' defaults it stands for (from their
 /// settings types, so that it cannot drift).
 fn full_help() -> String {
@@ -106,7 +116,9 @@ pub enum Command {
         #[command(subcommand)]
         command: ConfigCommand,
     },
-    /// Write a synthetic scene directory with ground truth (depth, flow, per-event flow).
+    /// Write a synthetic scene directory with ground truth (depth, flow, per-event flow):
+    /// train and test frames along the camera path, and novel views at the test times
+    /// from a camera rotated about the scene's centre (`novel_angle_deg`).
     Synth {
         /// Preset: static, rigid, nonrigid, fast
         #[arg(long, default_value = "rigid")]
@@ -114,8 +126,8 @@ pub enum Command {
         /// A full settings file instead of a preset (as written by `degs run`/`plan`)
         #[arg(long, value_name = "FILE")]
         config: Option<PathBuf>,
-        /// Override a setting, e.g. --set width=64 --set camera.sway_hz=0.5
-        #[arg(long = "set", value_name = "KEY=VALUE")]
+        // Help: "Override a setting, e.g. … [novel_angle_deg default: …]".
+        #[arg(long = "set", value_name = "KEY=VALUE", help = synth_set_help())]
         set: Vec<String>,
         /// Output scene directory (replaced atomically)
         #[arg(long)]
@@ -188,8 +200,10 @@ pub enum Command {
         #[arg(short = 'j', long, default_value_t = 2)]
         jobs: usize,
     },
-    /// PSNR/SSIM of the final renders against the scene's test images (and the flow
-    /// EPE the evflow stage reports where the scene has ground truth) → metrics.json.
+    /// PSNR/SSIM of the final renders against the scene's test images and novel views
+    /// (and the flow EPE the evflow stage reports where the scene has ground truth) →
+    /// metrics.json; prints the 2D baselines (nearest frame, linear blend, event pseudo
+    /// image) on the test frames beside them.
     Eval {
         /// A run directory (<cache>/runs/<name>) or an experiment name
         run: String,

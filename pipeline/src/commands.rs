@@ -110,7 +110,11 @@ pub fn execute(command: Command) -> Result<()> {
         Command::Eval { run, place } => {
             let dir = place.run_dir(&run)?;
             let m = eval::eval_run(&dir)?;
-            print!("{}", eval::compare_table(&[(m.experiment.clone(), m)]));
+            print!(
+                "{}",
+                eval::compare_table(&[(m.experiment.clone(), m.clone())])
+            );
+            print!("\n{}", eval::baseline_block(&m));
             eprintln!("[degs] wrote {}", dir.join("metrics.json").display());
             Ok(())
         }
@@ -149,12 +153,13 @@ fn synth_scene(preset: &str, config: Option<&Path>, set: &[String], out: &Path) 
     let cfg = synth::load_config(config, Some(preset), set)?;
     let s = synth::write_scene(&cfg, out)?;
     eprintln!(
-        "[degs] synth: {} {}x{}, {} train + {} test frames, {} events in {:.2} s → {}",
+        "[degs] synth: {} {}x{}, {} train + {} test frames + {} novel views, {} events in {:.2} s → {}",
         s.preset,
         s.width,
         s.height,
         s.train_frames,
         s.test_frames,
+        s.novel_frames,
         s.events,
         s.total_s,
         out.display()

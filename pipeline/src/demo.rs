@@ -53,6 +53,10 @@ pub struct DemoSummary {
     /// Test-frame PSNR/SSIM of the final renders (`degs eval`).
     pub psnr: Option<f64>,
     pub ssim: Option<f64>,
+    /// The same on the novel views (`degs eval`; None when the scene or the renders
+    /// have none).
+    pub novel_psnr: Option<f64>,
+    pub novel_ssim: Option<f64>,
     /// Per-event flow EPE against the scene's ground truth (`degs eval`), px/s.
     pub flow_epe: Option<f64>,
     pub renders: Option<PathBuf>,
@@ -170,6 +174,8 @@ pub fn demo(opts: &DemoOptions, ctx: &Context, progress: &Progress) -> Result<De
         stages: stage_rows(&record),
         psnr: metrics.as_ref().and_then(|m| m.psnr_mean),
         ssim: metrics.as_ref().and_then(|m| m.ssim_mean),
+        novel_psnr: metrics.as_ref().and_then(|m| m.novel_psnr_mean),
+        novel_ssim: metrics.as_ref().and_then(|m| m.novel_ssim_mean),
         flow_epe: metrics.as_ref().and_then(|m| m.flow_epe),
         renders,
         metrics: metrics.map(|_| run_dir.join("metrics.json")),
@@ -304,7 +310,7 @@ pub fn format_summary(s: &DemoSummary) -> String {
         );
     }
     t += "\n";
-    let mut line = |label: &str, value: String| t += &format!("{label:<16}{value}\n");
+    let mut line = |label: &str, value: String| t += &format!("{label:<17}{value}\n");
     line("experiment:", s.experiment_file.display().to_string());
     if let Some(scene) = &s.scene {
         line("scene:", scene.display().to_string());
@@ -321,10 +327,19 @@ pub fn format_summary(s: &DemoSummary) -> String {
         }
     }
     if let Some(r) = &s.renders {
-        line("renders:", format!("{} (test frames)", r.display()));
+        line(
+            "renders:",
+            format!("{} (test frames; novel views in novel/)", r.display()),
+        );
     }
     if let (Some(p), Some(q)) = (s.psnr, s.ssim) {
         line("test PSNR/SSIM:", format!("{p:.2} dB / {q:.4}"));
+    }
+    if let (Some(p), Some(q)) = (s.novel_psnr, s.novel_ssim) {
+        line(
+            "novel PSNR/SSIM:",
+            format!("{p:.2} dB / {q:.4} (views off the path)"),
+        );
     }
     if let Some(e) = s.flow_epe {
         line("flow EPE:", format!("{e:.3} px/s (per event, vs gt)"));

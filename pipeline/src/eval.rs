@@ -1,6 +1,8 @@
 //! `degs eval RUN` and `degs compare RUN…`: image quality of the final renders on the
-//! held-out test frames, flow error where the stages report it.
+//! held-out test frames and on the novel views, the 2D baselines on the test frames
+//! ([`crate::baselines`]), flow error where the stages report it.
 
+use crate::baselines::{self, BaselineFigures};
 use crate::record::RunRecord;
 use crate::stages;
 use anyhow::{Context, Result, bail};
@@ -19,6 +21,20 @@ pub struct Metrics {
     pub frames: Vec<FrameMetrics>,
     pub psnr_mean: Option<f64>,
     pub ssim_mean: Option<f64>,
+    /// The same stage's renders of the novel views (`<renders>/novel/`) against the
+    /// scene's novel-view images; empty when either has none.
+    #[serde(default)]
+    pub novel_frames: Vec<FrameMetrics>,
+    #[serde(default)]
+    pub novel_psnr_mean: Option<f64>,
+    #[serde(default)]
+    pub novel_ssim_mean: Option<f64>,
+    /// The 2D baselines on the test frames (PSNR capped as the frames' are); None with
+    /// the reason in `baselines_note` when they are not available.
+    #[serde(default)]
+    pub baselines: Option<BaselineFigures>,
+    #[serde(default)]
+    pub baselines_note: Option<String>,
     /// Mean end-point error (px/s) of the per-event flow against the scene's ground
     /// truth (`gt/event_flow.bin`), over every non-noise event of every window; when
     /// the flow files cannot be read, the figure the evflow stage reported.
@@ -38,6 +54,7 @@ pub struct Metrics {
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct FrameMetrics {
+    /// The held-out image (a test frame or a novel view).
     pub test_image: PathBuf,
     pub render: PathBuf,
     pub psnr: f64,
@@ -246,17 +263,19 @@ pub fn eval_run(run_dir: &Path) -> Result<Metrics> {
         .and_then(|s| s.entry.clone())
         .with_context(|| format!("{}: the run has no scene", run_dir.display()))?;
     let scene = Scene::open(&scene_dir)?;
-    let tests: Vec<PathBuf> = scene
-        .test
-        .frames
-        .iter()
-        .map(|f| scene.image_path(f))
-        .collect();
+    let images = |m: &scene::manifest::Manifest| -> Vec<PathBuf> {
+        m.frames.iter().map(|f| scene.image_path(f)).collect()
+    };
 
-    let (render_stage, frames) = eval_renders(&entry_of, &tests)?;
-    let mean = |f: &dyn Fn(&FrameMetrics) -> f64| {
+    let (render_stage, frames) = eval_renders(&entry_of, &images(&scene.test))?;
+    let novel_frames = match &render_stage {
+        Some(stage) => eval_novel(&entry_of, stage, &images(&scene.novel))?,
+        None => Vec::new(),
+    };
+    let mean = |frames: &[FrameMetrics], f: &dyn Fn(&FrameMetrics) -> f64| {
         (!frames.is_empty()).then(|| frames.iter().map(f).sum::<f64>() / frames.len() as f64)
     };
+    let (baselines, baselines_note) = run_baselines(&entry_of, &scene);
     let (flow, flow_source) = eval_flow(&entry_of, &scene_dir).unzip();
     let stage_s: Vec<(String, f64)> = record
         .stages
@@ -267,9 +286,14 @@ pub fn eval_run(run_dir: &Path) -> Result<Metrics> {
     let metrics = Metrics {
         experiment: record.experiment.clone(),
         render_stage,
-        psnr_mean: mean(&|f| f.psnr),
-        ssim_mean: mean(&|f| f.ssim),
+        psnr_mean: mean(&frames, &|f| f.psnr),
+        ssim_mean: mean(&frames, &|f| f.ssim),
         frames,
+        novel_psnr_mean: mean(&novel_frames, &|f| f.psnr),
+        novel_ssim_mean: mean(&novel_frames, &|f| f.ssim),
+        novel_frames,
+        baselines,
+        baselines_note,
         flow_epe: flow.as_ref().map(|f| f.epe_px_s),
         flow_err_px: flow.as_ref().and_then(|f| f.err_px),
         flow_outliers: flow.as_ref().and_then(|f| f.outliers),
@@ -298,21 +322,83 @@ fn eval_renders(
         }
         let pairs = pair_renders(tests, &renders)
             .with_context(|| format!("{}", entry.join(dir).display()))?;
-        let frames = pairs
-            .par_iter()
-            .map(|(t, r)| {
-                let (psnr, ssim) = compare_images(t, r)?;
-                Ok(FrameMetrics {
-                    test_image: t.clone(),
-                    render: r.clone(),
-                    psnr,
-                    ssim,
-                })
-            })
-            .collect::<Result<Vec<_>>>()?;
-        return Ok((Some(stage.name.to_string()), frames));
+        return Ok((Some(stage.name.to_string()), score_pairs(&pairs)?));
     }
     Ok((None, Vec::new()))
+}
+
+/// PSNR/SSIM of each (held-out image, render) pair.
+fn score_pairs(pairs: &[(PathBuf, PathBuf)]) -> Result<Vec<FrameMetrics>> {
+    pairs
+        .par_iter()
+        .map(|(t, r)| {
+            let (psnr, ssim) = compare_images(t, r)?;
+            Ok(FrameMetrics {
+                test_image: t.clone(),
+                render: r.clone(),
+                psnr,
+                ssim,
+            })
+        })
+        .collect()
+}
+
+/// PSNR/SSIM of stage `stage`'s renders of the novel views (`<renders>/novel/`);
+/// empty when the scene has no novel views or the stage rendered none (an entry
+/// built before the split existed).
+fn eval_novel(
+    entry_of: &dyn Fn(&str) -> Option<PathBuf>,
+    stage: &str,
+    novel: &[PathBuf],
+) -> Result<Vec<FrameMetrics>> {
+    let dir =
+        stages::find(stage).and_then(|s| Some(entry_of(stage)?.join(s.renders?).join("novel")));
+    let Some(dir) = dir.filter(|_| !novel.is_empty()) else {
+        return Ok(Vec::new());
+    };
+    let renders = images_in(&dir);
+    if renders.is_empty() {
+        return Ok(Vec::new());
+    }
+    let pairs = pair_renders(novel, &renders).with_context(|| format!("{}", dir.display()))?;
+    score_pairs(&pairs)
+}
+
+/// The run's 2D baselines: the deform stage's report's when it ran, else computed from
+/// the scene; else None and why.
+fn run_baselines(
+    entry_of: &dyn Fn(&str) -> Option<PathBuf>,
+    scene: &Scene,
+) -> (Option<BaselineFigures>, Option<String>) {
+    let reported = entry_of("deform")
+        .and_then(|e| std::fs::read(e.join("report.json")).ok())
+        .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
+        .and_then(|v| baselines::from_report(&v));
+    let found = match reported {
+        Some(b) => Ok(Some(b)),
+        None => baselines::compute(scene),
+    };
+    match found {
+        Ok(Some(b)) => (Some(b.capped(PSNR_CAP)), None),
+        Ok(None) => (None, Some("the scene has no test frames".into())),
+        Err(e) => (None, Some(format!("{e:#}"))),
+    }
+}
+
+/// What `degs eval` prints under its table: the model's figures on the test frames
+/// beside the 2D baselines', and on the novel views.
+pub fn baseline_block(m: &Metrics) -> String {
+    let both = |p: Option<f64>, s: Option<f64>| p.zip(s);
+    let baselines = m
+        .baselines
+        .as_ref()
+        .ok_or(m.baselines_note.as_deref().unwrap_or("unknown"));
+    baselines::format_block(
+        m.render_stage.as_deref().unwrap_or("no"),
+        both(m.psnr_mean, m.ssim_mean),
+        both(m.novel_psnr_mean, m.novel_ssim_mean),
+        baselines,
+    )
 }
 
 /// The flow error of the stage that writes per-event flow, against the scene's ground
@@ -346,16 +432,28 @@ fn eval_flow(
 pub fn compare_table(runs: &[(String, Metrics)]) -> String {
     let f = |v: Option<f64>, p: usize| v.map_or("-".to_string(), |x| format!("{x:.p$}"));
     let mut s = format!(
-        "{:<24} {:>8} {:>7} {:>7} {:>11} {:>8} {:>9} {:>10} {:>8}\n",
-        "run", "PSNR dB", "SSIM", "frames", "EPE px/s", "EPE px", "outliers", "renders", "time s"
+        "{:<24} {:>8} {:>7} {:>7} {:>9} {:>10} {:>11} {:>8} {:>9} {:>10} {:>8}\n",
+        "run",
+        "PSNR dB",
+        "SSIM",
+        "frames",
+        "novel dB",
+        "novel SSIM",
+        "EPE px/s",
+        "EPE px",
+        "outliers",
+        "renders",
+        "time s"
     );
     for (name, m) in runs {
         s += &format!(
-            "{:<24} {:>8} {:>7} {:>7} {:>11} {:>8} {:>9} {:>10} {:>8.1}\n",
+            "{:<24} {:>8} {:>7} {:>7} {:>9} {:>10} {:>11} {:>8} {:>9} {:>10} {:>8.1}\n",
             name,
             f(m.psnr_mean, 2),
             f(m.ssim_mean, 4),
             m.frames.len(),
+            f(m.novel_psnr_mean, 2),
+            f(m.novel_ssim_mean, 4),
             f(m.flow_epe, 3),
             f(m.flow_err_px, 3),
             m.flow_outliers

@@ -5,6 +5,7 @@
 //! The `degs` binary is a thin layer over [`cli`] (its command line) and [`commands`]
 //! (what each sub-command does); tests and other tools can call the modules directly.
 
+pub mod baselines;
 pub mod cache;
 pub mod canon;
 pub mod cli;

@@ -19,6 +19,7 @@ pub const SYNTH: &str = "synth";
 pub const SYNTH_FIGURES: &[Figure] = &[
     Figure::plain("train_frames", "train frames"),
     Figure::plain("test_frames", "test frames"),
+    Figure::plain("novel_frames", "novel views"),
     Figure::plain("events", "events"),
 ];
 
@@ -40,7 +41,8 @@ pub struct Stage {
     pub settings: Option<SettingsType>,
     /// A file its settings name whose content enters its key.
     pub key_file: Option<KeyFile>,
-    /// Sub-directory holding its renders of the scene's test frames, if it writes them.
+    /// Sub-directory holding its renders of the scene's test frames, if it writes them
+    /// (its renders of the novel views, when the scene has them, in `novel/` under it).
     /// `degs eval` and the demo use the last stage in run order that has them.
     pub renders: Option<&'static str>,
     /// Sub-directory holding per-event flow files (`*.evflow`), if it writes them.
@@ -136,6 +138,7 @@ pub const STAGES: &[Stage] = &[
         figures: &[
             Figure::new("test/psnr_mean", "test PSNR", "dB"),
             Figure::plain("test/ssim_mean", "SSIM"),
+            Figure::new("novel/psnr_mean", "novel PSNR", "dB"),
             Figure::plain("gaussians", "Gaussians"),
         ],
     },
@@ -187,6 +190,7 @@ pub const STAGES: &[Stage] = &[
         figures: &[
             Figure::new("test/psnr_mean", "test PSNR", "dB"),
             Figure::plain("test/ssim_mean", "SSIM"),
+            Figure::new("novel/psnr_mean", "novel PSNR", "dB"),
             Figure::new("baselines/blend/psnr_mean", "linear blend", "dB"),
             Figure::new("baselines/events/psnr_mean", "event pseudo image", "dB"),
             Figure::new("psnr", "PSNR", "dB"),

@@ -193,7 +193,23 @@ fn synth_writes_every_preset_in_the_scene_layout() {
         // train frames at k / train_fps over 0.25 s at 8 fps: 0, 0.125, 0.25
         assert_eq!(scene.train.frames.len(), 3, "{preset}");
         assert_eq!(scene.test.frames.len(), 2, "{preset}");
-        for f in scene.train.frames.iter().chain(&scene.test.frames) {
+        // the novel views: one per test time, 15° off the path
+        assert_eq!(scene.novel.frames.len(), 2, "{preset}");
+        assert!(
+            text(&o).contains("3 train + 2 test frames + 2 novel views"),
+            "{preset}: {}",
+            text(&o)
+        );
+        for (n, t) in scene.novel.frames.iter().zip(&scene.test.frames) {
+            assert_eq!(n.timestamp, t.timestamp, "{preset}");
+            let moved = (n.cam_to_world.translation - t.cam_to_world.translation).length();
+            assert!(
+                moved > 0.75,
+                "{preset}: novel camera {moved} from the test one"
+            );
+        }
+        let all = scene.train.frames.iter().chain(&scene.test.frames);
+        for f in all.chain(&scene.novel.frames) {
             let img = scene::image_io::read_image(scene.image_path(f)).unwrap();
             assert_eq!((img.width, img.height), (24, 16), "{preset}");
         }
@@ -203,7 +219,7 @@ fn synth_writes_every_preset_in_the_scene_layout() {
         assert!(out.join("events.evs").is_file());
         let gt = synth::gt::read_event_flow_gt(out.join("gt/event_flow.bin")).unwrap();
         assert_eq!(gt.len(), ev.len(), "{preset}: one gt flow per event");
-        for split in ["train", "test"] {
+        for split in ["train", "test", "novel"] {
             let n = if split == "train" { 3 } else { 2 };
             for i in 0..n {
                 let depth = out.join(format!("gt/{split}/depth_{i:04}.exr"));
@@ -222,6 +238,21 @@ fn synth_writes_every_preset_in_the_scene_layout() {
                 .unwrap();
         assert_eq!(settings["width"].as_integer(), Some(24), "{preset}");
     }
+    // the novel-view angle is a setting (its default in --help); 0 writes no novel split
+    let help = String::from_utf8_lossy(&degs(&["synth", "--help"]).stdout).to_string();
+    assert!(
+        help.contains("novel_angle_deg=0") && help.contains("[novel_angle_deg default: 15]"),
+        "{help}"
+    );
+    let out = d.path().join("no-novel");
+    let mut args = vec!["synth", "--out", out.to_str().unwrap()];
+    args.extend_from_slice(&TINY);
+    args.extend_from_slice(&["--set", "novel_angle_deg=0"]);
+    let o = degs(&args);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("+ 0 novel views"), "{}", text(&o));
+    assert!(Scene::open(&out).unwrap().novel.frames.is_empty());
+    assert!(!out.join("transforms_novel.json").exists());
     // a typo in a setting names it; nothing is written
     let out = d.path().join("typo");
     let o = degs(&["synth", "--out", out.to_str().unwrap(), "--set", "widht=3"]);

@@ -37,7 +37,7 @@ fn reports(f: &Fixture) -> std::path::PathBuf {
     for (stage, json) in [
         (
             "gaussians",
-            r#"{"test": {"psnr_mean": 27.5, "ssim_mean": 0.91}, "gaussians": 4200}"#,
+            r#"{"test": {"psnr_mean": 27.5, "ssim_mean": 0.91}, "novel": {"psnr_mean": 21.25}, "gaussians": 4200}"#,
         ),
         (
             "evflow",
@@ -76,11 +76,13 @@ fn demo_runs_every_built_stage_and_summarises_it() {
         ),
         "{err}"
     );
-    assert!(row(&table, "synth").contains(" ran "), "{table}");
+    let synth = row(&table, "synth");
+    assert!(synth.contains(" ran "), "{table}");
+    assert!(synth.contains("test frames 8, novel views 8"), "{synth}");
     let g = row(&table, "gaussians");
     assert!(g.contains(" ran ") && g.contains(" no "), "{g}");
     assert!(
-        g.contains("test PSNR 27.50 dB, SSIM 0.9100, Gaussians 4200"),
+        g.contains("test PSNR 27.50 dB, SSIM 0.9100, novel PSNR 21.25 dB, Gaussians 4200"),
         "{g}"
     );
     let e = row(&table, "evflow");
@@ -96,12 +98,17 @@ fn demo_runs_every_built_stage_and_summarises_it() {
             && d.contains("cargo build --release -p degs-deform"),
         "{d}"
     );
-    // renders are the test images here, so eval gives the PSNR cap and SSIM 1
+    // renders are the test images and novel views here, so eval gives the PSNR cap
+    // and SSIM 1 on both splits
     assert!(
-        table.contains("test PSNR/SSIM: 100.00 dB / 1.0000"),
+        table.contains("test PSNR/SSIM:  100.00 dB / 1.0000"),
         "{table}"
     );
-    assert!(table.contains("flow EPE:       12.500 px/s"), "{table}");
+    assert!(
+        table.contains("novel PSNR/SSIM: 100.00 dB / 1.0000 (views off the path)"),
+        "{table}"
+    );
+    assert!(table.contains("flow EPE:        12.500 px/s"), "{table}");
     let renders = table
         .lines()
         .find(|l| l.starts_with("renders:"))
@@ -124,6 +131,7 @@ fn demo_runs_every_built_stage_and_summarises_it() {
     let summary: serde_json::Value =
         serde_json::from_slice(&fs::read(out.join("summary.json")).unwrap()).unwrap();
     assert_eq!(summary["psnr"], 100.0);
+    assert_eq!(summary["novel_psnr"], 100.0);
     assert_eq!(summary["stages"][2]["figures"][0][1], 27.5);
 
     // the second demo reuses everything

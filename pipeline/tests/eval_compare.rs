@@ -1,7 +1,9 @@
 //! `degs eval RUN` and `degs compare RUN…` on fabricated run directories: a tiny
-//! synthetic scene, renders with a known error, flow files with a known error.
+//! synthetic scene, renders of the test frames and novel views with a known error,
+//! flow files with a known error, the 2D baselines computed or read from a report.
 
 use evflow::flowfile::{EvFlow, write_evflow};
+use pipeline::baselines;
 use pipeline::experiment::synth_config;
 use pipeline::record::{Action, RunRecord, StageRecord};
 use scene::image_io::{read_image, write_png};
@@ -50,6 +52,18 @@ fn stage(name: &str, action: Action, entry: Option<PathBuf>) -> StageRecord {
 
 /// A run dir whose gaussians entry holds `renders` and whose evflow entry holds `flow/`.
 fn fabricate_run(root: &Path, name: &str, scene: &Path, renders: &Path, flows: Option<&Path>) {
+    fabricate_run_with(root, name, scene, renders, flows, None);
+}
+
+/// The same with a deform entry (`deform`) after it.
+fn fabricate_run_with(
+    root: &Path,
+    name: &str,
+    scene: &Path,
+    renders: &Path,
+    flows: Option<&Path>,
+    deform: Option<&Path>,
+) {
     let run = root.join("runs").join(name);
     let record = RunRecord {
         experiment: name.into(),
@@ -67,7 +81,10 @@ fn fabricate_run(root: &Path, name: &str, scene: &Path, renders: &Path, flows: O
             },
             stage("gaussians", Action::Ran, Some(renders.to_path_buf())),
             stage("assoc", Action::Unavailable, None),
-            stage("deform", Action::Unavailable, None),
+            match deform {
+                Some(d) => stage("deform", Action::Ran, Some(d.to_path_buf())),
+                None => stage("deform", Action::Unavailable, None),
+            },
         ],
     };
     record.write(&run.join("run.json")).unwrap();
@@ -76,10 +93,14 @@ fn fabricate_run(root: &Path, name: &str, scene: &Path, renders: &Path, flows: O
 /// Copies of the test frames as renders; frame 1 gets pixel (0, 0) red changed by
 /// `delta` levels. Returns the expected PSNR of frame 1.
 fn renders(dir: &Path, scene: &Scene, delta: f32) -> f64 {
-    let out = dir.join("renders");
-    fs::create_dir_all(&out).unwrap();
+    copies(&dir.join("renders"), scene, &scene.test.frames, delta)
+}
+
+/// The same for the frames `frames` of `scene`, into `out`.
+fn copies(out: &Path, scene: &Scene, frames: &[scene::manifest::Frame], delta: f32) -> f64 {
+    fs::create_dir_all(out).unwrap();
     let mut expected = f64::INFINITY;
-    for (i, f) in scene.test.frames.iter().enumerate() {
+    for (i, f) in frames.iter().enumerate() {
         let mut img = read_image(scene.image_path(f)).unwrap();
         if i == 1 && delta != 0.0 {
             let v = (img.data[0] * 255.0).round();
@@ -111,10 +132,12 @@ fn eval_and_compare_report_known_errors() {
         .count();
     assert!(noise > 0 && noise < gt.len(), "{noise} of {}", gt.len());
 
-    // run A: one render off by 40 levels in one value; flow off by (3, -4) px/s,
-    // noise events given absurd flow (they must not count)
+    // run A: one render off by 40 levels in one value, one novel view off by 20;
+    // flow off by (3, -4) px/s, noise events given absurd flow (they must not count)
     let a = d.path().join("a-gaussians");
     let psnr1 = renders(&a, &scene, 40.0);
+    assert_eq!(scene.novel.frames.len(), 2);
+    let novel1 = copies(&a.join("renders/novel"), &scene, &scene.novel.frames, 20.0);
     let flows = d.path().join("a-evflow");
     fs::create_dir_all(flows.join("flow")).unwrap();
     let half = gt.len() / 2;
@@ -157,6 +180,62 @@ fn eval_and_compare_report_known_errors() {
     let mean = m["psnr_mean"].as_f64().unwrap();
     assert!((mean - (100.0 + psnr1) / 2.0).abs() < 1e-9);
     assert_eq!(m["render_stage"], "gaussians");
+    // the novel views: frame 0 exact, frame 1 off by 20 levels in one value
+    let novel = m["novel_frames"].as_array().unwrap();
+    assert_eq!(novel.len(), 2);
+    assert!(
+        novel[1]["test_image"]
+            .as_str()
+            .unwrap()
+            .ends_with("novel_0001.png")
+    );
+    assert!((novel[1]["psnr"].as_f64().unwrap() - novel1).abs() < 1e-9);
+    let novel_mean = m["novel_psnr_mean"].as_f64().unwrap();
+    assert!((novel_mean - (100.0 + novel1) / 2.0).abs() < 1e-9);
+    assert!(novel1 > psnr1 + 5.9, "{novel1} vs {psnr1}"); // half the error: +6.02 dB
+    // the 2D baselines, computed from the scene (the run has no deform stage)
+    let want = scene_baselines(&scene_dir);
+    let b = &m["baselines"];
+    assert_eq!(b["source"], "computed from the scene");
+    for (key, want) in [("nearest", want.nearest), ("blend", want.blend)] {
+        assert!((b[key]["psnr_mean"].as_f64().unwrap() - want.psnr_mean).abs() < 1e-9);
+        assert!((b[key]["ssim_mean"].as_f64().unwrap() - want.ssim_mean).abs() < 1e-9);
+    }
+    let events = want.events.unwrap();
+    assert!((b["events"]["psnr_mean"].as_f64().unwrap() - events.psnr_mean).abs() < 1e-9);
+    // and printed under the table, beside the model's figures
+    let out = String::from_utf8_lossy(&o.stdout).to_string();
+    let line = |label: &str| {
+        out.lines()
+            .find(|l| l.trim_start().starts_with(label))
+            .unwrap_or_else(|| panic!("no {label} line in\n{out}"))
+            .to_string()
+    };
+    let figures = |s: &baselines::Score| format!("{:.2} {:.4}", s.psnr_mean, s.ssim_mean);
+    let tail = |l: String| {
+        l.split_whitespace()
+            .rev()
+            .take(2)
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
+    let flip = |s: String| s.split(' ').rev().collect::<Vec<_>>().join(" ");
+    assert_eq!(
+        flip(tail(line("nearest train frame"))),
+        figures(&want.nearest)
+    );
+    assert_eq!(flip(tail(line("linear blend"))), figures(&want.blend));
+    assert_eq!(flip(tail(line("event pseudo image"))), figures(&events));
+    assert!(
+        line("model (gaussians renders)").contains(&format!("{:.2}", mean)),
+        "{out}"
+    );
+    assert!(
+        out.contains("2D baselines: computed from the scene"),
+        "{out}"
+    );
+    assert!(out.contains("novel views"), "{out}");
+    assert!(out.contains("cannot render a new viewpoint"), "{out}");
     // flow: |(3, -4)| = 5 px/s for every non-noise event (f32 rounding of gt + 3)
     assert_eq!(m["flow_source"], "gt/event_flow.bin");
     assert_eq!(
@@ -182,16 +261,19 @@ fn eval_and_compare_report_known_errors() {
     let lines: Vec<&str> = table.lines().collect();
     assert_eq!(lines.len(), 3, "{table}");
     assert!(lines[0].contains("PSNR dB") && lines[0].contains("EPE px/s"));
+    assert!(lines[0].contains("novel dB") && lines[0].contains("novel SSIM"));
     let cols = |l: &str| l.split_whitespace().map(str::to_string).collect::<Vec<_>>();
     let ca = cols(lines[1]);
     assert_eq!(ca[1], format!("{:.2}", (100.0 + psnr1) / 2.0), "{table}");
     assert_eq!(ca[3], "2");
-    assert_eq!(ca[4], "5.000");
-    assert_eq!(ca[5], "0.625");
-    assert_eq!(ca[6], "0.0%");
+    assert_eq!(ca[4], format!("{:.2}", (100.0 + novel1) / 2.0), "{table}");
+    assert_eq!(ca[6], "5.000");
+    assert_eq!(ca[7], "0.625");
+    assert_eq!(ca[8], "0.0%");
     let cb = cols(lines[2]);
     assert_eq!(cb[0], "b");
-    assert_eq!(&cb[1..5], ["100.00", "1.0000", "2", "-"]);
+    // run B rendered no novel views
+    assert_eq!(&cb[1..7], ["100.00", "1.0000", "2", "-", "-", "-"]);
     assert!(root.join("runs/b/metrics.json").is_file());
 }
 
@@ -221,4 +303,60 @@ fn eval_errors_name_what_is_wrong() {
     let o = degs(&["eval", bad.to_str().unwrap()]);
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("run.json"));
+}
+
+/// The 2D baselines of the scene's test frames, computed as the deform stage does.
+fn scene_baselines(dir: &Path) -> baselines::BaselineFigures {
+    baselines::compute(&Scene::open(dir).unwrap())
+        .unwrap()
+        .unwrap()
+}
+
+#[test]
+fn eval_prints_the_baselines_of_the_deform_report() {
+    let d = tempfile::tempdir().unwrap();
+    let root = d.path().join("cache-root");
+    let scene_dir = tiny_scene(d.path());
+    let scene = Scene::open(&scene_dir).unwrap();
+    let g = d.path().join("g");
+    renders(&g, &scene, 0.0);
+    // the deform entry: its renders (one off by 40 levels) and its report's baselines
+    let deform = d.path().join("deform");
+    let psnr1 = renders(&deform, &scene, 40.0);
+    fs::write(
+        deform.join("report.json"),
+        r#"{"test": {"psnr_mean": 1.0}, "baselines": {
+            "nearest": {"psnr_mean": 21.125, "ssim_mean": 0.625, "psnr": [20.0, 22.25]},
+            "blend": {"psnr_mean": 23.5, "ssim_mean": 0.75, "psnr": [23.0, 24.0]},
+            "events": {"psnr_mean": 24.875, "ssim_mean": 0.8125, "psnr": [24.0, 25.75]}}}"#,
+    )
+    .unwrap();
+    fabricate_run_with(&root, "j", &scene_dir, &g, None, Some(&deform));
+    let run = root.join("runs/j");
+    let o = degs(&["eval", run.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let out = String::from_utf8_lossy(&o.stdout).to_string();
+    let block: Vec<&str> = out
+        .lines()
+        .skip_while(|l| !l.starts_with("test frames"))
+        .collect();
+    let cols = |l: &str| l.split_whitespace().map(str::to_string).collect::<Vec<_>>();
+    let mean = format!("{:.2}", (100.0 + psnr1) / 2.0);
+    assert_eq!(
+        cols(block[1])[..3],
+        ["model", "(deform", "renders)"],
+        "{out}"
+    );
+    assert_eq!(cols(block[1])[3], mean, "{out}");
+    assert_eq!(cols(block[2])[3..], ["21.12", "0.6250"], "{out}");
+    assert_eq!(cols(block[3])[2..], ["23.50", "0.7500"], "{out}");
+    assert_eq!(cols(block[4])[4..], ["24.88", "0.8125"], "{out}");
+    assert_eq!(block[5], "  2D baselines: the deform report", "{out}");
+    // the deform entry rendered no novel views: no novel block
+    assert_eq!(block.len(), 6, "{out}");
+    let m: serde_json::Value =
+        serde_json::from_slice(&fs::read(run.join("metrics.json")).unwrap()).unwrap();
+    assert_eq!(m["render_stage"], "deform");
+    assert_eq!(m["baselines"]["blend"]["psnr_mean"], 23.5);
+    assert!(m["novel_psnr_mean"].is_null());
 }

@@ -1,5 +1,6 @@
 //! The scene manifest (DESIGN §3): `transforms_train.json` / `transforms_test.json`
-//! in the D-NeRF / nerfstudio layout, and [`Scene`], a validated scene directory.
+//! (and the optional novel-view split `transforms_novel.json`) in the D-NeRF /
+//! nerfstudio layout, and [`Scene`], a validated scene directory.
 //!
 //! Layout read and written here:
 //!
@@ -42,6 +43,8 @@ pub const DEFAULT_CONTRAST_THRESHOLD: f64 = 0.1;
 /// File names of a scene directory.
 pub const TRAIN_FILE: &str = "transforms_train.json";
 pub const TEST_FILE: &str = "transforms_test.json";
+/// Held-out frames at test times seen from cameras off the recorded path (optional).
+pub const NOVEL_FILE: &str = "transforms_novel.json";
 
 /// One RGB frame with its camera pose.
 #[derive(Clone, Debug, PartialEq)]
@@ -398,13 +401,17 @@ pub struct Scene {
     pub train: Manifest,
     /// Held-out frames; empty (with the train camera) when `transforms_test.json` is absent.
     pub test: Manifest,
+    /// Novel views: held-out frames from cameras off the recorded path (`degs synth`
+    /// puts them at the test times); empty (with the train camera) when
+    /// `transforms_novel.json` is absent.
+    pub novel: Manifest,
 }
 
 impl Scene {
-    /// Open `dir`: read both manifests and check that the train file has frames, every
-    /// image exists with the camera's size (header only), both files use the same sensor
-    /// size, and the events file (if any) exists. The events themselves are read by
-    /// [`Scene::load_events`].
+    /// Open `dir`: read the manifests and check that the train file has frames, every
+    /// image exists with the camera's size (header only), every file uses the same
+    /// sensor size, and the events file (if any) exists. The events themselves are read
+    /// by [`Scene::load_events`].
     pub fn open(dir: impl AsRef<Path>) -> Result<Scene> {
         let root = dir.as_ref().to_path_buf();
         if !root.is_dir() {
@@ -415,19 +422,31 @@ impl Scene {
         if train.frames.is_empty() {
             return Err(Error::invalid(&train_path, "no frames"));
         }
-        let test_path = root.join(TEST_FILE);
-        let test = if test_path.exists() {
-            Manifest::read(&test_path)?
-        } else {
-            Manifest {
+        let (test_path, novel_path) = (root.join(TEST_FILE), root.join(NOVEL_FILE));
+        let optional = |path: &Path| -> Result<Manifest> {
+            if path.exists() {
+                return Manifest::read(path);
+            }
+            Ok(Manifest {
                 camera: train.camera,
                 frames: Vec::new(),
                 events: None,
                 frame_encoding: train.frame_encoding,
-            }
+            })
         };
-        let scene = Scene { root, train, test };
-        for (path, m) in [(&train_path, &scene.train), (&test_path, &scene.test)] {
+        let (test, novel) = (optional(&test_path)?, optional(&novel_path)?);
+        let scene = Scene {
+            root,
+            train,
+            test,
+            novel,
+        };
+        let files = [
+            (&train_path, &scene.train),
+            (&test_path, &scene.test),
+            (&novel_path, &scene.novel),
+        ];
+        for (path, m) in files {
             if (m.camera.width, m.camera.height)
                 != (scene.train.camera.width, scene.train.camera.height)
             {

@@ -456,3 +456,69 @@ fn frame_encoding_round_trips_and_an_unknown_one_names_the_file() {
         "{e}"
     );
 }
+
+#[test]
+fn the_novel_split_is_read_when_present_and_checked_like_the_test_split() {
+    // Absent: empty, with the train camera and encoding.
+    let dir = tempfile::tempdir().unwrap();
+    let m = write_scene(dir.path(), 3);
+    let scene = Scene::open(dir.path()).unwrap();
+    assert!(scene.novel.frames.is_empty());
+    assert_eq!(scene.novel.camera, m.camera);
+    assert_eq!(scene.novel.frame_encoding, m.frame_encoding);
+
+    // Present: two frames off the train path, their images checked.
+    let mut novel = Manifest {
+        frames: frames(2),
+        events: None,
+        ..m.clone()
+    };
+    for f in &mut novel.frames {
+        f.cam_to_world.translation.x += 0.5;
+    }
+    novel
+        .write(dir.path().join(scene::manifest::NOVEL_FILE))
+        .unwrap();
+    let scene = Scene::open(dir.path()).unwrap();
+    assert_eq!(scene.novel.frames.len(), 2);
+    for (a, b) in scene.novel.frames.iter().zip(&novel.frames) {
+        assert_eq!(a.file_path, b.file_path);
+        assert_pose_close(&a.cam_to_world, &b.cam_to_world);
+    }
+    assert_eq!(scene.novel.frames[1].timestamp, 1.6);
+    assert_eq!(scene.test.frames.len(), 1);
+
+    // A novel frame whose image is missing names the novel file and the frame.
+    let mut missing = novel.clone();
+    missing.frames[1].file_path = "images/novel_0001.png".into();
+    missing
+        .write(dir.path().join("transforms_novel.json"))
+        .unwrap();
+    let e = err_text(Scene::open(dir.path()));
+    assert!(
+        e.contains("transforms_novel.json")
+            && e.contains("frame 1")
+            && e.contains("novel_0001.png"),
+        "{e}"
+    );
+
+    // A corrupt novel manifest is an error naming that file.
+    std::fs::write(dir.path().join("transforms_novel.json"), "{\"frames\": [").unwrap();
+    let e = err_text(Scene::open(dir.path()));
+    assert!(
+        e.contains("transforms_novel.json") && e.contains("not a valid manifest"),
+        "{e}"
+    );
+
+    // A novel camera of another size.
+    let mut other = novel.clone();
+    other.camera.height = 7;
+    other
+        .write(dir.path().join("transforms_novel.json"))
+        .unwrap();
+    let e = err_text(Scene::open(dir.path()));
+    assert!(
+        e.contains("transforms_novel.json") && e.contains("8x7"),
+        "{e}"
+    );
+}

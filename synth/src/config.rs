@@ -28,6 +28,11 @@ pub struct SynthConfig {
     pub train_fps: f64,
     /// Number of held-out test frames, at `(k + ½)·duration / test_frames`.
     pub test_frames: usize,
+    /// The novel-view split (`transforms_novel.json`): one frame at each test time, seen
+    /// from the recorded camera's centre rotated by this angle (degrees, about the
+    /// vertical axis through `camera.target`), looking at `camera.target`. A view of
+    /// the moving scene that no train or test frame saw; 0 writes no novel split.
+    pub novel_angle_deg: f64,
     /// Internal render rate for the event simulator, Hz.
     pub render_rate_hz: f64,
     /// Sub-frames averaged into each training frame (1 = sharp).
@@ -218,6 +223,12 @@ impl scene::cli::Settings for SynthConfig {
         if self.fov_x_deg >= 179.0 {
             return Err(format!("fov_x_deg = {} must be < 179", self.fov_x_deg));
         }
+        if !(self.novel_angle_deg.is_finite() && self.novel_angle_deg.abs() <= 90.0) {
+            return Err(format!(
+                "novel_angle_deg = {} must be within -90..=90 (0: no novel split)",
+                self.novel_angle_deg
+            ));
+        }
         if !(self.exposure_s.is_finite() && self.exposure_s >= 0.0) {
             return Err(format!(
                 "exposure_s = {} must be finite and ≥ 0",
@@ -307,6 +318,15 @@ impl SynthConfig {
         (0..n)
             .map(|k| (k as f64 + 0.5) * self.duration / n as f64)
             .collect()
+    }
+
+    /// Times of the novel-view frames: the test times, none when `novel_angle_deg` is 0.
+    pub fn novel_times(&self) -> Vec<f64> {
+        if self.novel_angle_deg == 0.0 {
+            Vec::new()
+        } else {
+            self.test_times()
+        }
     }
 
     /// Times of the internal renders fed to the event simulator: `k / render_rate_hz`

@@ -208,6 +208,7 @@ impl SynthConfig {
             duration: 1.0,
             train_fps: 8.0,
             test_frames: 8,
+            novel_angle_deg: 15.0,
             render_rate_hz: 1000.0,
             blur_subframes: 1,
             exposure_s: 0.01,

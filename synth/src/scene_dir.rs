@@ -10,6 +10,11 @@
 //! images/train_XXXX.png   linear RGB, 8-bit; averaged over `blur_subframes` renders
 //!                         spanning `exposure_s` when blur_subframes > 1
 //! images/test_XXXX.png    sharp
+//! transforms_novel.json   novel views: at the test times, from the recorded camera's
+//!                         centre rotated by `novel_angle_deg` about the vertical axis
+//!                         through the path's target, looking at it (absent when the
+//!                         angle is 0; `SynthWorld::novel_camera_at`)
+//! images/novel_XXXX.png   sharp
 //! events.evs              events simulated from renders at render_rate_hz
 //! synth.json              the SynthConfig used
 //! report.json             the Summary (counts, timings)
@@ -17,6 +22,7 @@
 //! gt/train/flow_XXXX.exr  analytic optical flow (EXR `U`,`V`, px/s)
 //! gt/train/object_XXXX.png object ids (16-bit PNG, 0 = background, k+1 = objects[k])
 //! gt/test/…               the same at the test times
+//! gt/novel/…              the same from the novel cameras
 //! gt/event_flow.bin       per-event flow (px/s) and object id, one row per event of
 //!                         events.evs (format: crate::gt)
 //! ```
@@ -36,7 +42,9 @@ use scene::cli::Settings;
 use scene::error::{Error, Result};
 use scene::events::EventStream;
 use scene::image_io::{Image, write_exr_depth, write_exr_flow, write_png};
-use scene::manifest::{EventsRef, Frame, FrameEncoding, Manifest, TEST_FILE, TRAIN_FILE};
+use scene::manifest::{
+    EventsRef, Frame, FrameEncoding, Manifest, NOVEL_FILE, TEST_FILE, TRAIN_FILE,
+};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -53,12 +61,16 @@ pub struct Summary {
     pub height: u32,
     pub train_frames: usize,
     pub test_frames: usize,
+    /// Frames of the novel-view split (0: none written).
+    #[serde(default)]
+    pub novel_frames: usize,
     pub internal_frames: usize,
     pub events: usize,
     pub noise_events: usize,
     /// Seconds spent rendering the internal frames and simulating events.
     pub simulate_s: f64,
-    /// Seconds spent rendering and writing the train/test frames and their ground truth.
+    /// Seconds spent rendering and writing the train/test/novel frames and their ground
+    /// truth.
     pub frames_s: f64,
     pub total_s: f64,
 }
@@ -138,15 +150,20 @@ fn train_image(world: &SynthWorld, t: f64, sharp: &Render) -> Vec<f32> {
     acc
 }
 
-/// Render and write the frames of one split with their ground truth; returns the
-/// manifest frames.
+/// Render and write the frames of one split (`train`, `test` or `novel`: from the
+/// novel-view cameras) with their ground truth; returns the manifest frames.
 fn write_split(world: &SynthWorld, root: &Path, split: &str, times: &[f64]) -> Result<Vec<Frame>> {
     let cfg = world.config();
     let (w, h) = (cfg.width, cfg.height);
     let gt_dir = root.join("gt").join(split);
+    let novel = split == "novel";
     let mut frames = Vec::with_capacity(times.len());
     for (k, &t) in times.iter().enumerate() {
-        let r = world.render_frame(t);
+        let (r, camera) = if novel {
+            (world.render_novel_frame(t), world.novel_camera_at(t))
+        } else {
+            (world.render_frame(t), world.camera_at(t))
+        };
         let rgb = if split == "train" {
             train_image(world, t, &r)
         } else {
@@ -178,7 +195,7 @@ fn write_split(world: &SynthWorld, root: &Path, split: &str, times: &[f64]) -> R
             file_path,
             timestamp: t,
             time: (t / cfg.duration).clamp(0.0, 1.0),
-            cam_to_world: world.camera_at(t).cam_to_world,
+            cam_to_world: camera.cam_to_world,
         });
     }
     Ok(frames)
@@ -216,8 +233,16 @@ pub fn write_synthetic_scene(cfg: &SynthConfig, out_dir: &Path) -> Result<Summar
         events: None,
         frame_encoding: Some(FrameEncoding::Linear),
     };
+    let novel = write_split(&world, &root, "novel", &cfg.novel_times())?;
     train.write(root.join(TRAIN_FILE))?;
     test.write(root.join(TEST_FILE))?;
+    if !novel.is_empty() {
+        Manifest {
+            frames: novel.clone(),
+            ..test.clone()
+        }
+        .write(root.join(NOVEL_FILE))?;
+    }
     write_json_atomic(&root.join("synth.json"), cfg)?;
     let frames_s = t_frames.elapsed().as_secs_f64();
 
@@ -228,6 +253,7 @@ pub fn write_synthetic_scene(cfg: &SynthConfig, out_dir: &Path) -> Result<Summar
         height: cfg.height,
         train_frames: train.frames.len(),
         test_frames: test.frames.len(),
+        novel_frames: novel.len(),
         internal_frames: cfg.render_times().len(),
         events: events.len(),
         noise_events: gt.object.iter().filter(|&&o| o == NOISE_ID).count(),

@@ -20,6 +20,12 @@
 //! the flow is `u̇ = f_x(ṗ_x d − p_x ḋ)/d²`, `v̇ = −f_y(ṗ_y d − p_y ḋ)/d²`.
 //! Rays that hit nothing see a point at infinity (only the camera rotation moves it).
 //!
+//! The novel-view camera ([`SynthWorld::novel_camera_at`], setting `novel_angle_deg` = θ)
+//! has its centre at `c + R_y(θ)(e(t) − c)`, `c` the path's `target`, and looks at `c`
+//! with +Y up (a look-at rotation, so `c` projects to the principal point). Its flow
+//! uses its own velocity `R_y(θ)·ė` and the angular velocity of the look-at frame
+//! `ω = ½ Σ_i r_i × ṙ_i` over its axes `r_i` (exact for any rotating orthonormal frame).
+//!
 //! Worlds are built from a [`SynthConfig`] (serde; [`SynthConfig::preset`] for the
 //! named presets).
 
@@ -177,6 +183,22 @@ impl SynthWorld {
         }
     }
 
+    /// The novel-view camera at `t` (see the module doc).
+    fn novel_camera_state(&self, t: f64) -> CameraState {
+        let rec = self.camera_state(t);
+        let c = self.cfg.camera.target;
+        let ry = DMat3::from_rotation_y(self.cfg.novel_angle_deg.to_radians());
+        let eye = c + ry * (rec.eye - c);
+        let eye_rate = ry * rec.eye_rate;
+        let (rot, omega) = look_at_motion(eye - c, eye_rate);
+        CameraState {
+            eye,
+            rot,
+            eye_rate,
+            omega,
+        }
+    }
+
     fn object_state(&self, k: usize, t: f64) -> ObjectState {
         let o = &self.cfg.objects[k];
         let m = &o.motion;
@@ -211,7 +233,11 @@ impl SynthWorld {
     }
 
     fn frame(&self, t: f64) -> Frame<'_> {
-        let cam = self.camera_state(t);
+        self.frame_from(t, self.camera_state(t))
+    }
+
+    /// The scene at `t` seen by the camera `cam`.
+    fn frame_from(&self, t: f64, cam: CameraState) -> Frame<'_> {
         let objects: Vec<ObjectState> = (0..self.cfg.objects.len())
             .map(|k| self.object_state(k, t))
             .collect();
@@ -256,6 +282,17 @@ impl SynthWorld {
         }
     }
 
+    /// The novel-view camera at time `t`: the recorded centre rotated by
+    /// `novel_angle_deg` about the vertical axis through the path's target, looking at
+    /// the target (see the module doc).
+    pub fn novel_camera_at(&self, t: f64) -> Camera {
+        let c = self.novel_camera_state(t);
+        Camera {
+            intrinsics: self.intrinsics,
+            cam_to_world: Pose::new(DQuat::from_mat3(&c.rot), c.eye),
+        }
+    }
+
     /// World position at time `t` of the material point `local` of object `object`.
     pub fn material_to_world(&self, object: usize, local: DVec3, t: f64) -> DVec3 {
         let s = self.object_state(object, t);
@@ -286,11 +323,22 @@ impl SynthWorld {
         self.render_sampled(t, self.cfg.frame_supersample)
     }
 
+    /// Render from the novel-view camera ([`Self::novel_camera_at`]) as the RGB camera
+    /// sees it (`frame_supersample`² colour samples per pixel), with the depth, flow
+    /// and object ids that camera sees.
+    pub fn render_novel_frame(&self, t: f64) -> Render {
+        let frame = self.frame_from(t, self.novel_camera_state(t));
+        self.render_from(&frame, self.cfg.frame_supersample)
+    }
+
     /// Render with `ss × ss` colour samples per pixel (rows in parallel); depth, flow
     /// and object ids are those of the pixel centre.
     pub fn render_sampled(&self, t: f64, ss: u32) -> Render {
+        self.render_from(&self.frame(t), ss)
+    }
+
+    fn render_from(&self, frame: &Frame<'_>, ss: u32) -> Render {
         let (w, h) = (self.cfg.width as usize, self.cfg.height as usize);
-        let frame = self.frame(t);
         let mut out = Render {
             width: self.cfg.width,
             height: self.cfg.height,
@@ -344,6 +392,22 @@ impl SynthWorld {
             });
         out
     }
+}
+
+/// Rotation (columns right, up, back as [`Pose::look_at`] with up +Y) and angular
+/// velocity of a camera at `v` from the point it looks at, moving at `v_rate`.
+fn look_at_motion(v: DVec3, v_rate: DVec3) -> (DMat3, DVec3) {
+    let len = v.length();
+    let back = v / len;
+    let back_rate = (v_rate - back * back.dot(v_rate)) / len;
+    let n = DVec3::Y.cross(back);
+    let right = n / n.length();
+    let n_rate = DVec3::Y.cross(back_rate);
+    let right_rate = (n_rate - right * right.dot(n_rate)) / n.length();
+    let up = back.cross(right);
+    let up_rate = back_rate.cross(right) + back.cross(right_rate);
+    let omega = 0.5 * (right.cross(right_rate) + up.cross(up_rate) + back.cross(back_rate));
+    (DMat3::from_cols(right, up, back), omega)
 }
 
 impl Frame<'_> {

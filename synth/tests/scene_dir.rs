@@ -213,7 +213,12 @@ fn the_rgb_only_writer_writes_the_frames_of_the_full_one() {
     synth::write_rgb_synthetic_scene(&cfg, &rgb).unwrap();
     let (a, b) = (Scene::open(&full).unwrap(), Scene::open(&rgb).unwrap());
     assert!(b.train.events.is_none() && !rgb.join("events.evs").exists());
-    for (ma, mb) in [(&a.train, &b.train), (&a.test, &b.test)] {
+    assert_eq!(b.novel.frames.len(), 2);
+    for (ma, mb) in [
+        (&a.train, &b.train),
+        (&a.test, &b.test),
+        (&a.novel, &b.novel),
+    ] {
         assert_eq!(ma.camera, mb.camera);
         assert_eq!(ma.frames, mb.frames);
         for f in &ma.frames {
@@ -221,4 +226,76 @@ fn the_rgb_only_writer_writes_the_frames_of_the_full_one() {
             assert!(bytes(&full) == bytes(&rgb), "{}", f.file_path);
         }
     }
+}
+
+#[test]
+fn the_novel_split_is_written_at_the_test_times_from_the_novel_cameras() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("scene");
+    let cfg = SynthConfig {
+        frame_supersample: 2,
+        ..small("rigid")
+    };
+    let summary = write_synthetic_scene(&cfg, &out).unwrap();
+    assert_eq!(summary.novel_frames, 2);
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["novel_frames"], 2);
+    let scene = Scene::open(&out).unwrap();
+    assert_eq!(scene.novel.frames.len(), 2);
+    assert_eq!(scene.novel.camera, scene.test.camera);
+    let world = SynthWorld::new(&cfg).unwrap();
+    for (i, (f, t)) in scene
+        .novel
+        .frames
+        .iter()
+        .zip(&scene.test.frames)
+        .enumerate()
+    {
+        assert_eq!(f.file_path, format!("images/novel_{i:04}.png"));
+        assert_eq!((f.timestamp, f.time), (t.timestamp, t.time));
+        let pose = world.novel_camera_at(f.timestamp).cam_to_world;
+        assert!((f.cam_to_world.translation - pose.translation).length() < 1e-9);
+        assert!(f.cam_to_world.rotation.angle_between(pose.rotation) < 1e-6);
+        // 15° about the target, r ≈ 3.1: the centre is ~0.8 away from the test camera's
+        let moved = (f.cam_to_world.translation - t.cam_to_world.translation).length();
+        assert!(moved > 0.75 && moved < 0.9, "{moved}");
+        let r = world.render_novel_frame(f.timestamp);
+        let img = read_image(scene.image_path(f)).unwrap();
+        let worst = img
+            .data
+            .iter()
+            .zip(&r.rgb)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f32, f32::max);
+        assert!(worst <= 0.5 / 255.0 + 1e-6, "novel {i}: {worst}");
+        // and differs from the test image at the same time
+        let test = read_image(scene.image_path(t)).unwrap();
+        let diff = img
+            .data
+            .iter()
+            .zip(&test.data)
+            .map(|(a, b)| (a - b).abs())
+            .sum::<f32>()
+            / img.data.len() as f32;
+        assert!(diff > 0.02, "novel {i} ≈ test {i}: {diff}");
+        let gt = out.join("gt/novel");
+        let (_, _, depth) = read_exr_depth(gt.join(format!("depth_{i:04}.exr"))).unwrap();
+        assert!(depth == r.depth, "novel {i}: depth differs");
+        let (_, _, u, v) = read_exr_flow(gt.join(format!("flow_{i:04}.exr"))).unwrap();
+        assert!(u == r.flow_u && v == r.flow_v, "novel {i}: flow differs");
+        let (_, _, ids) = read_object_png(gt.join(format!("object_{i:04}.png"))).unwrap();
+        assert!(ids == r.object_id, "novel {i}: ids differ");
+    }
+
+    // angle 0: no novel split at all
+    let off = tmp.path().join("off");
+    let cfg = SynthConfig {
+        novel_angle_deg: 0.0,
+        ..small("rigid")
+    };
+    assert_eq!(write_synthetic_scene(&cfg, &off).unwrap().novel_frames, 0);
+    assert!(!off.join("transforms_novel.json").exists());
+    assert!(!off.join("gt/novel").exists() && !off.join("images/novel_0000.png").exists());
+    assert!(Scene::open(&off).unwrap().novel.frames.is_empty());
 }

@@ -1,7 +1,8 @@
 //! `degs run` over the real stage binaries on a tiny synthetic scene (32×32 px, three
 //! train and two test frames, one LoCM epoch, 200 warm-up and 30 joint iterations: a few seconds
 //! on two cores): every built stage leaves a cache entry with its report, a second run
-//! runs nothing, and the warm-up beats the mean-colour baseline on the test frames.
+//! runs nothing, the warm-up beats the mean-colour baseline on the test frames, and
+//! both the warm-up and the joint training score the novel views (15° off the path).
 
 use degs_tests::{Workspace, entry, read_json, stage_record, stderr};
 
@@ -77,6 +78,7 @@ fn degs_run_builds_every_stage_once_and_beats_the_mean_colour() {
         psnr.is_finite() && psnr > baseline,
         "test PSNR {psnr} dB, mean colour {baseline} dB"
     );
+    assert_novel_views(&entry(&first, "gaussians"), &report);
 
     // the joint training: finite losses of every term, rebinding, a PoseNet, a test PSNR
     let dir = entry(&first, "deform");
@@ -101,6 +103,15 @@ fn degs_run_builds_every_stage_once_and_beats_the_mean_colour() {
         psnr.is_finite() && psnr > baseline,
         "deform test PSNR {psnr} dB"
     );
+    assert_novel_views(&dir, &report);
+    // the 2D baselines are scored on the test frames only
+    assert!(
+        report["baselines"]["blend"]["psnr_mean"]
+            .as_f64()
+            .unwrap()
+            .is_finite()
+    );
+    assert!(report["novel"].get("baselines").is_none(), "{report}");
 
     // everything is cached: the second run runs nothing
     let out = w.degs(&["run", exp, "-j", "2", "--quiet"]);
@@ -116,5 +127,24 @@ fn degs_run_builds_every_stage_once_and_beats_the_mean_colour() {
             !["ran", "rebuilt", "failed"].contains(&s["action"].as_str().unwrap()),
             "{s}"
         );
+    }
+}
+
+/// A stage's report has a `novel` section for the scene's two novel views, with a
+/// finite PSNR above the mean-colour baseline's, and their renders.
+fn assert_novel_views(dir: &std::path::Path, report: &serde_json::Value) {
+    let novel = &report["novel"];
+    assert_eq!(novel["frames"], 2, "{report}");
+    let psnr = novel["psnr_mean"].as_f64().unwrap();
+    let baseline = novel["mean_colour_psnr_mean"].as_f64().unwrap();
+    assert!(
+        psnr.is_finite() && psnr > baseline,
+        "{}: novel PSNR {psnr} dB, mean colour {baseline} dB",
+        dir.display()
+    );
+    assert_eq!(novel["psnr"].as_array().unwrap().len(), 2);
+    for i in 0..2 {
+        let render = dir.join(format!("renders/novel/{i:04}.png"));
+        assert!(render.is_file(), "{}", render.display());
     }
 }

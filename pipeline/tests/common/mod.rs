@@ -9,7 +9,7 @@ use std::process::{Command, Output};
 /// A shell script that behaves like a stage: takes an optional verb (`finetune`,
 /// `train`), checks its inputs, records its invocation in $DEGS_FAKE_LOG, writes
 /// $DEGS_FAKE_REPORTS/<stage>.json as its report when that exists (as `gaussians`, copies
-/// the scene's test images as its renders), fails when its settings say `seed = 666`,
+/// the scene's test images as its renders and its novel views as `renders/novel/`), fails when its settings say `seed = 666`,
 /// sleeps when $DEGS_FAKE_SLEEP names it, meets the other stages named in
 /// $DEGS_FAKE_MEET when it is one of them (see [`Fixture::meeting`]), and writes a few output
 /// files.
@@ -68,6 +68,12 @@ if [ "$stage" = gaussians ] && [ -d "$scene/images" ]; then
   i=0
   for f in "$scene"/images/test_*.png; do
     cp "$f" "$out/renders/$(printf %04d $i).png"; i=$((i+1))
+  done
+  i=0
+  for f in "$scene"/images/novel_*.png; do
+    [ -f "$f" ] || continue
+    mkdir -p "$out/renders/novel"
+    cp "$f" "$out/renders/novel/$(printf %04d $i).png"; i=$((i+1))
   done
 fi
 echo "end $stage" >> "$DEGS_FAKE_LOG"
