@@ -36,6 +36,7 @@
 //! `real` and `lie`, and `event_image` and `fallbacks` use `event_counts`.
 
 pub mod baselines;
+pub mod camera_check;
 pub mod camera_path;
 pub mod event_counts;
 pub mod event_image;

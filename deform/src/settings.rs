@@ -51,6 +51,9 @@ pub struct DeformSettings {
     /// `ξ(t) − (1 − s)·ξ(ta) − s·ξ(tb)` between frames `ta`, `tb`; `false` is the paper's
     /// free correction (a jump at the frames, where the recorded poses are used).
     pub posenet_anchor: bool,
+    /// First joint iterations in which `L_event` trains the PoseNet only (the scene is
+    /// not moved to make up for a camera error between frames); 0 = from the start.
+    pub posenet_warmup: u32,
     /// Adam learning rate of the PoseNet.
     pub posenet_lr: f64,
     /// Contrast threshold C; 0 takes the manifest's.
@@ -86,6 +89,7 @@ impl Default for DeformSettings {
             posenet: true,
             posenet_net: PoseNetSettings::default(),
             posenet_anchor: false,
+            posenet_warmup: 0,
             posenet_lr: 1e-4,
             contrast_threshold: 0.0,
             frame_encoding: FrameEncoding::Auto,

@@ -19,6 +19,7 @@
 //! section has no baselines.
 
 use crate::baselines::{Baselines, Recording};
+use crate::camera_check::CameraCheck;
 use crate::fallbacks::Fallbacks;
 use crate::inputs::Inputs;
 use crate::posenet::PoseNet;
@@ -130,6 +131,8 @@ pub struct TrainReport {
     pub frames_srgb: bool,
     pub gaussians: usize,
     pub curve: Vec<CurvePoint>,
+    /// The camera at the test frames' times against their recorded poses.
+    pub camera: CameraCheck,
     pub test: Evaluation,
     /// The same on the novel-view split; absent when the scene has none.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -203,6 +206,7 @@ pub fn train(
         on_step(&s);
     }
     let train_seconds = train_clock.elapsed().as_secs_f64();
+    let camera = tr.camera_check(&d);
     phases.start("save");
     let model = Model::from_trainer(&tr.inner);
     model.save(out.path())?;
@@ -244,6 +248,7 @@ pub fn train(
         frames_srgb: d.srgb,
         gaussians: model.splats.len(),
         curve,
+        camera,
         test,
         novel,
         baselines,

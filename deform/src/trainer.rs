@@ -10,6 +10,7 @@
 //! trained by `L_event` through the camera of the render at `t_e`); frames keep their
 //! recorded poses (the PoseNet corrects in-between times only).
 
+use crate::camera_check::{CameraCheck, pose_error};
 use crate::event_image::{PseudoImage, PseudoInputs, event_loss, pseudo_image, srgb_to_linear};
 use crate::fallbacks::{EventSkip, Fallbacks, interval_skip};
 use crate::flow::{EgoPoints, Flow2, GsCameras, GsGrad, Pinhole, ProjCam};
@@ -223,6 +224,38 @@ impl JointTrainer {
         (n(t), frames.map(|(a, b)| (n(a), n(b))))
     }
 
+    /// The camera's error at the held-out frames' times against their recorded poses
+    /// (interpolated path, and with the PoseNet correction).
+    pub fn camera_check(&self, d: &Inputs) -> CameraCheck {
+        let times: Vec<f64> = d.scene.test.frames.iter().map(|f| f.timestamp).collect();
+        let recorded: Vec<_> = d.test.iter().map(|v| v.camera.cam_to_world).collect();
+        let interp: Vec<_> = times.iter().map(|&t| d.path.pose_at(t)).collect();
+        let corrected: Vec<_> = times
+            .iter()
+            .map(|&t| self.camera_at(d, t).0.cam_to_world)
+            .collect();
+        CameraCheck {
+            frames: recorded.len().min(times.len()),
+            interpolated: pose_error(&interp, &recorded),
+            corrected: pose_error(&corrected, &recorded),
+        }
+    }
+
+    /// `L_motion` at train frame `i` (γ2 = 1) and its gradient on the model, assembled as
+    /// the joint step does (the part on `x(t0)` through the view's backward pass); for
+    /// diagnostics and the tests.
+    pub fn motion_gradient(&self, r: &TileRasterizer, d: &Inputs, i: usize) -> (f64, ModelGrads) {
+        let view = &d.views[i];
+        let rv = self.inner.render_view(r, &view.camera, view.time);
+        let mut m = MotionGrads::default();
+        let (loss, _, _) = self.motion_term(d, i, &rv, 1.0, &mut m);
+        let zero = vec![0.0f32; rv.image.rgb.len()];
+        let d_means = (!m.at_view.is_empty()).then_some(m.at_view.as_slice());
+        let mut g = self.inner.view_backward(r, &rv, &zero, None, d_means);
+        m.add_to(&mut g);
+        (loss, g)
+    }
+
     /// One joint iteration.
     pub fn step(&mut self, r: &TileRasterizer, d: &Inputs) -> JointStep {
         let it = self.iteration as u64;
@@ -349,7 +382,10 @@ impl JointTrainer {
             *gi *= g1 * if d.srgb { srgb_slope(c) } else { 1.0 };
         }
         let ge = self.inner.view_backward(r, &rv, &g, None, None);
-        add_scaled(grads, &ge, 1.0);
+        // While the PoseNet warms up, L_event moves the camera only (not the scene).
+        if self.iteration >= self.settings.posenet_warmup || self.posenet.is_none() {
+            add_scaled(grads, &ge, 1.0);
+        }
         if let Some(p) = &self.posenet {
             let g_eps =
                 crate::lie::world_left_grad_to_camera_right(&camera.cam_to_world, ge.camera);
