@@ -1,0 +1,219 @@
+//! The motion term of the joint step (Eq. 12 at the drawn train frame): flows of the
+//! bound Gaussians against their events' flow, and where its gradient goes.
+
+use super::{JointTrainer, NEAR, field_time};
+use crate::flow::{EgoPoints, Flow2, GsCameras, GsGrad, Pinhole, ProjCam};
+use crate::flow::{ego_flow, gaussian_flow, gaussian_flow_backward};
+use crate::inputs::Inputs;
+use crate::motion_loss::{CsrBindings, MotionGrad, MotionInputs, PerGaussian, motion_loss};
+use crate::settings::FlowForm;
+use gaussians::field::{Deformation, Deltas};
+use gaussians::train::{ModelGrads, ViewRender};
+use gaussians::{Rasterizer, RenderedImage, TileRasterizer};
+
+/// The motion term's gradients: on the centres as rendered at the view's time (`x(t0)`,
+/// taken back with the view's RGB gradient), on the canonical centres and on the field's
+/// parameters (through `x(t1)`). Empty vectors: no contribution.
+#[derive(Default)]
+pub(super) struct MotionGrads {
+    pub(super) at_view: Vec<[f32; 3]>,
+    canonical: Vec<[f32; 3]>,
+    field: Vec<f32>,
+}
+
+impl MotionGrads {
+    /// Add the canonical-centre and field parts to `g` (the rendered-centre part goes
+    /// through `Trainer::view_backward`).
+    pub(super) fn add_to(&self, g: &mut ModelGrads) {
+        if self.canonical.len() == g.splats.means.len() {
+            for (a, b) in g.splats.means.iter_mut().zip(&self.canonical) {
+                (0..3).for_each(|c| a[c] += b[c]);
+            }
+        }
+        if !self.field.is_empty() && g.field.len() == self.field.len() {
+            g.field
+                .iter_mut()
+                .zip(&self.field)
+                .for_each(|(a, b)| *a += b);
+        }
+    }
+}
+
+impl JointTrainer {
+    /// Eq. 12 over the Gaussians bound at train frame `i` (rendered as `rv`, whose
+    /// deformed centres are `x(t0)`): writes `γ2·∂L/∂θ` into `out`; returns
+    /// `(L_motion, bound Gaussians, [bound events left out for want of a flow, as
+    /// outliers])`.
+    pub(super) fn motion_term(
+        &self,
+        d: &Inputs,
+        i: usize,
+        rv: &ViewRender<<TileRasterizer as Rasterizer>::State>,
+        g2: f32,
+        out: &mut MotionGrads,
+    ) -> (f64, usize, [usize; 2]) {
+        let b = &self.bindings[i];
+        if b.gaussians() != self.inner.splats.len() {
+            return (0.0, 0, [0, 0]);
+        }
+        let idx: Vec<usize> = (0..b.gaussians())
+            .filter(|&g| !b.of(g).0.is_empty())
+            .collect();
+        if idx.is_empty() {
+            return (0.0, 0, [0, 0]);
+        }
+        let t0 = d.times[i];
+        let t1 = if i + 1 < d.times.len() {
+            t0 + self.span
+        } else {
+            t0 - self.span
+        };
+        let tau1 = field_time(d, t1);
+        // Compact CSR over the bound Gaussians.
+        let (mut offsets, mut events, mut weights) = (vec![0u32], Vec::new(), Vec::new());
+        for &g in &idx {
+            let (e, w) = b.of(g);
+            events.extend_from_slice(e);
+            weights.extend_from_slice(w);
+            offsets.push(events.len() as u32);
+        }
+        // Deformed centres at t0 and t1 (the field sees canonical positions detached).
+        let xs: Vec<[f32; 3]> = idx.iter().map(|&g| self.inner.splats.means[g]).collect();
+        let field_on = self.inner.field_on();
+        let dynamic_only = self.inner.settings.dynamic_only;
+        let moves = |k: usize| !dynamic_only || self.inner.splats.is_dynamic(idx[k]);
+        let deform = |t: f32| {
+            let (dl, cache) = Deformation::forward(&self.inner.field, &xs, &[t]);
+            let x = (0..xs.len())
+                .map(|k| {
+                    let dx = if moves(k) { dl.dx[k] } else { [0.0; 3] };
+                    std::array::from_fn(|c| xs[k][c] + dx[c])
+                })
+                .collect::<Vec<[f32; 3]>>();
+            (x, cache)
+        };
+        let x0: Vec<[f32; 3]> = idx.iter().map(|&g| rv.deformed.means[g]).collect();
+        let (x1, cache1) = if field_on {
+            let (x1, c1) = deform(tau1);
+            (x1, Some(c1))
+        } else {
+            (xs.clone(), None)
+        };
+        let k = d.views[i].camera.intrinsics;
+        let cam0 = ProjCam::<f32>::new(&rv.camera.cam_to_world, &k, NEAR);
+        let cam1 = ProjCam::<f32>::new(&d.path.pose_at(t1), &k, NEAR);
+        let cams = match self.settings.flow_form {
+            FlowForm::Paper => GsCameras::Same(&cam0),
+            FlowForm::Exact => GsCameras::Exact(&cam0, &cam1),
+        };
+        let mut fgs = Flow2::default();
+        gaussian_flow(cams, &x0, &x1, &mut fgs);
+        let mut fego = Flow2::default();
+        if self.settings.flow_form == FlowForm::Paper {
+            let (u, v, rho) = ego_points(&rv.image, &cam0, &x0);
+            let vel = d.path.velocity_at(t0).to_array().map(|x| x as f32);
+            let pts = EgoPoints {
+                u: &u,
+                v: &v,
+                inv_depth: &rho,
+            };
+            ego_flow(
+                &Pinhole::from_intrinsics(&k),
+                &vel,
+                pts,
+                (1.0 / NEAR) as f32,
+                &mut fego,
+            );
+        }
+        let inp = MotionInputs {
+            dt: (t1 - t0) as f32,
+            bindings: CsrBindings {
+                offsets: &offsets,
+                events: &events,
+                weights: &weights,
+            },
+            flow_u: &d.flow_u,
+            flow_v: &d.flow_v,
+            flow_base: 0,
+            ego: (self.settings.flow_form == FlowForm::Paper).then(|| PerGaussian {
+                u: &fego.u,
+                v: &fego.v,
+                valid: Some(&fego.valid),
+            }),
+            gs: PerGaussian {
+                u: &fgs.u,
+                v: &fgs.v,
+                valid: Some(&fgs.valid),
+            },
+        };
+        let mut mg = MotionGrad::default();
+        let ml = motion_loss(&self.settings.motion, &inp, Some(&mut mg));
+        let dropped = [
+            ml.missing_events + ml.dropped_non_finite,
+            ml.dropped_outliers,
+        ];
+        if ml.bound == 0 {
+            return (0.0, idx.len(), dropped);
+        }
+        let gu: Vec<f32> = mg.gs_u.iter().map(|g| g * g2).collect();
+        let gv: Vec<f32> = mg.gs_v.iter().map(|g| g * g2).collect();
+        let mut gg = GsGrad::default();
+        gaussian_flow_backward(cams, &x0, &x1, &fgs, &gu, &gv, &mut gg);
+        let n = self.inner.splats.len();
+        out.at_view = vec![[0.0; 3]; n];
+        out.canonical = vec![[0.0; 3]; n];
+        for (kk, &g) in idx.iter().enumerate() {
+            out.at_view[g] = gg.x0[kk];
+            out.canonical[g] = gg.x1[kk];
+        }
+        if let Some(c1) = cache1 {
+            let mut dl = Deltas::zeros(idx.len());
+            for (kk, g) in gg.x1.iter().enumerate() {
+                if moves(kk) {
+                    dl.dx[kk] = *g;
+                }
+            }
+            out.field = Deformation::backward(&self.inner.field, &c1, &dl);
+        }
+        (ml.loss as f64, idx.len(), dropped)
+    }
+}
+
+/// Pixel and inverse rendered depth (alpha-normalised; −1 where nothing was rendered) of
+/// each centre `x` under `cam`.
+fn ego_points(
+    img: &RenderedImage,
+    cam: &ProjCam<f32>,
+    x: &[[f32; 3]],
+) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
+    let (w, h) = (img.width, img.height);
+    let mut out = (
+        Vec::with_capacity(x.len()),
+        Vec::with_capacity(x.len()),
+        Vec::with_capacity(x.len()),
+    );
+    for p in x {
+        let (px, rho) = match cam.project(p) {
+            Some((px, _)) => {
+                let (xi, yi) = (px[0].round(), px[1].round());
+                let rho = if xi >= 0.0 && yi >= 0.0 && (xi as usize) < w && (yi as usize) < h {
+                    let k = yi as usize * w + xi as usize;
+                    let a = img.alpha[k];
+                    if a >= 0.5 {
+                        a / img.depth[k].max(1e-12)
+                    } else {
+                        -1.0
+                    }
+                } else {
+                    -1.0
+                };
+                (px, rho)
+            }
+            None => ([0.0; 2], -1.0),
+        };
+        out.0.push(px[0]);
+        out.1.push(px[1]);
+        out.2.push(rho);
+    }
+    out
+}
