@@ -22,7 +22,7 @@ fn main() -> anyhow::Result<()> {
     let Some((scene_dir, flows)) = args.split_first() else {
         anyhow::bail!("usage: flow_floor SCENE_DIR [FLOWS_DIR …]");
     };
-    let src = Source::from_scene(scene_dir)?;
+    let src = Source::from_scene(scene_dir, 0.0)?;
     let gt = evflow::predict::scene_gt(scene_dir)?
         .ok_or_else(|| anyhow::anyhow!("{}: no gt/event_flow.bin", scene_dir.display()))?;
     let (wd, ht) = (src.width() as usize, src.height() as usize);

@@ -88,6 +88,11 @@ pub struct FlowSettings {
     pub weights_max_flow: Option<f64>,
     /// Write dense previews (`.flo`, EXR, colour-wheel PNG) per window.
     pub previews: bool,
+    /// Scene windows: 0 = one per interval between consecutive train frames; `S > 0` =
+    /// one of `S` seconds centred on each train frame (clamped to the recording and to
+    /// the midpoints between frames), where `deform` binds events to Gaussians: the
+    /// network assumes one flow per window, which a long interval of fast motion breaks.
+    pub frame_window: f64,
 }
 
 impl Default for FlowSettings {
@@ -108,6 +113,7 @@ impl Default for FlowSettings {
             weights_width: None,
             weights_max_flow: None,
             previews: true,
+            frame_window: 0.0,
         }
     }
 }
@@ -127,6 +133,9 @@ impl Settings for FlowSettings {
         }
         if self.cm_scales == 0 || self.cm_scales > 8 {
             return Err("cm_scales must be in 1..=8".into());
+        }
+        if !(self.frame_window.is_finite() && self.frame_window >= 0.0) {
+            return Err("frame_window must be finite and >= 0 (seconds)".into());
         }
         if self.epochs > 10_000 {
             return Err("epochs must be <= 10000".into());

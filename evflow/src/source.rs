@@ -2,7 +2,9 @@
 //!
 //! - **A scene directory** (`docs/DESIGN.md` §3): the events of the train manifest, one
 //!   window per interval between consecutive train frames, `[t_i, t_{i+1})` (the last
-//!   one includes its end). Window `i` is written as `flow/iiii.evflow`. A scene with a
+//!   one includes its end), or with a frame window `S > 0` one window of `S` seconds
+//!   centred on each train frame (`FlowSettings::frame_window`). Window `i` is written as
+//!   `flow/iiii.evflow`. A scene with a
 //!   single train frame has no interval: that is an error naming
 //!   `transforms_train.json` (give the event file with `--events` and `--window`
 //!   instead).
@@ -183,6 +185,36 @@ fn undistort_all(ev: &EventStream, k: Option<&Intrinsics>) -> (Vec<f32>, Vec<f32
     }
 }
 
+/// Windows of `len` seconds centred on each frame time, clamped to `[first, last]` frame
+/// time and to the midpoints between neighbouring frames (no event in two windows); the
+/// last one includes its end time.
+pub fn windows_around(ev: &EventStream, times: &[f64], len: f64) -> Vec<Window> {
+    let n = times.len();
+    (0..n)
+        .map(|i| {
+            let lo = if i > 0 {
+                0.5 * (times[i - 1] + times[i])
+            } else {
+                times[0]
+            };
+            let hi = if i + 1 < n {
+                0.5 * (times[i] + times[i + 1])
+            } else {
+                times[n - 1]
+            };
+            let t_a = (times[i] - 0.5 * len).max(lo);
+            let t_b = (times[i] + 0.5 * len).min(hi);
+            let end = if i + 1 == n { t_b.next_up() } else { t_b };
+            Window {
+                index: i,
+                t_a,
+                t_b,
+                range: ev.window_range(t_a, end),
+            }
+        })
+        .collect()
+}
+
 /// Windows between consecutive frame times; the last one includes its end time.
 pub fn windows_between(ev: &EventStream, times: &[f64]) -> Vec<Window> {
     let n = times.len().saturating_sub(1);
@@ -220,8 +252,9 @@ impl Source {
         }
     }
 
-    /// The events of a scene directory, one window per train interval.
-    pub fn from_scene(dir: &Path) -> Result<Source> {
+    /// The events of a scene directory, one window per train interval (`frame_window`
+    /// 0) or one of `frame_window` seconds around each train frame.
+    pub fn from_scene(dir: &Path, frame_window: f64) -> Result<Source> {
         let scene = scene::Scene::open(dir)?;
         let train = dir.join(scene::manifest::TRAIN_FILE);
         let events_path = scene
@@ -236,7 +269,11 @@ impl Source {
         }
         let events = scene.load_events()?;
         let times: Vec<f64> = scene.train.frames.iter().map(|f| f.timestamp).collect();
-        let windows = windows_between(&events, &times);
+        let windows = if frame_window > 0.0 {
+            windows_around(&events, &times, frame_window)
+        } else {
+            windows_between(&events, &times)
+        };
         Ok(Source::build(
             events_path,
             events,
@@ -357,5 +394,41 @@ impl Source {
     /// Total events over all windows.
     pub fn window_events(&self) -> usize {
         self.windows.iter().map(Window::len).sum()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// One event every millisecond over [0, 1] s.
+    fn stream() -> EventStream {
+        let mut ev = EventStream::with_capacity(8, 8, 1001);
+        for k in 0..=1000 {
+            ev.push(k as f64 / 1000.0, 1, 2, 1);
+        }
+        ev
+    }
+
+    #[test]
+    fn frame_windows_are_centred_clamped_and_disjoint() {
+        let ev = stream();
+        let times = [0.0, 0.25, 0.3, 1.0];
+        let w = windows_around(&ev, &times, 0.1);
+        let spans: Vec<(f64, f64)> = w.iter().map(|w| (w.t_a, w.t_b)).collect();
+        // First clamped to the first frame, 2nd/3rd to their midpoint 0.275, last to 1.
+        assert_eq!(
+            spans,
+            vec![(0.0, 0.05), (0.2, 0.275), (0.275, 0.35), (0.95, 1.0)]
+        );
+        // Events [t_a, t_b), the last window including its end: 50, 75, 75, 51 events.
+        let counts: Vec<usize> = w.iter().map(Window::len).collect();
+        assert_eq!(counts, vec![50, 75, 75, 51]);
+        for p in w.windows(2) {
+            assert!(p[0].range.end <= p[1].range.start);
+        }
+        // Interval windows cover everything once.
+        let b = windows_between(&ev, &times);
+        assert_eq!(b.iter().map(Window::len).sum::<usize>(), 1001);
     }
 }

@@ -35,9 +35,11 @@ pub enum Input {
 }
 
 impl Input {
-    pub fn open(&self) -> Result<Source> {
+    /// The events cut into windows (`frame_window`: [`FlowSettings::frame_window`], for
+    /// scenes).
+    pub fn open(&self, frame_window: f64) -> Result<Source> {
         match self {
-            Input::Scene(dir) => Source::from_scene(dir),
+            Input::Scene(dir) => Source::from_scene(dir, frame_window),
             Input::Events {
                 path,
                 sensor,
@@ -129,7 +131,7 @@ pub fn run(
     let mut phases = scene::report::Phases::new();
     phases.start("load");
     emit(Event::Phase("load"));
-    let src = input.open()?;
+    let src = input.open(s.frame_window)?;
     let weights = crate::net::io::resolve_weights(s.weights.as_deref())?;
     if !weights.is_file() {
         return Err(Error::invalid(
@@ -282,8 +284,14 @@ pub struct EvalReport {
 /// `input`: ground truth from the scene's `gt/` where present, or from `gt_flow` (a
 /// `.npy` `1×2×H×W`, px of displacement over the window, sampled at each event's
 /// pixel); flow-warp loss always.
-pub fn eval_flows(input: &Input, flows_dir: &Path, gt_flow: Option<&Path>) -> Result<EvalReport> {
-    let src = input.open()?;
+/// `frame_window` must be the one the flows were computed with (their `settings.toml`).
+pub fn eval_flows(
+    input: &Input,
+    flows_dir: &Path,
+    gt_flow: Option<&Path>,
+    frame_window: f64,
+) -> Result<EvalReport> {
+    let src = input.open(frame_window)?;
     let gt = match input.scene_dir() {
         Some(d) => crate::predict::scene_gt(d)?,
         None => None,

@@ -101,7 +101,7 @@ fn lora_finetune_lowers_the_cm_loss_and_writes_the_stage_outputs() {
         assert!(out.join(f).is_file(), "{f} missing");
     }
     // Every event of every window has a finite flow; indices point into the stream.
-    let src = Source::from_scene(&scene).unwrap();
+    let src = Source::from_scene(&scene, 0.0).unwrap();
     let mut total = 0;
     for win in &src.windows {
         let f = evflow::flowfile::read_evflow(&out.join(format!("flow/{:04}.evflow", win.index)))
@@ -147,7 +147,7 @@ fn lora_at_init_is_exact_and_merged_matches_unmerged() {
     let tmp = tempfile::tempdir().unwrap();
     let scene = tiny_scene(tmp.path());
     let w = tiny_weights(tmp.path());
-    let src = Source::from_scene(&scene).unwrap();
+    let src = Source::from_scene(&scene, 0.0).unwrap();
     let win = &src.windows[1];
     let dev = Device::flex().autodiff();
     let mut net = evflow::net::io::load_base(&w, &dev).unwrap();
@@ -265,7 +265,7 @@ fn single_frame_scene_and_corrupt_weights_give_clear_errors() {
         serde_json::from_str(&std::fs::read_to_string(&train).unwrap()).unwrap();
     j["frames"].as_array_mut().unwrap().truncate(1);
     std::fs::write(&train, j.to_string()).unwrap();
-    let e = Source::from_scene(&scene).unwrap_err().to_string();
+    let e = Source::from_scene(&scene, 0.0).unwrap_err().to_string();
     assert!(
         e.contains("transforms_train.json") && e.contains("single train frame"),
         "{e}"

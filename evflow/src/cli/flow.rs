@@ -105,8 +105,21 @@ pub struct EvalArgs {
 impl EvalArgs {
     /// Score the flow files; print the figures as JSON (and write them to `--out`).
     pub fn run(&self) -> anyhow::Result<()> {
-        let e =
-            crate::stage::eval_flows(&self.input.input()?, &self.flows, self.gt_flow.as_deref())?;
+        // The windows the flows were computed over: their run's settings.toml, if any.
+        let settings = self.flows.join("settings.toml");
+        let frame_window = if settings.is_file() {
+            let text = std::fs::read_to_string(&settings)?;
+            scene::cli::settings::parse::<crate::finetune::FlowSettings>(&text, &settings)?
+                .frame_window
+        } else {
+            0.0
+        };
+        let e = crate::stage::eval_flows(
+            &self.input.input()?,
+            &self.flows,
+            self.gt_flow.as_deref(),
+            frame_window,
+        )?;
         let text = serde_json::to_string_pretty(&e)?;
         if let Some(p) = &self.out {
             scene::atomic::write_bytes_atomic(p, text.as_bytes())?;
