@@ -1,7 +1,8 @@
 //! The motion term's gradient as the joint step assembles it (the part on `x(t0)` taken
 //! back with the view's RGB gradient, the part on `x(t1)` through a second field pass)
 //! against central differences of `L_motion` itself, along random directions in the
-//! canonical centres and in the field's weights. The kernels are checked in f64 in the
+//! canonical centres, in the field's weights and in the PoseNet's weights (through the
+//! corrected camera's velocity in `F_ego`). The kernels are checked in f64 in the
 //! unit tests; this checks their assembly in the f32 trainer.
 
 mod fixture;
@@ -25,7 +26,7 @@ fn assembled_motion_gradient_matches_central_differences() {
     let r = TileRasterizer;
     let mut rng = Rng(7);
     let i = 1;
-    let (l0, g) = tr.motion_gradient(&r, &d, i);
+    let (l0, g, _) = tr.motion_gradient(&r, &d, i);
     assert!(
         l0 > 1e-3,
         "the fixture's flows disagree with the model: L = {l0}"
@@ -62,6 +63,36 @@ fn assembled_motion_gradient_matches_central_differences() {
     };
     let numeric = (at(1.0) - at(-1.0)) / (2.0 * h as f64);
     tr.inner.splats.means = base;
+    // PoseNet weights (F_ego's camera velocity comes from the corrected camera), in the
+    // paper's form (the one with F_ego; its rendered depth is detached, so the centres
+    // are checked in the exact form above).
+    tr.settings.flow_form = FlowForm::Paper;
+    let (_, _, gp) = tr.motion_gradient(&r, &d, i);
+    let norm = gp.iter().map(|v| v * v).sum::<f32>().sqrt();
+    assert!(norm > 0.0, "L_motion gives the PoseNet no gradient");
+    let dir: Vec<f32> = gp.iter().map(|v| v / norm).collect();
+    let analytic_p = norm as f64;
+    let base_p = tr.posenet.as_ref().unwrap().params().to_vec();
+    // Small: the loss bends within 0.03 along this direction (robust norm near its kink).
+    let hp = 1e-3f32;
+    let mut at_p = |sign: f32| {
+        let p = tr.posenet.as_mut().unwrap().params_mut();
+        for (x, (b, v)) in p.iter_mut().zip(base_p.iter().zip(&dir)) {
+            *x = b + sign * hp * v;
+        }
+        tr.motion_gradient(&r, &d, i).0
+    };
+    let numeric_p = (at_p(1.0) - at_p(-1.0)) / (2.0 * hp as f64);
+    tr.posenet
+        .as_mut()
+        .unwrap()
+        .params_mut()
+        .copy_from_slice(&base_p);
+    tr.settings.flow_form = FlowForm::Exact;
+    assert!(
+        (analytic_p - numeric_p).abs() <= 0.03 * numeric_p.abs(),
+        "PoseNet: analytic {analytic_p} numeric {numeric_p}"
+    );
     assert!(
         analytic.abs() > 1e-3 && (analytic - numeric).abs() <= 0.03 * numeric.abs(),
         "centres: analytic {analytic} numeric {numeric}"
@@ -70,7 +101,7 @@ fn assembled_motion_gradient_matches_central_differences() {
     for p in tr.inner.field.params.iter_mut() {
         *p += 0.05 * (rng.uniform() as f32 - 0.5);
     }
-    let (_, g) = tr.motion_gradient(&r, &d, i);
+    let (_, g, _) = tr.motion_gradient(&r, &d, i);
     let norm = g.field.iter().map(|v| v * v).sum::<f32>().sqrt();
     let dir: Vec<f32> = g
         .field

@@ -6,9 +6,9 @@
 //! iterations and whenever densification changes the Gaussians.
 //!
 //! Simplifications (documented in docs/DESIGN.md §9): the rendered depth in `F_ego` is
-//! detached; `F_ego` uses the velocity of the interpolated camera path (the PoseNet is
-//! trained by `L_event` through the camera of the render at `t_e`); frames keep their
-//! recorded poses (the PoseNet corrects in-between times only).
+//! detached; frames keep their recorded poses (the PoseNet corrects in-between times
+//! only). The PoseNet learns from `L_event` (the camera of the render at `t_e`) and from
+//! `L_motion` (the corrected camera's velocity in `F_ego`).
 
 use crate::camera_check::{CameraCheck, pose_error};
 use crate::event_image::{PseudoImage, PseudoInputs, event_loss, pseudo_image, srgb_to_linear};
@@ -212,10 +212,15 @@ impl JointTrainer {
         }
     }
 
-    /// `L_motion` at train frame `i` (γ2 = 1) and its gradient on the model, assembled as
-    /// the joint step does (the part on `x(t0)` through the view's backward pass); for
-    /// diagnostics and the tests.
-    pub fn motion_gradient(&self, r: &TileRasterizer, d: &Inputs, i: usize) -> (f64, ModelGrads) {
+    /// `L_motion` at train frame `i` (γ2 = 1) and its gradient on the model and on the
+    /// PoseNet's parameters, assembled as the joint step does (the part on `x(t0)` through
+    /// the view's backward pass); for diagnostics and the tests.
+    pub fn motion_gradient(
+        &mut self,
+        r: &TileRasterizer,
+        d: &Inputs,
+        i: usize,
+    ) -> (f64, ModelGrads, Vec<f32>) {
         let view = &d.views[i];
         let rv = self.inner.render_view(r, &view.camera, view.time);
         let mut m = MotionGrads::default();
@@ -224,7 +229,24 @@ impl JointTrainer {
         let d_means = (!m.at_view.is_empty()).then_some(m.at_view.as_slice());
         let mut g = self.inner.view_backward(r, &rv, &zero, None, d_means);
         m.add_to(&mut g);
-        (loss, g)
+        self.posenet_grad.fill(0.0);
+        for &(t, xi, g_eps) in &m.camera {
+            self.posenet_backward(d, t, xi, g_eps);
+        }
+        (loss, g, self.posenet_grad.clone())
+    }
+
+    /// Accumulate the PoseNet's gradient from `∂L/∂ε` (camera-right twist) of the
+    /// corrected camera at `t`, whose correction was `xi`.
+    fn posenet_backward(&mut self, d: &Inputs, t: f64, xi: [f64; 6], g_eps: [f64; 6]) {
+        let Some(p) = &self.posenet else {
+            return;
+        };
+        let g_xi = correction_backward(xi, g_eps).map(|v| v as f32);
+        match self.posenet_times(d, t) {
+            (tn, Some((ta, tb))) => p.backward_anchored(tn, ta, tb, g_xi, &mut self.posenet_grad),
+            (tn, None) => p.backward(tn, g_xi, &mut self.posenet_grad),
+        }
     }
 
     /// One joint iteration.
@@ -266,6 +288,9 @@ impl JointTrainer {
 
         let clock = Instant::now();
         self.posenet_grad.fill(0.0);
+        for &(t, xi, g_eps) in &motion.camera {
+            self.posenet_backward(d, t, xi, g_eps);
+        }
         let skipped = self.fallbacks.event_steps_skipped;
         let l_event = if g1 > 0.0 && d.views.len() >= 2 {
             self.event_term(r, d, g1 as f32, &mut grads)
@@ -357,17 +382,8 @@ impl JointTrainer {
         if self.iteration >= self.settings.posenet_warmup || self.posenet.is_none() {
             add_scaled(grads, &ge, 1.0);
         }
-        if let Some(p) = &self.posenet {
-            let g_eps =
-                crate::lie::world_left_grad_to_camera_right(&camera.cam_to_world, ge.camera);
-            let g_xi = correction_backward(xi, g_eps).map(|v| v as f32);
-            match self.posenet_times(d, t_e) {
-                (tn, Some((ta, tb))) => {
-                    p.backward_anchored(tn, ta, tb, g_xi, &mut self.posenet_grad)
-                }
-                (tn, None) => p.backward(tn, g_xi, &mut self.posenet_grad),
-            }
-        }
+        let g_eps = crate::lie::world_left_grad_to_camera_right(&camera.cam_to_world, ge.camera);
+        self.posenet_backward(d, t_e, xi, g_eps);
         el.loss as f64
     }
 

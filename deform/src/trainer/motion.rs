@@ -2,8 +2,9 @@
 //! bound Gaussians against their events' flow, and where its gradient goes.
 
 use super::{JointTrainer, NEAR, field_time};
+use crate::camera_path::{CameraVelocity, velocity_between, velocity_between_backward};
+use crate::flow::{EgoGrad, ego_flow, ego_flow_backward, gaussian_flow, gaussian_flow_backward};
 use crate::flow::{EgoPoints, Flow2, GsCameras, GsGrad, Pinhole, ProjCam};
-use crate::flow::{ego_flow, gaussian_flow, gaussian_flow_backward};
 use crate::inputs::Inputs;
 use crate::motion_loss::{CsrBindings, MotionGrad, MotionInputs, PerGaussian, motion_loss};
 use crate::settings::FlowForm;
@@ -19,6 +20,9 @@ pub(super) struct MotionGrads {
     pub(super) at_view: Vec<[f32; 3]>,
     canonical: Vec<[f32; 3]>,
     field: Vec<f32>,
+    /// `(t, ξ(t), ∂L/∂ε)`: camera-right twist gradients of the corrected camera at the
+    /// span's two ends, for the PoseNet.
+    pub(super) camera: Vec<(f64, [f64; 6], [f64; 6])>,
 }
 
 impl MotionGrads {
@@ -101,29 +105,34 @@ impl JointTrainer {
         };
         let k = d.views[i].camera.intrinsics;
         let cam0 = ProjCam::<f32>::new(&rv.camera.cam_to_world, &k, NEAR);
-        let cam1 = ProjCam::<f32>::new(&d.path.pose_at(t1), &k, NEAR);
+        let cam1 = ProjCam::<f32>::new(&self.camera_at(d, t1).0.cam_to_world, &k, NEAR);
         let cams = match self.settings.flow_form {
             FlowForm::Paper => GsCameras::Same(&cam0),
             FlowForm::Exact => GsCameras::Exact(&cam0, &cam1),
         };
         let mut fgs = Flow2::default();
         gaussian_flow(cams, &x0, &x1, &mut fgs);
+        // F_ego from the velocity of the joint training's camera (PoseNet-corrected) over
+        // [t0, t1]: the PoseNet learns from L_motion too (Eq. 12 trains it jointly).
         let mut fego = Flow2::default();
-        if self.settings.flow_form == FlowForm::Paper {
-            let (u, v, rho) = ego_points(&rv.image, &cam0, &x0);
-            let vel = d.path.velocity_at(t0).to_array().map(|x| x as f32);
-            let pts = EgoPoints {
-                u: &u,
-                v: &v,
-                inv_depth: &rho,
-            };
-            ego_flow(
-                &Pinhole::from_intrinsics(&k),
-                &vel,
-                pts,
-                (1.0 / NEAR) as f32,
-                &mut fego,
-            );
+        let paper = self.settings.flow_form == FlowForm::Paper;
+        let (ca, xa) = self.camera_at(d, t0);
+        let (cb, xb) = self.camera_at(d, t1);
+        let vel = velocity_between(&ca.cam_to_world, &cb.cam_to_world, t1 - t0);
+        let vel = vel.to_array().map(|x| x as f32);
+        let pinhole = Pinhole::from_intrinsics(&k);
+        let (u, v, rho) = if paper {
+            ego_points(&rv.image, &cam0, &x0)
+        } else {
+            Default::default()
+        };
+        let pts = EgoPoints {
+            u: &u,
+            v: &v,
+            inv_depth: &rho,
+        };
+        if paper {
+            ego_flow(&pinhole, &vel, pts, (1.0 / NEAR) as f32, &mut fego);
         }
         let inp = MotionInputs {
             dt: (t1 - t0) as f32,
@@ -165,6 +174,16 @@ impl JointTrainer {
         for (kk, &g) in idx.iter().enumerate() {
             out.at_view[g] = gg.x0[kk];
             out.canonical[g] = gg.x1[kk];
+        }
+        if paper && self.posenet.is_some() {
+            let scaled = |g: &[f32]| g.iter().map(|x| x * g2).collect::<Vec<f32>>();
+            let mut eg = EgoGrad::default();
+            let (gu, gv) = (scaled(&mg.ego_u), scaled(&mg.ego_v));
+            ego_flow_backward(&pinhole, &vel, pts, &fego, &gu, &gv, &mut eg);
+            let g_vel = CameraVelocity::from_array(eg.velocity.map(f64::from));
+            let (ga, gb) =
+                velocity_between_backward(&ca.cam_to_world, &cb.cam_to_world, t1 - t0, &g_vel);
+            out.camera = vec![(t0, xa, ga), (t1, xb, gb)];
         }
         if let Some(c1) = cache1 {
             let mut dl = Deltas::zeros(idx.len());
