@@ -26,7 +26,7 @@ pub const DEMO_GAUSSIANS_ITERATIONS: u32 = 1500;
 /// LoCM epochs of the demo (the stage default is 3).
 pub const DEMO_EVFLOW_EPOCHS: usize = 1;
 /// Joint iterations of the demo (the stage default is 2000).
-pub const DEMO_DEFORM_ITERATIONS: u32 = 300;
+pub const DEMO_DEFORM_ITERATIONS: u32 = 600;
 
 /// What the demo runs.
 #[derive(Clone, Debug)]
