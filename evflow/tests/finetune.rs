@@ -113,7 +113,7 @@ fn lora_finetune_lowers_the_cm_loss_and_writes_the_stage_outputs() {
     }
     assert_eq!(total, r.events);
     // `evflow eval` (evflow::eval metrics) agrees with the stage's own figures.
-    let ev = evflow::stage::eval_flows(&Input::Scene(scene.clone()), &out, None).unwrap();
+    let ev = evflow::stage::eval_flows(&Input::Scene(scene.clone()), &out, None, 0.0).unwrap();
     let (a, b) = (ev.mean_epe_px.unwrap(), r.flow_err_px.unwrap());
     assert!(
         (a - b).abs() < 1e-3 * b.max(1.0),
