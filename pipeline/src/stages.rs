@@ -193,8 +193,7 @@ pub const STAGES: &[Stage] = &[
             Figure::new("novel/psnr_mean", "novel PSNR", "dB"),
             Figure::new("baselines/blend/psnr_mean", "linear blend", "dB"),
             Figure::new("baselines/events/psnr_mean", "event pseudo image", "dB"),
-            Figure::new("psnr", "PSNR", "dB"),
-            Figure::plain("ssim", "SSIM"),
+            Figure::new("camera/corrected/rotation_deg_mean", "camera error", "°"),
         ],
     },
 ];
