@@ -95,18 +95,6 @@ pub fn resolve_settings(a: &TrainArgs) -> Result<DeformSettings> {
     })
 }
 
-/// One point of the loss curves.
-#[derive(Clone, Debug, Serialize)]
-pub struct CurvePoint {
-    pub iteration: u32,
-    pub l_rgb: f64,
-    pub l_event: f64,
-    pub l_motion: f64,
-    pub total: f64,
-    pub psnr: f64,
-    pub bound: usize,
-}
-
 /// `report.json` of `deform train`.
 #[derive(Clone, Debug, Serialize)]
 pub struct TrainReport {
@@ -130,7 +118,8 @@ pub struct TrainReport {
     pub contrast_threshold: f64,
     pub frames_srgb: bool,
     pub gaussians: usize,
-    pub curve: Vec<CurvePoint>,
+    /// Every `log_every`-th iteration's figures (losses, PSNR, bound Gaussians, …).
+    pub curve: Vec<JointStep>,
     /// The camera at the test frames' times against their recorded poses.
     pub camera: CameraCheck,
     pub test: Evaluation,
@@ -193,15 +182,7 @@ pub fn train(
         }
         let s = tr.step(&r, &d);
         if s.iteration.is_multiple_of(settings.log_every) || s.iteration == settings.iterations {
-            curve.push(CurvePoint {
-                iteration: s.iteration,
-                l_rgb: s.l_rgb,
-                l_event: s.l_event,
-                l_motion: s.l_motion,
-                total: s.total,
-                psnr: s.psnr,
-                bound: s.bound,
-            });
+            curve.push(s);
         }
         on_step(&s);
     }

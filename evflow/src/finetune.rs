@@ -11,7 +11,7 @@
 //! Windows without events are skipped (nothing to sharpen).
 
 use crate::net::io::BareWeights;
-use crate::net::{FlowNet, NetConfig, adam_step, to_f64};
+use crate::net::{FlowNet, NetConfig, adam_step, adam_step_conv, to_f64};
 use crate::source::Source;
 use burn::tensor::Tensor;
 use scene::cli::Settings;
@@ -346,16 +346,7 @@ pub fn finetune(
                         adam_step(&mut adam, &format!("{name}.lora_a"), &mut lo.a, &grads, lr);
                         adam_step(&mut adam, &format!("{name}.lora_b"), &mut lo.b, &grads, lr);
                     }
-                    _ => {
-                        adam_step(
-                            &mut adam,
-                            &format!("{name}.weight"),
-                            &mut c.weight,
-                            &grads,
-                            lr,
-                        );
-                        adam_step(&mut adam, &format!("{name}.bias"), &mut c.bias, &grads, lr);
-                    }
+                    _ => adam_step_conv(&mut adam, c, &grads, lr),
                 }
             }
             step_time += t0.elapsed().as_secs_f64();

@@ -204,31 +204,27 @@ pub fn windows_around(ev: &EventStream, times: &[f64], len: f64) -> Vec<Window> 
             };
             let t_a = (times[i] - 0.5 * len).max(lo);
             let t_b = (times[i] + 0.5 * len).min(hi);
-            let end = if i + 1 == n { t_b.next_up() } else { t_b };
-            Window {
-                index: i,
-                t_a,
-                t_b,
-                range: ev.window_range(t_a, end),
-            }
+            window(ev, i, t_a, t_b, i + 1 == n)
         })
         .collect()
+}
+
+/// Window `index` over `[t_a, t_b)`, or `[t_a, t_b]` for the `last` one.
+fn window(ev: &EventStream, index: usize, t_a: f64, t_b: f64, last: bool) -> Window {
+    let end = if last { t_b.next_up() } else { t_b };
+    Window {
+        index,
+        t_a,
+        t_b,
+        range: ev.window_range(t_a, end),
+    }
 }
 
 /// Windows between consecutive frame times; the last one includes its end time.
 pub fn windows_between(ev: &EventStream, times: &[f64]) -> Vec<Window> {
     let n = times.len().saturating_sub(1);
     (0..n)
-        .map(|i| {
-            let (t_a, t_b) = (times[i], times[i + 1]);
-            let end = if i + 1 == n { t_b.next_up() } else { t_b };
-            Window {
-                index: i,
-                t_a,
-                t_b,
-                range: ev.window_range(t_a, end),
-            }
-        })
+        .map(|i| window(ev, i, times[i], times[i + 1], i + 1 == n))
         .collect()
 }
 

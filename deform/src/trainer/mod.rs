@@ -17,7 +17,7 @@ use crate::inputs::Inputs;
 use crate::posenet::{PoseNet, apply_correction, correction_backward};
 use crate::settings::DeformSettings;
 use gaussians::stage::PSNR_CAP;
-use gaussians::train::{ModelGrads, Trainer};
+use gaussians::train::{ModelGrads, Trainer, ViewRender};
 use gaussians::{Rasterizer, TileRasterizer};
 use rand::{RngExt, SeedableRng};
 use scene::Camera;
@@ -226,14 +226,29 @@ impl JointTrainer {
         let mut m = MotionGrads::default();
         let (loss, _, _) = self.motion_term(d, i, &rv, 1.0, &mut m);
         let zero = vec![0.0f32; rv.image.rgb.len()];
-        let d_means = (!m.at_view.is_empty()).then_some(m.at_view.as_slice());
-        let mut g = self.inner.view_backward(r, &rv, &zero, None, d_means);
-        m.add_to(&mut g);
         self.posenet_grad.fill(0.0);
+        let g = self.backward_with_motion(r, d, &rv, &zero, &m);
+        (loss, g, self.posenet_grad.clone())
+    }
+
+    /// The view's gradients from `d_rgb` with the motion term's joined in: its part on the
+    /// rendered centres goes back through the view's pass, its canonical and field parts
+    /// are added, and its camera part accumulates into the PoseNet's gradient.
+    fn backward_with_motion(
+        &mut self,
+        r: &TileRasterizer,
+        d: &Inputs,
+        rv: &ViewRender<<TileRasterizer as Rasterizer>::State>,
+        d_rgb: &[f32],
+        m: &MotionGrads,
+    ) -> ModelGrads {
+        let d_means = (!m.at_view.is_empty()).then_some(m.at_view.as_slice());
+        let mut g = self.inner.view_backward(r, rv, d_rgb, None, d_means);
+        m.add_to(&mut g);
         for &(t, xi, g_eps) in &m.camera {
             self.posenet_backward(d, t, xi, g_eps);
         }
-        (loss, g, self.posenet_grad.clone())
+        g
     }
 
     /// Accumulate the PoseNet's gradient from `∂L/∂ε` (camera-right twist) of the
@@ -277,20 +292,13 @@ impl JointTrainer {
         self.timings.motion += clock.elapsed().as_secs_f64();
 
         let clock = Instant::now();
-        let d_means = (!motion.at_view.is_empty()).then_some(motion.at_view.as_slice());
-        let mut grads = self.inner.view_backward(r, &rv, &grad, None, d_means);
+        self.posenet_grad.fill(0.0);
+        let mut grads = self.backward_with_motion(r, d, &rv, &grad, &motion);
         self.fallbacks.drop_bindings(no_flow, outliers);
         drop(rv);
         self.timings.rgb += clock.elapsed().as_secs_f64();
-        let clock = Instant::now();
-        motion.add_to(&mut grads);
-        self.timings.motion += clock.elapsed().as_secs_f64();
 
         let clock = Instant::now();
-        self.posenet_grad.fill(0.0);
-        for &(t, xi, g_eps) in &motion.camera {
-            self.posenet_backward(d, t, xi, g_eps);
-        }
         let skipped = self.fallbacks.event_steps_skipped;
         let l_event = if g1 > 0.0 && d.views.len() >= 2 {
             self.event_term(r, d, g1 as f32, &mut grads)

@@ -104,8 +104,11 @@ impl JointTrainer {
             (xs.clone(), None)
         };
         let k = d.views[i].camera.intrinsics;
+        // The joint training's camera (PoseNet-corrected) at both ends of the span.
+        let (ca, xa) = self.camera_at(d, t0);
+        let (cb, xb) = self.camera_at(d, t1);
         let cam0 = ProjCam::<f32>::new(&rv.camera.cam_to_world, &k, NEAR);
-        let cam1 = ProjCam::<f32>::new(&self.camera_at(d, t1).0.cam_to_world, &k, NEAR);
+        let cam1 = ProjCam::<f32>::new(&cb.cam_to_world, &k, NEAR);
         let cams = match self.settings.flow_form {
             FlowForm::Paper => GsCameras::Same(&cam0),
             FlowForm::Exact => GsCameras::Exact(&cam0, &cam1),
@@ -116,8 +119,6 @@ impl JointTrainer {
         // [t0, t1]: the PoseNet learns from L_motion too (Eq. 12 trains it jointly).
         let mut fego = Flow2::default();
         let paper = self.settings.flow_form == FlowForm::Paper;
-        let (ca, xa) = self.camera_at(d, t0);
-        let (cb, xb) = self.camera_at(d, t1);
         let vel = velocity_between(&ca.cam_to_world, &cb.cam_to_world, t1 - t0);
         let vel = vel.to_array().map(|x| x as f32);
         let pinhole = Pinhole::from_intrinsics(&k);

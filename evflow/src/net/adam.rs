@@ -1,6 +1,7 @@
 //! Adam on the network's burn tensors: [`scene::optim::Adam`] (f32 moments, PyTorch's
 //! update) with one group per tensor, named after it.
 
+use super::flownet::Conv;
 use super::tensor::to_f32;
 use burn::tensor::{Gradients, Tensor, TensorData};
 use scene::optim::Adam;
@@ -35,4 +36,16 @@ pub fn adam_step<const D: usize>(
         (&device, dtype),
     )
     .require_grad();
+}
+
+/// [`adam_step`] on a layer's weight and bias (groups `NAME.weight`, `NAME.bias`).
+pub fn adam_step_conv(adam: &mut Adam, c: &mut Conv, grads: &Gradients, lr: f64) {
+    adam_step(
+        adam,
+        &format!("{}.weight", c.name),
+        &mut c.weight,
+        grads,
+        lr,
+    );
+    adam_step(adam, &format!("{}.bias", c.name), &mut c.bias, grads, lr);
 }

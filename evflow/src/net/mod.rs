@@ -14,7 +14,7 @@ pub mod io;
 pub mod lora;
 pub mod tensor;
 
-pub use adam::adam_step;
+pub use adam::{adam_step, adam_step_conv};
 pub use flownet::{Conv, FlowNet, NetConfig, layout, px_per_window_to_px_per_s, upsample2};
 pub use lora::Lora;
 pub use tensor::{tensor4, to_f32, to_f64};

@@ -28,7 +28,7 @@
 
 use crate::cm::{CmConfig, CmEvents, cm_loss};
 use crate::eval::{FlowMetrics, FlowWarpLoss, flow_metrics, flow_warp_loss};
-use crate::net::{FlowNet, NetConfig, adam_step, tensor4, to_f64};
+use crate::net::{FlowNet, NetConfig, adam_step_conv, tensor4, to_f64};
 use burn::tensor::{DType, Device};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -263,15 +263,7 @@ pub fn run(
         }
         let grads = total.backward();
         for c in &mut net.convs {
-            let name = &c.name;
-            adam_step(
-                &mut adam,
-                &format!("{name}.weight"),
-                &mut c.weight,
-                &grads,
-                lr,
-            );
-            adam_step(&mut adam, &format!("{name}.bias"), &mut c.bias, &grads, lr);
+            adam_step_conv(&mut adam, c, &grads, lr);
         }
         loss_curve.push(loss_value);
         progress(step + 1, s.iterations, loss_value);
