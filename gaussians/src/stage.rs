@@ -135,6 +135,9 @@ pub struct TrainReport {
     pub final_loss: f64,
     pub gaussians: usize,
     pub field_parameters: usize,
+    /// The static/dynamic split (absent when none was made).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub static_split: Option<crate::train::static_split::SplitSummary>,
     pub train_frames: usize,
     /// Initial Gaussians placed on surfaces (from the PLY or stereo; the rest random).
     pub init_surface_points: usize,
@@ -370,6 +373,7 @@ pub fn train(
     let model = Model::from_trainer(&trainer);
     // The settings as trained (the automatic Gaussian cap resolved).
     let settings = trainer.settings.clone();
+    let split = trainer.split;
     drop(trainer);
     model.save(out.path())?;
     write_resolved(out.path(), &settings)?;
@@ -401,6 +405,7 @@ pub fn train(
         final_loss: summary.final_loss,
         gaussians: model.splats.len(),
         field_parameters: model.field.as_ref().map_or(0, |f| f.params.len()),
+        static_split: split,
         train_frames: views.len(),
         init_surface_points,
         test,

@@ -347,3 +347,52 @@ fn default_field_starts_as_the_identity() {
         }
     }
 }
+
+/// The static/dynamic split happens once, at its iteration, flags the Gaussians the field
+/// moves by at most the tolerance, and freezes them at their canonical parameters.
+#[test]
+fn static_split_flags_and_freezes_the_gaussians_the_field_barely_moves() {
+    let cams = cameras(2);
+    let views: Vec<View> = cams
+        .iter()
+        .enumerate()
+        .map(|(k, c)| View {
+            camera: *c,
+            time: k as f32,
+            rgb: vec![0.5; 3 * W * H],
+        })
+        .collect();
+    let run = |tolerance_px: f32| {
+        let s = TrainSettings {
+            iterations: 8,
+            static_iterations: 0,
+            static_tolerance_px: tolerance_px,
+            static_split_at: 0.5,
+            field: gaussians::field::FieldSettings {
+                zero_head_init: false,
+                width: 8,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let mut t = Trainer::new(s, random_splats(10, DVec3::ZERO, 0.5, 4), 1.0);
+        assert_eq!(t.static_split_iteration(), Some(4));
+        for it in 0..8 {
+            assert_eq!(t.split.is_some(), it >= 4, "iteration {it}");
+            t.step(&Additive, &views);
+        }
+        t
+    };
+    // Every Gaussian moves under a random field: a tiny tolerance keeps all dynamic.
+    let t = run(1e-6);
+    let sp = t.split.unwrap();
+    assert_eq!((sp.iteration, sp.dynamic, sp.static_), (4, 10, 0));
+    assert!(t.settings.dynamic_only && t.splats.dynamic.iter().all(|&d| d));
+    // A huge tolerance flags all static: the field no longer moves anything.
+    let t = run(1e9);
+    let sp = t.split.unwrap();
+    assert_eq!((sp.dynamic, sp.static_), (0, 10));
+    let (d, _) = t.deformed(0.7);
+    assert_eq!(d.means, t.splats.means);
+    assert_eq!(d.rotations, t.splats.rotations);
+}

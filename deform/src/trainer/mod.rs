@@ -124,6 +124,8 @@ impl JointTrainer {
     /// densification, field).
     pub fn new(d: &Inputs, settings: DeformSettings) -> Self {
         let mut warm = d.warmup.clone();
+        // The model says whether the warm-up split it into static and dynamic Gaussians.
+        warm.dynamic_only = d.model.info.dynamic_only;
         let done = d.model.info.iterations;
         warm.iterations = done + settings.iterations;
         if !settings.densify {

@@ -7,6 +7,7 @@
 
 pub mod init;
 pub mod settings;
+pub mod static_split;
 pub mod stereo;
 
 use crate::densify::{self, Geometry, GradStats};
@@ -66,6 +67,8 @@ pub struct Trainer {
     pub stats: GradStats,
     pub extent: f32,
     pub iteration: u32,
+    /// The static/dynamic split, once made.
+    pub split: Option<static_split::SplitSummary>,
     order: Vec<usize>,
     rng: rand_chacha::ChaCha8Rng,
 }
@@ -113,6 +116,7 @@ impl Trainer {
             field_adam,
             extent,
             iteration: 0,
+            split: None,
             order: Vec::new(),
         }
     }
@@ -282,6 +286,7 @@ impl Trainer {
         let g = self.view_backward(r, &rendered, &grad, None, None);
         drop(rendered);
         self.apply_gradients(&g);
+        self.split_static_if_due(views);
         StepInfo {
             iteration: self.iteration,
             loss,
@@ -289,6 +294,37 @@ impl Trainer {
             gaussians: self.splats.len(),
             field_on,
         }
+    }
+
+    /// The iteration of the static/dynamic split (`None`: no split in this run).
+    pub fn static_split_iteration(&self) -> Option<u32> {
+        let s = &self.settings;
+        if !s.deform || s.dynamic_only || s.static_tolerance_px <= 0.0 {
+            return None;
+        }
+        let field_its = s.iterations.saturating_sub(s.static_iterations) as f32;
+        Some(s.static_iterations + (s.static_split_at.clamp(0.0, 1.0) * field_its) as u32)
+    }
+
+    /// Make the static/dynamic split when its iteration has come ([`static_split`]).
+    pub fn split_static_if_due(&mut self, views: &[View]) {
+        if self.split.is_some() || self.static_split_iteration() != Some(self.iteration) {
+            return;
+        }
+        let cams: Vec<Camera> = views.iter().map(|v| v.camera).collect();
+        let times: Vec<f32> = views.iter().map(|v| v.time).collect();
+        let times = static_split::sample_times(&times);
+        let motion = static_split::field_motion_px(&self.field, &self.splats, &cams, &times);
+        let tol = self.settings.static_tolerance_px;
+        self.splats.dynamic = static_split::dynamic_flags(&motion, tol);
+        self.settings.dynamic_only = true;
+        let dynamic = self.splats.dynamic.iter().filter(|&&d| d).count();
+        self.split = Some(static_split::SplitSummary {
+            iteration: self.iteration,
+            tolerance_px: tol,
+            dynamic,
+            static_: self.splats.len() - dynamic,
+        });
     }
 
     fn apply_grads(&mut self, g: &SplatGrads, it: u32) {

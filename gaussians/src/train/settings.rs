@@ -32,6 +32,12 @@ pub struct TrainSettings {
     pub deform: bool,
     /// Deform only Gaussians flagged `dynamic` (missing flags count as dynamic).
     pub dynamic_only: bool,
+    /// Static/dynamic split: Gaussians the field moves by at most this many pixels in
+    /// the train views over the whole recording are flagged static (they keep their
+    /// canonical parameters) and `dynamic_only` is switched on (0 = no split).
+    pub static_tolerance_px: f32,
+    /// When the split is made: this fraction of the way through the field phase.
+    pub static_split_at: f32,
     pub field: FieldSettings,
     /// Field learning rate, log-linear init → final over `iterations`. Deform-GS's
     /// 8e-4 → 1.6e-6 is spread over 40k iterations; squeezed into a 3500-iteration
@@ -82,6 +88,8 @@ impl Default for TrainSettings {
             static_iterations: 1000,
             deform: true,
             dynamic_only: false,
+            static_tolerance_px: 0.25,
+            static_split_at: 0.75,
             field: FieldSettings::default(),
             field_lr_init: 3e-3,
             field_lr_final: 3e-4,
@@ -128,6 +136,12 @@ impl scene::cli::Settings for TrainSettings {
         }
         if !(0.0..=1.0).contains(&self.dssim_weight) {
             return Err("dssim_weight must lie in [0, 1]".into());
+        }
+        if !(self.static_tolerance_px.is_finite() && self.static_tolerance_px >= 0.0) {
+            return Err("static_tolerance_px must be finite and ≥ 0 (0: no split)".into());
+        }
+        if !(0.0..=1.0).contains(&self.static_split_at) {
+            return Err("static_split_at must lie in [0, 1]".into());
         }
         if self.sh_degree > 3 {
             return Err("sh_degree must be ≤ 3".into());

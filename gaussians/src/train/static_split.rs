@@ -1,0 +1,199 @@
+//! Static/dynamic split: Gaussians that the deformation field barely moves over the
+//! recording are flagged static and keep their canonical parameters from then on.
+//!
+//! A static Gaussian cannot be moved by the field, so the background cannot deform to
+//! make up for an error of the camera (the joint training's PoseNet is pinned by it),
+//! and the field runs on the dynamic Gaussians only (cheaper iterations).
+
+use crate::field::{self, Deltas, Mlp};
+use crate::splats::Splats;
+use scene::Camera;
+
+/// Times at which the field is sampled between the first and last train time.
+pub const SAMPLES: usize = 33;
+
+/// How far the field moves each Gaussian, in pixels of the train views: over `times`,
+/// the largest of `|δμ| + s_max·(θ + |Δs|/s)` (centre displacement plus the motion of
+/// the Gaussian's outline from rotation by θ and relative scale change), divided by the
+/// Gaussian's smallest depth over `cams` and multiplied by the focal length. A Gaussian
+/// behind every camera scores 0 (no view sees it move).
+pub fn field_motion_px(
+    mlp: &Mlp<f32>,
+    splats: &Splats,
+    cams: &[Camera],
+    times: &[f32],
+) -> Vec<f32> {
+    let n = splats.len();
+    let mut world = vec![0.0f32; n];
+    for &t in times {
+        let (d, _) = field::Deformation::forward(mlp, &splats.means, &[t]);
+        accumulate_motion(splats, &d, &mut world);
+    }
+    let focal = cams
+        .iter()
+        .map(|c| c.intrinsics.fx.max(c.intrinsics.fy))
+        .fold(0.0f64, f64::max);
+    (0..n)
+        .map(|i| {
+            let p = glam::DVec3::from(splats.means[i].map(f64::from));
+            let z = cams
+                .iter()
+                .map(|c| -c.cam_to_world.to_camera(p).z)
+                .filter(|&z| z > 1e-6)
+                .fold(f64::INFINITY, f64::min);
+            if z.is_finite() {
+                (world[i] as f64 * focal / z) as f32
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
+/// `out[i] = max(out[i], motion of Gaussian i under d)` in world units.
+fn accumulate_motion(splats: &Splats, d: &Deltas, out: &mut [f32]) {
+    let moved = field::apply_deltas(&splats.means, &splats.log_scales, &splats.rotations, d);
+    for i in 0..splats.len() {
+        let dx = d.dx[i];
+        let shift = (dx[0] * dx[0] + dx[1] * dx[1] + dx[2] * dx[2]).sqrt();
+        let s0 = splats.log_scales[i].map(f32::exp);
+        let s1 = moved.log_scales[i].map(f32::exp);
+        let s_max = s0.iter().fold(0.0f32, |a, &b| a.max(b));
+        let rel_scale = (0..3)
+            .map(|k| (s1[k] - s0[k]).abs() / s0[k].max(1e-12))
+            .fold(0.0f32, f32::max);
+        let angle = quat_angle(splats.rotations[i], moved.rotations[i]);
+        let m = shift + s_max * (angle + rel_scale);
+        if m > out[i] {
+            out[i] = m;
+        }
+    }
+}
+
+/// Angle (radians) of the rotation between two raw quaternions (normalised here).
+fn quat_angle(a: [f32; 4], b: [f32; 4]) -> f32 {
+    let na = a.iter().map(|v| v * v).sum::<f32>().sqrt().max(1e-12);
+    let nb = b.iter().map(|v| v * v).sum::<f32>().sqrt().max(1e-12);
+    let dot = (0..4).map(|k| a[k] * b[k]).sum::<f32>() / (na * nb);
+    2.0 * dot.abs().min(1.0).acos()
+}
+
+/// Uniform sample times over `[min, max]` of the views' times (one if they are equal).
+pub fn sample_times(view_times: &[f32]) -> Vec<f32> {
+    let lo = view_times.iter().copied().fold(f32::INFINITY, f32::min);
+    let hi = view_times.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+    if !(lo.is_finite() && hi.is_finite()) {
+        return Vec::new();
+    }
+    if hi <= lo {
+        return vec![lo];
+    }
+    (0..SAMPLES)
+        .map(|k| lo + (hi - lo) * k as f32 / (SAMPLES - 1) as f32)
+        .collect()
+}
+
+/// Dynamic flags: a Gaussian is dynamic when the field moves it by more than
+/// `tolerance_px` pixels.
+pub fn dynamic_flags(motion_px: &[f32], tolerance_px: f32) -> Vec<bool> {
+    motion_px.iter().map(|&m| m > tolerance_px).collect()
+}
+
+/// What the split found (for the report).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct SplitSummary {
+    /// Iteration at which the split was made.
+    pub iteration: u32,
+    pub tolerance_px: f32,
+    pub dynamic: usize,
+    pub static_: usize,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::field::FieldSettings;
+    use scene::camera::{Intrinsics, Pose};
+
+    fn camera() -> Camera {
+        Camera {
+            intrinsics: Intrinsics::from_fov_x(64, 64, 60f64.to_radians()),
+            cam_to_world: Pose::look_at(
+                glam::DVec3::new(0.0, 0.0, 3.0),
+                glam::DVec3::ZERO,
+                glam::DVec3::Y,
+            ),
+        }
+    }
+
+    #[test]
+    fn zero_field_moves_nothing_and_a_shift_scales_with_depth() {
+        let s = FieldSettings {
+            width: 8,
+            depth: 2,
+            ..FieldSettings::default()
+        };
+        let mut mlp = Mlp::<f32>::new(s, 1);
+        mlp.zero_head();
+        let mut splats = Splats::with_capacity(2);
+        for z in [0.0f32, -3.0] {
+            splats.push(crate::splats::Gaussian::isotropic(
+                [0.0, 0.0, z],
+                -3.0,
+                0.0,
+                [0.5; 3],
+            ));
+        }
+        let cams = [camera()];
+        let times = sample_times(&[0.0, 0.5, 1.0]);
+        assert_eq!(times.len(), SAMPLES);
+        let m = field_motion_px(&mlp, &splats, &cams, &times);
+        assert_eq!(m, vec![0.0, 0.0]);
+
+        // Head bias δμ = (0.01, 0, 0) with a zero head weight: a constant shift, seen
+        // as 0.01·f/z pixels from the camera at distance z (3 and 6 here).
+        let head = *mlp.layers.last().unwrap();
+        mlp.params[head.bias] = 0.01;
+        let m = field_motion_px(&mlp, &splats, &cams, &times);
+        let f = cams[0].intrinsics.fx as f32;
+        assert!((m[0] - 0.01 * f / 3.0).abs() < 1e-4, "{m:?}");
+        assert!((m[1] - 0.01 * f / 6.0).abs() < 1e-4, "{m:?}");
+        // A Gaussian behind the camera is not seen to move.
+        splats.push(crate::splats::Gaussian::isotropic(
+            [0.0, 0.0, 4.0],
+            -3.0,
+            0.0,
+            [0.5; 3],
+        ));
+        assert_eq!(field_motion_px(&mlp, &splats, &cams, &times)[2], 0.0);
+        assert_eq!(
+            dynamic_flags(&[0.2, 0.6, 0.5], 0.5),
+            vec![false, true, false]
+        );
+    }
+
+    #[test]
+    fn rotation_and_scale_count_by_the_gaussians_size() {
+        let mut splats = Splats::with_capacity(1);
+        splats.push(crate::splats::Gaussian::isotropic(
+            [0.0; 3],
+            0.1f32.ln(),
+            0.0,
+            [0.5; 3],
+        ));
+        let mut d = Deltas::zeros(1);
+        // δs = +0.01 on a scale of 0.1: 10 % larger → 0.1 · 0.1 = 0.01 world units.
+        d.ds = vec![[0.01, 0.0, 0.0]];
+        let mut w = vec![0.0];
+        accumulate_motion(&splats, &d, &mut w);
+        assert!((w[0] - 0.01).abs() < 1e-5, "{}", w[0]);
+        // δq turning the identity by θ about z: q = (cos θ/2, 0, 0, sin θ/2).
+        let th = 0.2f32;
+        let mut d = Deltas::zeros(1);
+        let q0 = splats.rotations[0];
+        d.dq = vec![[(th / 2.0).cos() - q0[0], 0.0, 0.0, (th / 2.0).sin() - q0[3]]];
+        let mut w = vec![0.0];
+        accumulate_motion(&splats, &d, &mut w);
+        assert!((w[0] - 0.1 * th).abs() < 1e-5, "{}", w[0]);
+    }
+}
