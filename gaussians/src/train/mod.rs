@@ -324,6 +324,7 @@ impl Trainer {
             tolerance_px: tol,
             dynamic,
             static_: self.splats.len() - dynamic,
+            motion_px_quantiles: static_split::quantiles(&motion, [0.5, 0.9, 0.99]),
         });
     }
 

@@ -107,6 +107,21 @@ pub struct SplitSummary {
     pub tolerance_px: f32,
     pub dynamic: usize,
     pub static_: usize,
+    /// Quantiles 0.5, 0.9 and 0.99 of the Gaussians' motion in pixels.
+    pub motion_px_quantiles: [f32; 3],
+}
+
+/// Quantiles `qs` (in [0, 1]) of `v` (nearest rank; 0 for an empty `v`).
+pub fn quantiles<const N: usize>(v: &[f32], qs: [f32; N]) -> [f32; N] {
+    let mut s = v.to_vec();
+    s.sort_by(f32::total_cmp);
+    qs.map(|q| {
+        if s.is_empty() {
+            0.0
+        } else {
+            s[((q * (s.len() - 1) as f32).round() as usize).min(s.len() - 1)]
+        }
+    })
 }
 
 #[cfg(test)]
@@ -166,6 +181,10 @@ mod tests {
             [0.5; 3],
         ));
         assert_eq!(field_motion_px(&mlp, &splats, &cams, &times)[2], 0.0);
+        assert_eq!(
+            quantiles(&[3.0, 1.0, 2.0, 4.0, 5.0], [0.0, 0.5, 1.0]),
+            [1.0, 3.0, 5.0]
+        );
         assert_eq!(
             dynamic_flags(&[0.2, 0.6, 0.5], 0.5),
             vec![false, true, false]
