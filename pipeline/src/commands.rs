@@ -9,8 +9,8 @@ use crate::record::Action;
 use crate::runner::{self, RunOptions};
 use crate::sweep::Sweep;
 use crate::{chart, config_show, eval, plan, stages, status, sweep_run, synth};
-use anyhow::{Result, anyhow};
-use std::path::Path;
+use anyhow::{Context as _, Result, anyhow};
+use std::path::{Path, PathBuf};
 
 /// Run one parsed `degs` command.
 pub fn execute(command: Command) -> Result<()> {
@@ -77,7 +77,7 @@ pub fn execute(command: Command) -> Result<()> {
             all,
         } => plan(&experiment, &place, all),
         Command::Chart { runs, place, out } => {
-            let records = chart::load_runs(&runs, &place)?;
+            let records = chart_runs(&runs, &place)?;
             let out = match out {
                 Some(o) => o,
                 None => place.context()?.cache.root.join("charts"),
@@ -229,6 +229,40 @@ fn plan(file: &Path, place: &Where, all: bool) -> Result<()> {
         slurm.display()
     );
     Ok(())
+}
+
+/// The run records named by `runs`: run directories, experiment names, or sweep names
+/// (`runs/<sweep>/sweep.json`: every experiment of the sweep that has a record).
+fn chart_runs(runs: &[String], place: &Where) -> Result<Vec<crate::record::RunRecord>> {
+    let mut out: Vec<crate::record::RunRecord> = Vec::new();
+    for r in runs {
+        let sweep = [PathBuf::from(r), place.context()?.cache.run_dir(r)]
+            .into_iter()
+            .map(|d| d.join("sweep.json"))
+            .find(|p| p.is_file());
+        let dirs = match sweep {
+            Some(p) => {
+                let rec: sweep_run::SweepRecord = serde_json::from_slice(
+                    &std::fs::read(&p).with_context(|| format!("{}: cannot read", p.display()))?,
+                )
+                .with_context(|| format!("{}: not a degs sweep record", p.display()))?;
+                rec.experiments
+                    .iter()
+                    .map(|e| e.run_record.clone())
+                    .filter(|p| p.is_file())
+                    .filter_map(|p| p.parent().map(Path::to_path_buf))
+                    .collect()
+            }
+            None => vec![place.run_dir(r)?],
+        };
+        for d in dirs {
+            let rec = crate::record::RunRecord::read(&d.join("run.json"))?;
+            if !out.iter().any(|o| o.experiment == rec.experiment) {
+                out.push(rec);
+            }
+        }
+    }
+    Ok(out)
 }
 
 fn synth_scene(preset: &str, config: Option<&Path>, set: &[String], out: &Path) -> Result<()> {

@@ -344,6 +344,21 @@ mod tests {
     }
 
     #[test]
+    fn the_preset_is_an_axis_too_and_keeps_the_base_overrides() {
+        let s = sweep("[axes]\n\"scene.synth\" = [\"rigid\", \"nonrigid\"]\n").unwrap();
+        let pts = s.expand().unwrap();
+        let presets: Vec<(String, u32)> = pts
+            .iter()
+            .map(|p| match &p.experiment.scene {
+                crate::experiment::SceneSource::Synth(c) => (c.preset.clone(), c.width),
+                other => panic!("{other:?}"),
+            })
+            .collect();
+        assert_eq!(presets, [("rigid".into(), 32), ("nonrigid".into(), 32)]);
+        assert_eq!(pts[1].experiment.name, "s_synth-nonrigid");
+    }
+
+    #[test]
     fn no_axes_is_one_experiment_and_strings_name_cleanly() {
         let s = sweep("").unwrap();
         let pts = s.expand().unwrap();

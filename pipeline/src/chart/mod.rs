@@ -306,40 +306,6 @@ fn locm_seconds(report: &Value) -> Option<f64> {
     Some(t)
 }
 
-/// The run records named by `runs`: run directories, experiment names, or sweep names
-/// (`runs/<sweep>/sweep.json`: every experiment of the sweep that has a record).
-pub fn load_runs(runs: &[String], place: &crate::cli::Where) -> Result<Vec<RunRecord>> {
-    let mut out: Vec<RunRecord> = Vec::new();
-    for r in runs {
-        let sweep = [PathBuf::from(r), place.context()?.cache.run_dir(r)]
-            .into_iter()
-            .map(|d| d.join("sweep.json"))
-            .find(|p| p.is_file());
-        let dirs = match sweep {
-            Some(p) => {
-                let rec: crate::sweep_run::SweepRecord = serde_json::from_slice(
-                    &std::fs::read(&p).with_context(|| format!("{}: cannot read", p.display()))?,
-                )
-                .with_context(|| format!("{}: not a degs sweep record", p.display()))?;
-                rec.experiments
-                    .iter()
-                    .map(|e| e.run_record.clone())
-                    .filter(|p| p.is_file())
-                    .filter_map(|p| p.parent().map(Path::to_path_buf))
-                    .collect()
-            }
-            None => vec![place.run_dir(r)?],
-        };
-        for d in dirs {
-            let rec = RunRecord::read(&d.join("run.json"))?;
-            if !out.iter().any(|o| o.experiment == rec.experiment) {
-                out.push(rec);
-            }
-        }
-    }
-    Ok(out)
-}
-
 /// The charted numbers as CSV, one row per point (models, then flows, then baselines).
 pub fn to_csv(d: &ChartData) -> String {
     let opt = |v: Option<f64>| v.map_or(String::new(), |x| format!("{x}"));
