@@ -207,7 +207,10 @@ fn run_sweep(file: &Path, place: &Where, opts: &RunOptions, quiet: bool) -> Resu
 
 /// `degs plan`: an experiment file, or a sweep file (one with `base` or `[axes]`).
 fn plan(file: &Path, place: &Where, all: bool) -> Result<()> {
-    let ctx = place.context()?;
+    // absolute paths: the commands run from wherever the scheduler starts them
+    let mut ctx = place.context()?;
+    ctx.cache.root = std::path::absolute(&ctx.cache.root)?;
+    ctx.stage_dir = ctx.stage_dir.map(std::path::absolute).transpose()?;
     let p = if crate::sweep::is_sweep_file(file) {
         let sweep = Sweep::load(file)?;
         let exps: Vec<Experiment> = sweep_run::write_experiments(&sweep, &ctx)?
