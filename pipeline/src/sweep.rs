@@ -284,13 +284,31 @@ pub fn point_name(sweep: &str, values: &[(&str, &Value)]) -> String {
     };
     let mut name = sweep.to_string();
     for (k, v) in values {
-        let v = match v {
-            Value::String(s) => s.clone(),
-            other => other.to_string(),
-        };
-        name += &format!("_{}-{}", clean(k), clean(&v));
+        name += &format!("_{}-{}", clean(k), clean(&value_text(v)));
     }
-    name
+    // runs of `-` (from cleaned characters) collapse to one
+    let mut out = String::with_capacity(name.len());
+    for c in name.chars() {
+        if !(c == '-' && out.ends_with('-')) {
+            out.push(c);
+        }
+    }
+    out
+}
+
+/// A value as it appears in a name: strings bare, tables as `key-value-…`, lists as
+/// `item-…`.
+fn value_text(v: &Value) -> String {
+    match v {
+        Value::String(s) => s.clone(),
+        Value::Table(t) => t
+            .iter()
+            .map(|(k, v)| format!("{k}-{}", value_text(v)))
+            .collect::<Vec<_>>()
+            .join("-"),
+        Value::Array(a) => a.iter().map(value_text).collect::<Vec<_>>().join("-"),
+        other => other.to_string(),
+    }
 }
 
 #[cfg(test)]
@@ -378,6 +396,20 @@ mod tests {
                 &[("a", &Value::Float(0.5)), ("b c", &Value::Boolean(true))]
             ),
             "x_a-0.5_b-c-true"
+        );
+        let table: Value = "gamma1 = 0.0\ngamma2_max = 1.5"
+            .parse::<Table>()
+            .unwrap()
+            .into();
+        assert_eq!(
+            point_name(
+                "x",
+                &[
+                    ("schedule", &table),
+                    ("list", &Value::Array(vec![1.into(), 2.into()]))
+                ]
+            ),
+            "x_schedule-gamma1-0.0-gamma2-max-1.5_list-1-2"
         );
     }
 
