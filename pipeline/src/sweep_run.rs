@@ -124,13 +124,13 @@ pub fn run(
     let path = dir.join("sweep.json");
     scene::atomic::write_json_atomic(&path, &record)?;
     for (i, (exp, _)) in exps.iter().enumerate() {
-        eprintln!(
-            "[degs] sweep {}: experiment {}/{}: {}",
+        progress.note(&format!(
+            "sweep {}: experiment {}/{}: {}",
             sweep.name,
             i + 1,
             exps.len(),
             exp.name
-        );
+        ));
         let run = runner::run(exp, ctx, opts, progress)?;
         note_run(&mut record, i, &run);
         scene::atomic::write_json_atomic(&path, &record)?;

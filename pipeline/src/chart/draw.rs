@@ -33,6 +33,24 @@ enum Marker {
     Cross,
 }
 
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn labels_keep_what_differs_and_ticks_what_tells_them_apart() {
+        let names = ["s_iterations-100_k-2", "s_iterations-300_k-2"];
+        assert_eq!(short_labels(&names), ["iterations-100", "iterations-300"]);
+        assert_eq!(short_labels(&["only_one"]), ["only_one"]);
+        let long = "x".repeat(50);
+        assert_eq!(short_labels(&[&long, "y"])[0].chars().count(), 41);
+        assert_eq!(linear_tick(4.7541, 0.01), "4.754");
+        assert_eq!(linear_tick(20.0, 8.0), "20.0");
+        assert_eq!(linear_tick(20.0, 40.0), "20");
+        assert_eq!(tick(1234.5), "1234");
+    }
+}
+
 /// One group of points, drawn alike; each point with its label.
 struct Series {
     label: String,
@@ -69,27 +87,31 @@ fn method_style(m: Method) -> (RGBColor, Marker) {
     }
 }
 
-/// Names without the prefix they all share (the sweep's name), so labels stay short.
+/// Short labels for experiment names `<sweep>_<key>-<value>_…`: the `_`-separated
+/// parts that differ between them (a lone name stays whole), at most 40 characters.
 fn short_labels(names: &[&str]) -> Vec<String> {
-    let common = names
-        .iter()
-        .skip(1)
-        .fold(names.first().map_or(0, |n| n.len()), |len, n| {
-            names[0]
-                .bytes()
-                .zip(n.bytes())
-                .take(len)
-                .take_while(|(a, b)| a == b)
-                .count()
-        });
+    let parts: Vec<Vec<&str>> = names.iter().map(|n| n.split('_').collect()).collect();
+    let same_shape = parts.iter().all(|p| p.len() == parts[0].len());
     names
         .iter()
-        .map(|n| {
-            let rest = n.get(common..).unwrap_or("").trim_start_matches(['_', '-']);
-            if names.len() == 1 || rest.is_empty() {
-                n.to_string()
+        .zip(&parts)
+        .map(|(name, p)| {
+            let label = if names.len() < 2 || !same_shape {
+                name.to_string()
             } else {
-                rest.to_string()
+                let differing: Vec<&str> = (0..p.len())
+                    .filter(|&i| parts.iter().any(|q| q[i] != p[i]))
+                    .map(|i| p[i])
+                    .collect();
+                if differing.is_empty() {
+                    name.to_string()
+                } else {
+                    differing.join(" ")
+                }
+            };
+            match label.char_indices().nth(40) {
+                Some((at, _)) => format!("{}…", &label[..at]),
+                None => label,
             }
         })
         .collect()
@@ -278,6 +300,13 @@ fn tick(v: f64) -> String {
     }
 }
 
+/// A tick value on a linear axis spanning `span`: enough decimals to tell the
+/// ticks (about ten of them) apart.
+fn linear_tick(v: f64, span: f64) -> String {
+    let decimals = (1.0 - span.max(1e-12).log10()).ceil().clamp(0.0, 6.0) as usize;
+    format!("{v:.decimals$}")
+}
+
 /// Padded range of `values` (a unit either side when they are all equal).
 fn range(values: impl Iterator<Item = f64>, pad: f64, clamp_at_zero: bool) -> (f64, f64) {
     let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
@@ -327,8 +356,14 @@ fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, spec: &Spec) -> Resul
         .y_desc(&spec.y_label)
         .axis_desc_style(("sans-serif", 18))
         .label_style(("sans-serif", 15))
-        .x_label_formatter(&|v| tick(if log { 10f64.powf(*v) } else { *v }))
-        .y_label_formatter(&|v| tick(*v))
+        .x_label_formatter(&|v| {
+            if log {
+                tick(10f64.powf(*v))
+            } else {
+                linear_tick(*v, x1 - x0)
+            }
+        })
+        .y_label_formatter(&|v| linear_tick(*v, y1 - y0))
         .light_line_style(RGBColor(246, 246, 246))
         .draw()
         .map_err(|e| err(&e))?;
@@ -378,22 +413,37 @@ fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, spec: &Spec) -> Resul
                 .legend(move |(x, y)| Cross::new((x + 12, y), 6, c.stroke_width(3))),
         };
     }
-    // every point's label, those on the front (the best for their budget) in black
-    let grey = ("sans-serif", 12)
-        .into_font()
-        .color(&RGBColor(110, 110, 110));
-    let off_front = (0..pts.len()).filter(|i| !front.contains(i));
+    // every point's label, those on the front (the best for their budget) first and
+    // in black, the others in grey, placed clear of each other
+    let order: Vec<usize> = front
+        .iter()
+        .copied()
+        .chain((0..pts.len()).filter(|i| !front.contains(i)))
+        .collect();
+    let font = |i: usize| {
+        let (size, colour) = if front.contains(&i) {
+            (13, BLACK)
+        } else {
+            (12, RGBColor(110, 110, 110))
+        };
+        ("sans-serif", size).into_font().color(&colour)
+    };
+    let anchors: Vec<(i32, i32)> = order
+        .iter()
+        .map(|&i| chart.backend_coord(&(pts[i].0, pts[i].1)))
+        .collect();
+    let sizes: Vec<(i32, i32)> = order
+        .iter()
+        .map(|&i| {
+            let (w, h) = font(i).font.box_size(pts[i].2).unwrap_or((0, 0));
+            (w as i32, h as i32)
+        })
+        .collect();
+    let (xs, ys) = chart.plotting_area().get_pixel_range();
+    let offsets = super::labels::place(&anchors, &sizes, (xs.start, ys.start, xs.end, ys.end));
     chart
-        .draw_series(off_front.map(|i| {
-            EmptyElement::at((pts[i].0, pts[i].1))
-                + Text::new(pts[i].2.to_string(), (9, 9), grey.clone())
-        }))
-        .map_err(|e| err(&e))?;
-    let text = ("sans-serif", 13).into_font().color(&BLACK);
-    chart
-        .draw_series(front.iter().map(|&i| {
-            EmptyElement::at((pts[i].0, pts[i].1))
-                + Text::new(pts[i].2.to_string(), (9, -17), text.clone())
+        .draw_series(order.iter().zip(&offsets).map(|(&i, &off)| {
+            EmptyElement::at((pts[i].0, pts[i].1)) + Text::new(pts[i].2.to_string(), off, font(i))
         }))
         .map_err(|e| err(&e))?;
     chart

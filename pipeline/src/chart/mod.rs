@@ -15,6 +15,7 @@
 //! numbers go to `chart.json` and `chart.csv` beside them.
 
 pub mod draw;
+mod labels;
 
 use crate::record::RunRecord;
 use crate::stages;
