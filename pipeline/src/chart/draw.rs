@@ -33,24 +33,6 @@ enum Marker {
     Cross,
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn labels_keep_what_differs_and_ticks_what_tells_them_apart() {
-        let names = ["s_iterations-100_k-2", "s_iterations-300_k-2"];
-        assert_eq!(short_labels(&names), ["iterations-100", "iterations-300"]);
-        assert_eq!(short_labels(&["only_one"]), ["only_one"]);
-        let long = "x".repeat(50);
-        assert_eq!(short_labels(&[&long, "y"])[0].chars().count(), 41);
-        assert_eq!(linear_tick(4.7541, 0.01), "4.754");
-        assert_eq!(linear_tick(20.0, 8.0), "20.0");
-        assert_eq!(linear_tick(20.0, 40.0), "20");
-        assert_eq!(tick(1234.5), "1234");
-    }
-}
-
 /// One group of points, drawn alike; each point with its label.
 struct Series {
     label: String,
@@ -455,4 +437,22 @@ fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, spec: &Spec) -> Resul
         .draw()
         .map_err(|e| err(&e))?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn labels_keep_what_differs_and_ticks_what_tells_them_apart() {
+        let names = ["s_iterations-100_k-2", "s_iterations-300_k-2"];
+        assert_eq!(short_labels(&names), ["iterations-100", "iterations-300"]);
+        assert_eq!(short_labels(&["only_one"]), ["only_one"]);
+        let long = "x".repeat(50);
+        assert_eq!(short_labels(&[&long, "y"])[0].chars().count(), 41);
+        assert_eq!(linear_tick(4.7541, 0.01), "4.754");
+        assert_eq!(linear_tick(20.0, 8.0), "20.0");
+        assert_eq!(linear_tick(20.0, 40.0), "20");
+        assert_eq!(tick(1234.5), "1234");
+    }
 }
