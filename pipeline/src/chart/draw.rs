@@ -118,7 +118,20 @@ fn model_series(points: &[&ModelPoint], x_of: &XOf) -> Vec<Series> {
             .filter_map(|(p, l)| {
                 let tag = match (p.stage.as_str(), p.experiments.len()) {
                     ("gaussians", 1) => format!("{l} (warm-up)"),
-                    ("gaussians", n) => format!("warm-up (shared by {n})"),
+                    ("gaussians", n) => {
+                        // the parts of the label every experiment sharing it has
+                        let shared: Vec<&str> = l
+                            .split(' ')
+                            .filter(|part| {
+                                p.experiments
+                                    .iter()
+                                    .all(|e| e.split('_').any(|q| q == *part))
+                            })
+                            .collect();
+                        format!("{} warm-up (shared by {n})", shared.join(" "))
+                            .trim_start()
+                            .to_string()
+                    }
                     _ => l.clone(),
                 };
                 Some((x_of(p)?, p.psnr, tag))

@@ -11,14 +11,18 @@ fn overlaps(a: Rect, b: Rect) -> bool {
 /// The offset (dx, dy) of each label's top-left corner from its point, in the order
 /// given (earlier labels take the better places): right above, right below, left
 /// above, left below, then further up or down; the first that stays inside `area`
-/// (left, top, right, bottom) and clears the labels already placed, else the first
+/// (left, top, right, bottom) and clears the markers and the labels already placed, else the first
 /// inside the area, else right above.
 pub fn place(
     points: &[(i32, i32)],
     sizes: &[(i32, i32)],
     area: (i32, i32, i32, i32),
 ) -> Vec<(i32, i32)> {
-    let mut placed: Vec<Rect> = Vec::new();
+    // the markers (about 14 px across) are taken already
+    let mut placed: Vec<Rect> = points
+        .iter()
+        .map(|&(x, y)| (x - 7, y - 7, 14, 14))
+        .collect();
     let mut out = Vec::with_capacity(points.len());
     for (&(x, y), &(w, h)) in points.iter().zip(sizes) {
         let candidates = [
@@ -63,6 +67,9 @@ mod tests {
         // near the top it goes below
         let o = place(&[(20, 5)], &[(60, 12)], area);
         assert_eq!(o, [(9, 5)]);
+        // a label does not cover another point's marker
+        let o = place(&[(50, 50), (100, 40)], &[(60, 12), (10, 12)], area);
+        assert_eq!(o[0], (9, 5));
         assert!(overlaps((0, 0, 10, 10), (5, 5, 10, 10)));
         assert!(!overlaps((0, 0, 10, 10), (10, 0, 10, 10)));
     }
