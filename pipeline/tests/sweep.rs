@@ -418,8 +418,31 @@ fn chart_draws_a_sweep_from_its_name() {
         .find(|m| m["experiments"][0] == "ch_iterations-2")
         .unwrap();
     assert!((d2["total_s"].as_f64().unwrap() - built).abs() < 1e-9);
-    // an unknown run is an error naming it
+    // an unknown run is an error naming it, a corrupt sweep record one naming the file
     let bad = f.degs(&["chart", "no-such-run"]);
     assert!(!bad.status.success());
     assert!(stderr(&bad).contains("no-such-run"), "{}", stderr(&bad));
+    let record = f.cache.join("runs/ch/sweep.json");
+    let text = fs::read_to_string(&record).unwrap();
+    fs::write(&record, &text[..text.len() / 2]).unwrap();
+    let bad = f.degs(&["chart", "ch", "--out", charts.to_str().unwrap()]);
+    assert!(!bad.status.success());
+    let err = stderr(&bad);
+    assert!(
+        err.contains(&record.display().to_string()) && err.contains("not a degs sweep record"),
+        "{err}"
+    );
+    // a sweep file that is not there, or truncated, is an error naming it
+    let missing = f.dir.path().join("missing.toml");
+    let bad = f.degs(&["sweep", missing.to_str().unwrap()]);
+    assert!(stderr(&bad).contains("missing.toml"), "{}", stderr(&bad));
+    let sweep_text = fs::read_to_string(&p).unwrap();
+    fs::write(&p, &sweep_text[..sweep_text.len() - 8]).unwrap();
+    let bad = f.degs(&["sweep", p.to_str().unwrap()]);
+    assert!(!bad.status.success());
+    assert!(
+        stderr(&bad).contains(p.to_str().unwrap()),
+        "{}",
+        stderr(&bad)
+    );
 }
