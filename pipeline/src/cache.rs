@@ -305,6 +305,17 @@ pub fn verify(dir: &Path, full: bool) -> Verdict {
     Verdict::Ok
 }
 
+/// The wall time a stage's `report.json` gives for itself (`wall_s` or
+/// `wall_seconds`), seconds; None when it has none.
+pub fn report_wall_s(dir: &Path) -> Option<f64> {
+    let v: serde_json::Value =
+        serde_json::from_slice(&fs::read(dir.join("report.json")).ok()?).ok()?;
+    ["wall_s", "wall_seconds", "total_s"]
+        .iter()
+        .find_map(|k| v.get(*k)?.as_f64())
+        .filter(|t| t.is_finite() && *t >= 0.0)
+}
+
 /// Total size in bytes of the files under `dir`.
 pub fn dir_size(dir: &Path) -> u64 {
     list_files(dir)

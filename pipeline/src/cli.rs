@@ -143,9 +143,33 @@ pub enum Command {
         #[arg(long)]
         verify: bool,
     },
-    /// Print the shell commands of the stages in order (for Slurm, Snakemake, …).
-    /// Writes the settings files they read under runs/<name>/.
+    /// Run every experiment of a sweep (a base experiment and axes: their cartesian
+    /// product), one after the other through the cache, so every stage they share is
+    /// computed once. Writes each experiment to runs/<sweep>/<experiment>.toml and
+    /// runs/<sweep>/sweep.json (the experiments, their run records, which experiment
+    /// built each shared entry). Re-running resumes an interrupted sweep.
+    Sweep {
+        /// Sweep file (TOML: name, base = "experiment.toml" or [base], [axes] with
+        /// "stage.key" = [values] or "scene.settings.key" = [values])
+        sweep: PathBuf,
+        #[command(flatten)]
+        place: Where,
+        /// Stages run at the same time within an experiment
+        #[arg(short = 'j', long, default_value_t = 1)]
+        jobs: usize,
+        /// Re-hash every cached file (default: only files whose size or mtime changed)
+        #[arg(long)]
+        verify: bool,
+        /// No progress lines
+        #[arg(short, long)]
+        quiet: bool,
+    },
+    /// Print the shell commands of the stages in order, each stage once; also write
+    /// runs/<name>/Snakefile (Snakemake rules) and runs/<name>/slurm.sh (Slurm array
+    /// jobs, one per level of the graph, in dependency order). Takes an experiment or a
+    /// sweep file. Writes the settings files the commands read under runs/<experiment>/.
     Plan {
+        /// Experiment file or sweep file
         experiment: PathBuf,
         #[command(flatten)]
         place: Where,
@@ -209,6 +233,21 @@ pub enum Command {
         run: String,
         #[command(flatten)]
         place: Where,
+    },
+    /// Charts of accuracy against cost across runs, one per question and scene, PNG and
+    /// SVG: test PSNR against total stage time (cached stages at their build cost),
+    /// against model size on disk and against Gaussian count, flow EPE against LoCM
+    /// time; Pareto front drawn, 2D baselines as horizontal lines, RGB-only and DEGS
+    /// told apart. The numbers go to chart.json and chart.csv beside them.
+    Chart {
+        /// Run directories, experiment names or sweep names
+        #[arg(required = true)]
+        runs: Vec<String>,
+        #[command(flatten)]
+        place: Where,
+        /// Output directory [default: <cache>/charts]
+        #[arg(long, value_name = "DIR")]
+        out: Option<PathBuf>,
     },
     /// Evaluate several runs and print them side by side.
     Compare {

@@ -3,12 +3,14 @@
 use crate::cli::{Command, ConfigCommand, EventsCommand, Where};
 use crate::demo::{self, DemoOptions};
 use crate::experiment::Experiment;
+use crate::plan::Plan;
 use crate::progress::Progress;
 use crate::record::Action;
 use crate::runner::{self, RunOptions};
-use crate::{config_show, eval, stages, status, synth};
-use anyhow::{Result, anyhow};
-use std::path::Path;
+use crate::sweep::Sweep;
+use crate::{chart, config_show, eval, plan, stages, status, sweep_run, synth};
+use anyhow::{Context as _, Result, anyhow};
+use std::path::{Path, PathBuf};
 
 /// Run one parsed `degs` command.
 pub fn execute(command: Command) -> Result<()> {
@@ -55,13 +57,41 @@ pub fn execute(command: Command) -> Result<()> {
             print!("{}", status::format_status(&rows));
             Ok(())
         }
+        Command::Sweep {
+            sweep,
+            place,
+            jobs,
+            verify,
+            quiet,
+        } => {
+            let opts = RunOptions {
+                jobs,
+                verify_full: verify,
+                ..RunOptions::default()
+            };
+            run_sweep(&sweep, &place, &opts, quiet)
+        }
         Command::Plan {
             experiment,
             place,
             all,
-        } => {
-            let exp = Experiment::load_checked(&experiment)?;
-            print!("{}", status::plan(&exp, &place.context()?, all)?);
+        } => plan(&experiment, &place, all),
+        Command::Chart { runs, place, out } => {
+            let records = chart_runs(&runs, &place)?;
+            let out = match out {
+                Some(o) => o,
+                None => place.context()?.cache.root.join("charts"),
+            };
+            let files = chart::write_charts(&records, &out)?;
+            for f in &files {
+                println!("{}", f.display());
+            }
+            eprintln!(
+                "[degs] chart: {} runs, {} files in {}",
+                records.len(),
+                files.len(),
+                out.display()
+            );
             Ok(())
         }
         Command::Gc { place, dry_run } => gc(&place, dry_run),
@@ -147,6 +177,95 @@ fn run(experiment: &Path, place: &Where, opts: &RunOptions, quiet: bool) -> Resu
         )),
         None => Ok(()),
     }
+}
+
+/// `degs sweep`: an error naming the experiments with a failed stage.
+fn run_sweep(file: &Path, place: &Where, opts: &RunOptions, quiet: bool) -> Result<()> {
+    let sweep = Sweep::load(file)?;
+    let ctx = place.context()?;
+    let record = sweep_run::run(&sweep, &ctx, opts, &Progress::new(quiet))?;
+    print!("{}", sweep_run::format_summary(&record));
+    eprintln!(
+        "[degs] wrote {}",
+        ctx.cache.run_dir(&sweep.name).join("sweep.json").display()
+    );
+    let failed: Vec<&str> = record
+        .experiments
+        .iter()
+        .filter(|e| e.status.as_deref() != Some("ok"))
+        .map(|e| e.name.as_str())
+        .collect();
+    if failed.is_empty() {
+        Ok(())
+    } else {
+        Err(anyhow!(
+            "a stage failed in {} (see runs/<name>/run.json and the stage logs)",
+            failed.join(", ")
+        ))
+    }
+}
+
+/// `degs plan`: an experiment file, or a sweep file (one with `base` or `[axes]`).
+fn plan(file: &Path, place: &Where, all: bool) -> Result<()> {
+    // absolute paths: the commands run from wherever the scheduler starts them
+    let mut ctx = place.context()?;
+    ctx.cache.root = std::path::absolute(&ctx.cache.root)?;
+    ctx.stage_dir = ctx.stage_dir.map(std::path::absolute).transpose()?;
+    let p = if crate::sweep::is_sweep_file(file) {
+        let sweep = Sweep::load(file)?;
+        let exps: Vec<Experiment> = sweep_run::write_experiments(&sweep, &ctx)?
+            .into_iter()
+            .map(|(e, _)| e)
+            .collect();
+        Plan::build(&sweep.name, &exps, &ctx)?
+    } else {
+        let exp = Experiment::load_checked(file)?;
+        Plan::build(&exp.name, std::slice::from_ref(&exp), &ctx)?
+    };
+    print!("{}", p.shell(all));
+    let (snake, slurm) = plan::write_files(&p, &ctx, all)?;
+    eprintln!(
+        "[degs] plan: {} stages ({} to run); wrote {} and {}",
+        p.jobs.len(),
+        p.to_run(all).count(),
+        snake.display(),
+        slurm.display()
+    );
+    Ok(())
+}
+
+/// The run records named by `runs`: run directories, experiment names, or sweep names
+/// (`runs/<sweep>/sweep.json`: every experiment of the sweep that has a record).
+fn chart_runs(runs: &[String], place: &Where) -> Result<Vec<crate::record::RunRecord>> {
+    let mut out: Vec<crate::record::RunRecord> = Vec::new();
+    for r in runs {
+        let sweep = [PathBuf::from(r), place.context()?.cache.run_dir(r)]
+            .into_iter()
+            .map(|d| d.join("sweep.json"))
+            .find(|p| p.is_file());
+        let dirs = match sweep {
+            Some(p) => {
+                let rec: sweep_run::SweepRecord = serde_json::from_slice(
+                    &std::fs::read(&p).with_context(|| format!("{}: cannot read", p.display()))?,
+                )
+                .with_context(|| format!("{}: not a degs sweep record", p.display()))?;
+                rec.experiments
+                    .iter()
+                    .map(|e| e.run_record.clone())
+                    .filter(|p| p.is_file())
+                    .filter_map(|p| p.parent().map(Path::to_path_buf))
+                    .collect()
+            }
+            None => vec![place.run_dir(r)?],
+        };
+        for d in dirs {
+            let rec = crate::record::RunRecord::read(&d.join("run.json"))?;
+            if !out.iter().any(|o| o.experiment == rec.experiment) {
+                out.push(rec);
+            }
+        }
+    }
+    Ok(out)
 }
 
 fn synth_scene(preset: &str, config: Option<&Path>, set: &[String], out: &Path) -> Result<()> {

@@ -61,6 +61,9 @@ pub struct DemoSummary {
     pub flow_epe: Option<f64>,
     pub renders: Option<PathBuf>,
     pub metrics: Option<PathBuf>,
+    /// The charts of the run (`degs chart`: its warm-up and joint points against
+    /// time, size, Gaussians; flow error against LoCM time) and their numbers.
+    pub charts: Vec<PathBuf>,
     pub wall_s: f64,
 }
 
@@ -165,6 +168,11 @@ pub fn demo(opts: &DemoOptions, ctx: &Context, progress: &Progress) -> Result<De
             .map(|(e, dir)| e.join(dir))
             .filter(|r| r.is_dir())
     });
+    let charts = crate::chart::write_charts(std::slice::from_ref(&record), &out.join("charts"))
+        .unwrap_or_else(|e| {
+            eprintln!("[degs] demo: no charts: {e:#}");
+            Vec::new()
+        });
     let summary = DemoSummary {
         out: out.clone(),
         experiment_file: file,
@@ -179,6 +187,7 @@ pub fn demo(opts: &DemoOptions, ctx: &Context, progress: &Progress) -> Result<De
         flow_epe: metrics.as_ref().and_then(|m| m.flow_epe),
         renders,
         metrics: metrics.map(|_| run_dir.join("metrics.json")),
+        charts,
         wall_s: record.wall_s,
     };
     scene::atomic::write_json_atomic(&out.join("summary.json"), &summary)?;
@@ -346,6 +355,22 @@ pub fn format_summary(s: &DemoSummary) -> String {
     }
     if let Some(m) = &s.metrics {
         line("metrics:", m.display().to_string());
+    }
+    if let Some(png) = s
+        .charts
+        .iter()
+        .find(|c| c.extension().is_some_and(|e| e == "png"))
+    {
+        let dir = png.parent().unwrap_or(Path::new("."));
+        let n = s
+            .charts
+            .iter()
+            .filter(|c| c.extension().is_some_and(|e| e == "png"))
+            .count();
+        line(
+            "charts:",
+            format!("{} ({n} PNG + SVG, chart.json, chart.csv)", dir.display()),
+        );
     }
     line("summary:", s.out.join("summary.json").display().to_string());
     line(

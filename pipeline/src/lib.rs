@@ -1,6 +1,6 @@
 //! degs: experiment files, the stage registry, the staged runner with its
 //! content-addressed cache (docs/DESIGN.md §4), status / gc / plan, synthetic scenes,
-//! evaluation and the demo.
+//! evaluation, the demo, sweeps (`sweep`, `sweep_run`), batch plans (`plan`) and charts.
 //!
 //! The `degs` binary is a thin layer over [`cli`] (its command line) and [`commands`]
 //! (what each sub-command does); tests and other tools can call the modules directly.
@@ -8,6 +8,7 @@
 pub mod baselines;
 pub mod cache;
 pub mod canon;
+pub mod chart;
 pub mod cli;
 pub mod command_line;
 pub mod commands;
@@ -18,6 +19,7 @@ pub mod eval;
 pub mod experiment;
 pub mod graph;
 pub mod overrides;
+pub mod plan;
 pub mod process;
 pub mod progress;
 pub mod record;
@@ -25,4 +27,6 @@ pub mod runner;
 pub mod settings;
 pub mod stages;
 pub mod status;
+pub mod sweep;
+pub mod sweep_run;
 pub mod synth;

@@ -47,6 +47,19 @@ impl Progress {
         }
     }
 
+    /// A line about the run as a whole (e.g. which experiment of a sweep starts).
+    pub fn note(&self, msg: &str) {
+        if self.quiet {
+            return;
+        }
+        match &self.multi {
+            Some(m) => {
+                let _ = m.println(format!("[degs] {msg}"));
+            }
+            None => eprintln!("[degs] {msg}"),
+        }
+    }
+
     /// A line of the stage's own output (shown on the spinner only).
     pub fn output(&self, stage: &str, line: &str) {
         if let Some(bar) = self

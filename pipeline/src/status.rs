@@ -1,8 +1,7 @@
-//! `degs status`, `degs gc` and `degs plan`.
+//! `degs status` and `degs gc`.
 
 use crate::cache::{self, BinaryHashes, Verdict};
 use crate::canon;
-use crate::command_line::{command, settings_path, shell_quote};
 use crate::context::Context;
 use crate::experiment::Experiment;
 use crate::graph::{self, Node, NodeKind};
@@ -188,39 +187,4 @@ pub fn gc(cache: &cache::Cache, dry_run: bool) -> Result<GcReport> {
         report.removed.push((stage, key));
     }
     Ok(report)
-}
-
-/// `degs plan`: the shell commands of the stages in order. Writes the settings files
-/// they read (under `runs/<name>/`). Cached stages are printed commented out unless `all`.
-pub fn plan(exp: &Experiment, ctx: &Context, all: bool) -> Result<String> {
-    let nodes = crate::runner::prepare(exp, ctx)?;
-    let mut s = format!(
-        "# degs plan: experiment {} (cache {})\n\
-         # Each command writes its output directory atomically; run them in this order\n\
-         # (evflow and gaussians may run at the same time). `degs run` then adopts the results.\n\
-         set -e\n",
-        exp.name,
-        ctx.cache.root.display()
-    );
-    for (i, n) in nodes.iter().enumerate() {
-        if let NodeKind::SceneDir(d) = &n.kind {
-            let _ = writeln!(s, "# scene: {}", d.display());
-            continue;
-        }
-        if let Some(why) = &n.unavailable {
-            let _ = writeln!(s, "# {}: {why}", n.stage);
-            continue;
-        }
-        let key = n.key.as_deref().unwrap_or_default();
-        let out = ctx.cache.entry(&n.stage, key);
-        let config = settings_path(&ctx.cache, &exp.name, &n.stage);
-        let cmd: Vec<String> = command(&nodes, i, &ctx.cache, &out, &config)
-            .iter()
-            .map(|a| shell_quote(a))
-            .collect();
-        let cached = out.is_dir() && cache::verify(&out, false) == Verdict::Ok;
-        let prefix = if cached && !all { "# cached: " } else { "" };
-        let _ = writeln!(s, "{prefix}{}", cmd.join(" "));
-    }
-    Ok(s)
 }

@@ -133,6 +133,29 @@ fn demo_runs_every_built_stage_and_summarises_it() {
     assert_eq!(summary["psnr"], 100.0);
     assert_eq!(summary["novel_psnr"], 100.0);
     assert_eq!(summary["stages"][2]["figures"][0][1], 27.5);
+    // its charts: the warm-up point against time, size and Gaussians, the flow point
+    let charts: Vec<&str> = summary["charts"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c.as_str().unwrap().rsplit('/').next().unwrap())
+        .collect();
+    assert_eq!(charts.len(), 10, "{charts:?}");
+    assert!(
+        charts.contains(&"rigid-psnr-vs-time.png") && charts.contains(&"rigid-epe-vs-locm.svg")
+    );
+    assert!(
+        table.contains(&format!(
+            "charts:          {}",
+            out.join("charts").display()
+        )),
+        "{table}"
+    );
+    let json: serde_json::Value =
+        serde_json::from_slice(&fs::read(out.join("charts/chart.json")).unwrap()).unwrap();
+    assert_eq!(json["models"][0]["psnr"], 27.5);
+    assert_eq!(json["models"][0]["gaussians"], 4200);
+    assert_eq!(json["flows"][0]["epe_px_s"], 12.5);
 
     // the second demo reuses everything
     let o = demo(&f, &out, &reports);

@@ -85,12 +85,13 @@ fn check_node(
     match cache::verify(&entry, verify_full) {
         Verdict::Ok if !st.forced => st.state = State::Done(Action::Cached),
         Verdict::Unsealed if !st.forced => {
-            // Written by a stage command from `degs plan`: adopt it.
+            // Written by a stage command from `degs plan`: adopt it, at the wall time
+            // its report gives (what it cost, for `degs chart`).
             cache::seal(
                 &entry,
                 &nd.stage,
                 nd.key.as_deref().unwrap_or(""),
-                0.0,
+                cache::report_wall_s(&entry).unwrap_or(0.0),
                 None,
             )?;
             st.state = State::Done(Action::Cached);
