@@ -88,7 +88,7 @@ impl Default for TrainSettings {
             static_iterations: 1000,
             deform: true,
             dynamic_only: false,
-            static_tolerance_px: 0.25,
+            static_tolerance_px: 0.0,
             static_split_at: 0.75,
             field: FieldSettings::default(),
             field_lr_init: 3e-3,
