@@ -7,9 +7,12 @@
 //! into burn's graph through [`crate::cm::cm_surrogate`] → Adam on the trainable
 //! tensors. Modes: `lora` (adapters r = 16 on every conv, base frozen; default), `full`
 //! (every base weight trainable; the paper's "Full Ft"), `none` (pretrained as is).
-//! The learning rate decays exponentially from `lr_start` to `lr_end` over all steps.
+//! The budget ([`crate::budget`]) is a fixed number of epochs or, by default, a stopping
+//! rule on the CM loss; the learning rate decays exponentially from `lr_start` to
+//! `lr_end` over the planned steps (all epochs, or the rule's `max_steps`).
 //! Windows without events are skipped (nothing to sharpen).
 
+use crate::budget::{Budget, StopReason, StopRule};
 use crate::net::io::BareWeights;
 use crate::net::{FlowNet, NetConfig, adam_step, adam_step_conv, to_f64};
 use crate::source::Source;
@@ -52,8 +55,12 @@ impl std::str::FromStr for Mode {
 #[serde(default, deny_unknown_fields)]
 pub struct FlowSettings {
     pub mode: Mode,
-    /// Passes over the windows.
-    pub epochs: usize,
+    /// A fixed number of passes over the windows; unset (the default) = train until the
+    /// CM loss stops improving ([`FlowSettings::stop`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub epochs: Option<usize>,
+    /// The stopping rule used when `epochs` is unset.
+    pub stop: StopRule,
     /// Adam learning rate at the first step.
     pub lr_start: f64,
     /// Learning rate at the last step (exponential decay in between).
@@ -67,7 +74,8 @@ pub struct FlowSettings {
     /// Pyramid levels of the CM objective.
     pub cm_scales: usize,
     /// Coarse-to-fine: the first epoch uses only the coarsest CM pyramid level, the
-    /// last all of them (the finest level used moves down linearly over the epochs).
+    /// last all of them (the finest level used moves down linearly over the epochs;
+    /// with the stopping rule, over the epochs of `stop.min_steps`).
     /// On by default: on large per-window motion it keeps LoRA from sharpening the
     /// events towards a wrong flow (BENCHMARKS.md, LoCM ablation).
     pub cm_coarse_to_fine: bool,
@@ -99,9 +107,10 @@ impl Default for FlowSettings {
     fn default() -> Self {
         FlowSettings {
             mode: Mode::Lora,
-            epochs: 3,
-            lr_start: 5e-4,
-            lr_end: 1e-4,
+            epochs: None,
+            stop: StopRule::default(),
+            lr_start: 1e-3,
+            lr_end: 2e-4,
             rank: 16,
             alpha: 16.0,
             lambda_tv: 0.01,
@@ -137,10 +146,10 @@ impl Settings for FlowSettings {
         if !(self.frame_window.is_finite() && self.frame_window >= 0.0) {
             return Err("frame_window must be finite and >= 0 (seconds)".into());
         }
-        if self.epochs > 10_000 {
+        if self.epochs.is_some_and(|e| e > 10_000) {
             return Err("epochs must be <= 10000".into());
         }
-        Ok(())
+        self.stop.validate()
     }
 }
 
@@ -151,6 +160,19 @@ impl FlowSettings {
             base: self.weights_width,
             max_flow: self.weights_max_flow,
         }
+    }
+
+    /// Fixed epochs when set, else the stopping rule.
+    pub fn budget(&self) -> Budget {
+        match self.epochs {
+            Some(e) => Budget::Epochs(e),
+            None => Budget::Rule(self.stop.clone()),
+        }
+    }
+
+    /// Whether this budget trains at all (`epochs = 0` does not).
+    pub fn trains(&self) -> bool {
+        self.mode != Mode::None && self.epochs != Some(0)
     }
 
     pub fn cm_config(&self) -> crate::cm::CmConfig {
@@ -178,6 +200,7 @@ pub fn for_inference(net: &FlowNet) -> FlowNet {
 #[derive(Clone, Copy, Debug)]
 pub struct Step {
     pub epoch: usize,
+    /// Epochs planned: all of them, or the most the stopping rule allows.
     pub epochs: usize,
     /// Step within the epoch (windows with events only).
     pub step: usize,
@@ -192,7 +215,14 @@ pub struct Step {
 pub struct FinetuneReport {
     pub mode: Mode,
     pub net: Option<NetConfig>,
+    /// Epochs (passes over the windows) that ran.
     pub epochs: usize,
+    /// Steps that ran (epochs × trained windows).
+    #[serde(default)]
+    pub steps: usize,
+    /// Why training stopped.
+    #[serde(default)]
+    pub stop_reason: StopReason,
     pub windows: usize,
     /// Windows with events (the steps per epoch).
     pub trained_windows: usize,
@@ -224,12 +254,13 @@ fn flow_of(net: &FlowNet, src: &Source, w: &crate::source::Window) -> (Tensor<4>
     (flow, vals)
 }
 
-/// Finest CM pyramid level used at `epoch` (0 unless `cm_coarse_to_fine`).
-pub fn coarse_level(s: &FlowSettings, epoch: usize) -> usize {
-    if !s.cm_coarse_to_fine || s.epochs < 2 {
+/// Finest CM pyramid level used at `epoch` when coarse-to-fine runs over `passes`
+/// epochs (0 unless `cm_coarse_to_fine`; 0 after them).
+pub fn coarse_level(s: &FlowSettings, epoch: usize, passes: usize) -> usize {
+    if !s.cm_coarse_to_fine || passes < 2 {
         return 0;
     }
-    let left = 1.0 - epoch as f64 / (s.epochs - 1) as f64;
+    let left = (1.0 - epoch as f64 / (passes - 1) as f64).max(0.0);
     ((s.cm_scales - 1) as f64 * left).round() as usize
 }
 
@@ -266,12 +297,23 @@ pub fn finetune(
     s: &FlowSettings,
     mut progress: impl FnMut(&Step),
 ) -> Result<FinetuneReport> {
+    finetune_observed(net, src, s, |st, _| progress(st))
+}
+
+/// [`finetune`] whose callback also sees the network after each step (to score it
+/// along the way: `evflow/examples/locm_budget.rs`).
+pub fn finetune_observed(
+    net: &mut FlowNet,
+    src: &Source,
+    s: &FlowSettings,
+    mut progress: impl FnMut(&Step, &FlowNet),
+) -> Result<FinetuneReport> {
     s.validate()
         .map_err(|e| Error::Other(format!("settings: {e}")))?;
     let mut report = FinetuneReport {
         mode: s.mode,
         net: Some(net.config),
-        epochs: s.epochs,
+        stop_reason: StopReason::NotTrained,
         windows: src.windows.len(),
         ..Default::default()
     };
@@ -281,7 +323,7 @@ pub fn finetune(
     let trained: Vec<_> = src.windows.iter().filter(|w| !w.is_empty()).collect();
     report.trained_windows = trained.len();
     report.cm_subsampled_windows = subsampled_windows(src, s).map(|w| w.index).collect();
-    if s.mode == Mode::None || s.epochs == 0 || trained.is_empty() {
+    if !s.trains() || trained.is_empty() {
         return Ok(report);
     }
     if !net.device.is_autodiff() {
@@ -309,21 +351,27 @@ pub fn finetune(
     let (wd, ht) = (src.width() as usize, src.height() as usize);
     let n = wd * ht;
     let cfg = s.cm_config();
-    let total = (s.epochs * trained.len()) as f64;
+    let budget = s.budget();
+    let plan = budget.schedule(trained.len());
+    let total = (plan.lr_passes * trained.len()) as f64;
+    // The first epoch at the finest level: the rule compares losses from there on.
+    let fine_from = (0..plan.max_passes)
+        .find(|&e| coarse_level(s, e, plan.coarse_passes) == 0)
+        .unwrap_or(0);
     let mut adam = Adam::default();
     let mut k = 0usize;
     let mut step_time = 0.0;
-    for epoch in 0..s.epochs {
+    for epoch in 0..plan.max_passes {
         let start = Instant::now();
         let cfg = crate::cm::CmConfig {
-            first_level: coarse_level(s, epoch),
+            first_level: coarse_level(s, epoch, plan.coarse_passes),
             ..cfg.clone()
         };
         let mut epoch_sum = 0.0;
         for (i, w) in trained.iter().enumerate() {
             let t0 = Instant::now();
             let frac = if total > 1.0 {
-                k as f64 / (total - 1.0)
+                (k as f64 / (total - 1.0)).min(1.0)
             } else {
                 0.0
             };
@@ -352,19 +400,28 @@ pub fn finetune(
             step_time += t0.elapsed().as_secs_f64();
             report.loss_curve.push(l.loss);
             epoch_sum += l.loss;
-            progress(&Step {
-                epoch,
-                epochs: s.epochs,
-                step: i,
-                steps: trained.len(),
-                window: w.index,
-                loss: l.loss,
-                lr,
-            });
+            progress(
+                &Step {
+                    epoch,
+                    epochs: plan.max_passes,
+                    step: i,
+                    steps: trained.len(),
+                    window: w.index,
+                    loss: l.loss,
+                    lr,
+                },
+                net,
+            );
         }
         report.epoch_loss.push(epoch_sum / trained.len() as f64);
         report.epoch_s.push(start.elapsed().as_secs_f64());
+        report.epochs = epoch + 1;
+        if let Some(why) = budget.stop_after(&report.epoch_loss, fine_from, k, trained.len()) {
+            report.stop_reason = why;
+            break;
+        }
     }
+    report.steps = k;
     report.step_s = step_time / k.max(1) as f64;
     report.cm_loss_after = mean_cm_loss(&for_inference(net), src, s);
     Ok(report)
@@ -377,15 +434,14 @@ mod tests {
     #[test]
     fn coarse_to_fine_schedule() {
         let s = |epochs, scales, on| FlowSettings {
-            epochs,
+            epochs: Some(epochs),
             cm_scales: scales,
             cm_coarse_to_fine: on,
             ..FlowSettings::default()
         };
         let levels = |f: &FlowSettings| {
-            (0..f.epochs)
-                .map(|e| coarse_level(f, e))
-                .collect::<Vec<_>>()
+            let n = f.epochs.unwrap();
+            (0..n).map(|e| coarse_level(f, e, n)).collect::<Vec<_>>()
         };
         assert_eq!(levels(&s(3, 3, true)), [2, 1, 0]);
         assert_eq!(levels(&s(5, 3, true)), [2, 2, 1, 1, 0]);
@@ -397,5 +453,9 @@ mod tests {
         );
         assert_eq!(levels(&s(3, 1, true)), [0, 0, 0]);
         assert!(FlowSettings::default().cm_coarse_to_fine);
+        // The rule's schedule runs over its first passes, then stays at the finest.
+        let f = s(3, 3, true);
+        let over_2 = (0..5).map(|e| coarse_level(&f, e, 2)).collect::<Vec<_>>();
+        assert_eq!(over_2, [2, 0, 0, 0, 0]);
     }
 }

@@ -2,6 +2,7 @@
 //! and LoCM fine-tuning (docs/DESIGN.md §2, §5). The event simulator is in the `synth`
 //! crate.
 
+pub mod budget;
 pub mod cli;
 pub mod cm;
 pub mod eval;

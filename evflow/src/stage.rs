@@ -168,8 +168,7 @@ pub fn run(
         ..Default::default()
     };
     if train
-        && s.mode != Mode::None
-        && s.epochs > 0
+        && s.trains()
         && let Some(note) = subsample_note(&src, s)
     {
         emit(Event::Warning(&note));
@@ -325,53 +324,14 @@ pub fn eval_flows(
                 "event index beyond the source stream",
             ));
         }
-        let span = w.duration();
-        // Dense flow (px/s) from the per-event flow, at the pixel each event uses.
-        let n = size.0 * size.1;
-        let (mut du, mut dv) = (vec![0.0; n], vec![0.0; n]);
-        let mut ev = crate::cm::CmEvents::default();
-        let (mut pu, mut pv) = (Vec::new(), Vec::new());
-        for (k, &i) in f.index.iter().enumerate() {
-            let i = i as usize;
-            let p = src.event_pixel(i);
-            du[p] = f.u[k] as f64;
-            dv[p] = f.v[k] as f64;
-            ev.x.push(src.xu[i] as f64);
-            ev.y.push(src.yu[i] as f64);
-            ev.t.push(src.events.t[i]);
-            pu.push(f.u[k] as f64 * span);
-            pv.push(f.v[k] as f64 * span);
-        }
-        let flow_warp = crate::eval::flow_warp_loss(&ev, &du, &dv, size, 0.5 * (w.t_a + w.t_b));
-        let (gu, gv): (Vec<f64>, Vec<f64>) = if let Some(g) = &gt {
-            f.index
-                .iter()
-                .map(|idx| match g.index.binary_search(idx) {
-                    Ok(j) if g.object[j] != synth::gt::NOISE_ID => {
-                        (g.u[j] as f64 * span, g.v[j] as f64 * span)
-                    }
-                    _ => (f64::NAN, f64::NAN),
-                })
-                .unzip()
-        } else if let Some((_, _, u, v)) = &dense_gt {
-            crate::eval::sample_at_events(u, v, size, &ev)
-        } else {
-            (Vec::new(), Vec::new())
-        };
-        let metrics = if gt.is_some() || dense_gt.is_some() {
-            Some(
-                crate::eval::flow_metrics((&pu, &pv), (&gu, &gv), None)
-                    .map_err(|m| Error::invalid(&path, m))?,
-            )
-        } else {
-            None
-        };
-        windows.push(EvalWindow {
-            window: w.index,
-            events: f.len(),
-            metrics,
-            flow_warp,
-        });
+        windows.push(score_window(
+            &src,
+            w,
+            &f,
+            gt.as_ref(),
+            dense_gt.as_ref(),
+            &path,
+        )?);
     }
     let scored: Vec<_> = windows
         .iter()
@@ -388,5 +348,66 @@ pub fn eval_flows(
         mean_flow_warp_ratio: windows.iter().map(|w| w.flow_warp.ratio).sum::<f64>()
             / windows.len().max(1) as f64,
         windows,
+    })
+}
+
+/// The figures of one window's per-event flow `f` (px/s): against the scene's ground
+/// truth `gt` or the dense `dense_gt` (`w, h, u, v`, px per window) when given, and the
+/// flow-warp loss. `path` names the flow in errors.
+pub fn score_window(
+    src: &Source,
+    w: &crate::source::Window,
+    f: &crate::flowfile::EvFlow,
+    gt: Option<&synth::gt::EventFlowGt>,
+    dense_gt: Option<&(usize, usize, Vec<f64>, Vec<f64>)>,
+    path: &Path,
+) -> Result<EvalWindow> {
+    let size = (src.width() as usize, src.height() as usize);
+    let span = w.duration();
+    // Dense flow (px/s) from the per-event flow, at the pixel each event uses.
+    let n = size.0 * size.1;
+    let (mut du, mut dv) = (vec![0.0; n], vec![0.0; n]);
+    let mut ev = crate::cm::CmEvents::default();
+    let (mut pu, mut pv) = (Vec::new(), Vec::new());
+    for (k, &i) in f.index.iter().enumerate() {
+        let i = i as usize;
+        let p = src.event_pixel(i);
+        du[p] = f.u[k] as f64;
+        dv[p] = f.v[k] as f64;
+        ev.x.push(src.xu[i] as f64);
+        ev.y.push(src.yu[i] as f64);
+        ev.t.push(src.events.t[i]);
+        pu.push(f.u[k] as f64 * span);
+        pv.push(f.v[k] as f64 * span);
+    }
+    let flow_warp = crate::eval::flow_warp_loss(&ev, &du, &dv, size, 0.5 * (w.t_a + w.t_b));
+    let (gu, gv): (Vec<f64>, Vec<f64>) = if let Some(g) = gt {
+        f.index
+            .iter()
+            .map(|idx| match g.index.binary_search(idx) {
+                Ok(j) if g.object[j] != synth::gt::NOISE_ID => {
+                    (g.u[j] as f64 * span, g.v[j] as f64 * span)
+                }
+                _ => (f64::NAN, f64::NAN),
+            })
+            .unzip()
+    } else if let Some((_, _, u, v)) = dense_gt {
+        crate::eval::sample_at_events(u, v, size, &ev)
+    } else {
+        (Vec::new(), Vec::new())
+    };
+    let metrics = if gt.is_some() || dense_gt.is_some() {
+        Some(
+            crate::eval::flow_metrics((&pu, &pv), (&gu, &gv), None)
+                .map_err(|m| Error::invalid(path, m))?,
+        )
+    } else {
+        None
+    };
+    Ok(EvalWindow {
+        window: w.index,
+        events: f.len(),
+        metrics,
+        flow_warp,
     })
 }

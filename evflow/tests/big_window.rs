@@ -116,7 +116,7 @@ fn several_subsampled_windows_give_one_warning() {
         },
     };
     let s = FlowSettings {
-        epochs: 1,
+        epochs: Some(1),
         max_cm_events: 500,
         previews: false,
         ..FlowSettings::default()

@@ -57,7 +57,8 @@ fn help_shows_the_settings_defaults() {
     let f = evflow::finetune::FlowSettings::default();
     let finetune = help("finetune");
     for (flag, default) in [
-        ("--epochs", f.epochs.to_string()),
+        ("--min-steps", f.stop.min_steps.to_string()),
+        ("--max-steps", f.stop.max_steps.to_string()),
         ("--lr-start", f.lr_start.to_string()),
         ("--lr-end", f.lr_end.to_string()),
         ("--rank", f.rank.to_string()),

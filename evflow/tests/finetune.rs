@@ -46,7 +46,7 @@ fn tiny_weights(dir: &Path) -> PathBuf {
 fn settings(weights: &Path, mode: Mode) -> FlowSettings {
     FlowSettings {
         mode,
-        epochs: 4,
+        epochs: Some(4),
         lr_start: 1e-2,
         lr_end: 2e-3,
         weights: Some(weights.to_path_buf()),
@@ -80,6 +80,8 @@ fn lora_finetune_lowers_the_cm_loss_and_writes_the_stage_outputs() {
     assert_eq!(steps, 4 * ft.trained_windows);
     assert_eq!(ft.loss_curve.len(), steps);
     assert_eq!(ft.epoch_s.len(), 4);
+    assert_eq!((ft.epochs, ft.steps), (4, steps));
+    assert_eq!(ft.stop_reason, evflow::budget::StopReason::Epochs);
     assert!(
         ft.cm_loss_after < ft.cm_loss_before,
         "CM loss {} -> {}",
@@ -162,7 +164,7 @@ fn lora_at_init_is_exact_and_merged_matches_unmerged() {
     assert_eq!(init, base_all, "LoRA at init must be the base network");
     // Train a little, then compare merged (inference copy) with unmerged.
     let s = FlowSettings {
-        epochs: 1,
+        epochs: Some(1),
         lr_start: 5e-2,
         lr_end: 5e-2,
         ..FlowSettings::default()
@@ -270,4 +272,49 @@ fn single_frame_scene_and_corrupt_weights_give_clear_errors() {
         e.contains("transforms_train.json") && e.contains("single train frame"),
         "{e}"
     );
+}
+
+#[test]
+fn the_stopping_rule_bounds_the_steps_and_says_why_it_stopped() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = tiny_scene(tmp.path());
+    let w = tiny_weights(tmp.path());
+    let src = evflow::source::Source::from_scene(&scene, 0.0).unwrap();
+    let run = |stop: evflow::budget::StopRule| {
+        let mut s = settings(&w, Mode::Lora);
+        s.epochs = None;
+        s.stop = stop;
+        let dev = burn::tensor::Device::flex().autodiff();
+        let mut net = evflow::net::io::load(&w, &s.bare_weights(), &dev, burn::tensor::DType::F32)
+            .unwrap()
+            .net;
+        evflow::finetune::finetune(&mut net, &src, &s, |_| {}).unwrap()
+    };
+    use evflow::budget::{StopReason, StopRule};
+    // Tolerance 0: only a loss that rose or stayed put over a pass stops it early.
+    let a = run(StopRule {
+        min_steps: 1,
+        max_steps: 12,
+        window: 1,
+        tolerance: 0.0,
+    });
+    let per_pass = a.trained_windows;
+    assert!(per_pass > 0);
+    assert_eq!(a.steps, a.epochs * per_pass);
+    assert_eq!(a.loss_curve.len(), a.steps);
+    assert!(a.steps <= 12, "{} steps", a.steps);
+    assert!(matches!(
+        a.stop_reason,
+        StopReason::MaxSteps | StopReason::Converged
+    ));
+    // An impossible tolerance (100 % gain per pass) stops as soon as the minimum ran
+    // and two passes at the finest level can be compared.
+    let b = run(StopRule {
+        min_steps: 2 * per_pass,
+        max_steps: 100,
+        window: 1,
+        tolerance: 1.0,
+    });
+    // Coarse-to-fine puts pass 0 at a coarser level, so passes 1 and 2 are compared.
+    assert_eq!((b.epochs, b.stop_reason), (3, StopReason::Converged));
 }

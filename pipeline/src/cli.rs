@@ -36,10 +36,12 @@ fn synth_set_help() -> String {
 /// settings types, so that it cannot drift).
 fn full_help() -> String {
     format!(
-        "Use every stage's default settings ({} + {} iterations, {} epochs) instead",
+        "Use every stage's default settings ({} + {} iterations, LoCM {}–{} steps until \
+         its loss stops improving) instead",
         gaussians::train::TrainSettings::default().iterations,
         deform::settings::DeformSettings::default().iterations,
-        evflow::finetune::FlowSettings::default().epochs
+        evflow::finetune::FlowSettings::default().stop.min_steps,
+        evflow::finetune::FlowSettings::default().stop.max_steps
     )
 }
 
@@ -217,7 +219,7 @@ pub enum Command {
         /// Joint iterations of the deform stage
         #[arg(long, default_value_t = crate::demo::DEMO_DEFORM_ITERATIONS)]
         deform_iterations: u32,
-        // Help: "Use every stage's default settings (… + … iterations, … epochs) instead".
+        // Help: "Use every stage's default settings (… + … iterations, LoCM …) instead".
         #[arg(long, conflicts_with_all = ["iterations", "epochs", "deform_iterations"], help = full_help())]
         full: bool,
         /// Stages to run at the same time

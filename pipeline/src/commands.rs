@@ -145,6 +145,16 @@ pub fn execute(command: Command) -> Result<()> {
                 eval::compare_table(&[(m.experiment.clone(), m.clone())])
             );
             print!("\n{}", eval::baseline_block(&m));
+            let f = |v: Option<f64>| v.map_or("-".to_string(), |x| format!("{x:.4}"));
+            match (&m.lpips_net, &m.lpips_note) {
+                (Some(net), _) => println!(
+                    "LPIPS ({net}, lower is better): test {}, novel views {}",
+                    f(m.lpips_mean),
+                    f(m.novel_lpips_mean)
+                ),
+                (None, Some(why)) => eprintln!("[degs] {why}"),
+                (None, None) => {}
+            }
             eprintln!("[degs] wrote {}", dir.join("metrics.json").display());
             Ok(())
         }

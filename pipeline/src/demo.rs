@@ -23,7 +23,7 @@ use synth::SynthConfig;
 pub const DEMO_SIZE: u32 = 96;
 /// Warm-up iterations of the demo (the stage default is the paper's 3500).
 pub const DEMO_GAUSSIANS_ITERATIONS: u32 = 1500;
-/// LoCM epochs of the demo (the stage default is 3).
+/// LoCM epochs of the demo (the stage default trains until the CM loss stops improving).
 pub const DEMO_EVFLOW_EPOCHS: usize = 1;
 /// Joint iterations of the demo (the stage default is 2000).
 pub const DEMO_DEFORM_ITERATIONS: u32 = 600;
@@ -107,7 +107,9 @@ pub fn describe(opts: &DemoOptions, experiment_file: &Path) -> String {
         reduced.push(format!("gaussians iterations = {n} (default 3500)"));
     }
     if let Some(n) = opts.evflow_epochs {
-        reduced.push(format!("evflow epochs = {n} (default 3)"));
+        reduced.push(format!(
+            "evflow epochs = {n} (default: until the CM loss stops improving)"
+        ));
     }
     if let Some(n) = opts.deform_iterations {
         reduced.push(format!("deform iterations = {n} (default 2000)"));

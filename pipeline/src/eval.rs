@@ -29,6 +29,16 @@ pub struct Metrics {
     pub novel_psnr_mean: Option<f64>,
     #[serde(default)]
     pub novel_ssim_mean: Option<f64>,
+    /// Mean LPIPS of the test frames and of the novel views (network `lpips_net`);
+    /// None with the reason in `lpips_note` when the weights cannot be had.
+    #[serde(default)]
+    pub lpips_mean: Option<f64>,
+    #[serde(default)]
+    pub novel_lpips_mean: Option<f64>,
+    #[serde(default)]
+    pub lpips_net: Option<String>,
+    #[serde(default)]
+    pub lpips_note: Option<String>,
     /// The 2D baselines on the test frames (PSNR capped as the frames' are); None with
     /// the reason in `baselines_note` when they are not available.
     #[serde(default)]
@@ -59,6 +69,8 @@ pub struct FrameMetrics {
     pub render: PathBuf,
     pub psnr: f64,
     pub ssim: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lpips: Option<f64>,
 }
 
 fn to_u8_levels(img: &Image) -> Vec<f32> {
@@ -247,8 +259,14 @@ pub fn flow_error(flow_dir: &Path, gt_path: &Path) -> Result<Option<FlowError>> 
     }))
 }
 
-/// Evaluate the run in `run_dir` (a `runs/<name>/` directory) and write its metrics.json.
+/// Evaluate the run in `run_dir` (a `runs/<name>/` directory) and write its metrics.json;
+/// LPIPS as `DEGS_LPIPS` says ([`crate::eval_lpips::LpipsUse::from_env`]).
 pub fn eval_run(run_dir: &Path) -> Result<Metrics> {
+    eval_run_with(run_dir, crate::eval_lpips::LpipsUse::from_env()?)
+}
+
+/// [`eval_run`] with LPIPS computed as `lpips` says.
+pub fn eval_run_with(run_dir: &Path, lpips: crate::eval_lpips::LpipsUse) -> Result<Metrics> {
     let record = RunRecord::read(&run_dir.join("run.json"))?;
     let entry_of = |stage: &str| {
         record
@@ -267,14 +285,16 @@ pub fn eval_run(run_dir: &Path) -> Result<Metrics> {
         m.frames.iter().map(|f| scene.image_path(f)).collect()
     };
 
-    let (render_stage, frames) = eval_renders(&entry_of, &images(&scene.test))?;
-    let novel_frames = match &render_stage {
+    let (render_stage, mut frames) = eval_renders(&entry_of, &images(&scene.test))?;
+    let mut novel_frames = match &render_stage {
         Some(stage) => eval_novel(&entry_of, stage, &images(&scene.novel))?,
         None => Vec::new(),
     };
+    let (lpips_net, lpips_note) = add_lpips(&mut frames, &mut novel_frames, lpips);
     let mean = |frames: &[FrameMetrics], f: &dyn Fn(&FrameMetrics) -> f64| {
         (!frames.is_empty()).then(|| frames.iter().map(f).sum::<f64>() / frames.len() as f64)
     };
+    let lpips_mean = |f: &[FrameMetrics]| crate::eval_lpips::mean_all(f.iter().map(|f| f.lpips));
     let (baselines, baselines_note) = run_baselines(&entry_of, &scene);
     let (flow, flow_source) = eval_flow(&entry_of, &scene_dir).unzip();
     let stage_s: Vec<(String, f64)> = record
@@ -288,6 +308,10 @@ pub fn eval_run(run_dir: &Path) -> Result<Metrics> {
         render_stage,
         psnr_mean: mean(&frames, &|f| f.psnr),
         ssim_mean: mean(&frames, &|f| f.ssim),
+        lpips_mean: lpips_mean(&frames),
+        novel_lpips_mean: lpips_mean(&novel_frames),
+        lpips_net,
+        lpips_note,
         frames,
         novel_psnr_mean: mean(&novel_frames, &|f| f.psnr),
         novel_ssim_mean: mean(&novel_frames, &|f| f.ssim),
@@ -304,6 +328,32 @@ pub fn eval_run(run_dir: &Path) -> Result<Metrics> {
     };
     scene::atomic::write_json_atomic(&run_dir.join("metrics.json"), &metrics)?;
     Ok(metrics)
+}
+
+fn pairs(s: &[FrameMetrics]) -> Vec<(&Path, &Path)> {
+    s.iter()
+        .map(|f| (f.test_image.as_path(), f.render.as_path()))
+        .collect()
+}
+
+/// LPIPS of the test and novel frames in place; the network, or why none.
+fn add_lpips(
+    test: &mut [FrameMetrics],
+    novel: &mut [FrameMetrics],
+    how: crate::eval_lpips::LpipsUse,
+) -> (Option<String>, Option<String>) {
+    if test.is_empty() && novel.is_empty() {
+        return (None, None);
+    }
+    match crate::eval_lpips::score_sets(&[pairs(test), pairs(novel)], how) {
+        Ok((net, scores)) => {
+            for (f, d) in test.iter_mut().chain(novel.iter_mut()).zip(scores.concat()) {
+                f.lpips = Some(d);
+            }
+            (Some(net), None)
+        }
+        Err(why) => (None, Some(why)),
+    }
 }
 
 /// PSNR/SSIM of the renders of the last stage in run order that has them (its name and
@@ -338,6 +388,7 @@ fn score_pairs(pairs: &[(PathBuf, PathBuf)]) -> Result<Vec<FrameMetrics>> {
                 render: r.clone(),
                 psnr,
                 ssim,
+                lpips: None,
             })
         })
         .collect()
@@ -432,7 +483,7 @@ fn eval_flow(
 pub fn compare_table(runs: &[(String, Metrics)]) -> String {
     let f = |v: Option<f64>, p: usize| v.map_or("-".to_string(), |x| format!("{x:.p$}"));
     let mut s = format!(
-        "{:<24} {:>8} {:>7} {:>7} {:>9} {:>10} {:>11} {:>8} {:>9} {:>10} {:>8}\n",
+        "{:<24} {:>8} {:>7} {:>7} {:>9} {:>10} {:>11} {:>8} {:>9} {:>10} {:>8} {:>7} {:>11}\n",
         "run",
         "PSNR dB",
         "SSIM",
@@ -443,11 +494,13 @@ pub fn compare_table(runs: &[(String, Metrics)]) -> String {
         "EPE px",
         "outliers",
         "renders",
-        "time s"
+        "time s",
+        "LPIPS",
+        "novel LPIPS"
     );
     for (name, m) in runs {
         s += &format!(
-            "{:<24} {:>8} {:>7} {:>7} {:>9} {:>10} {:>11} {:>8} {:>9} {:>10} {:>8.1}\n",
+            "{:<24} {:>8} {:>7} {:>7} {:>9} {:>10} {:>11} {:>8} {:>9} {:>10} {:>8.1} {:>7} {:>11}\n",
             name,
             f(m.psnr_mean, 2),
             f(m.ssim_mean, 4),
@@ -459,122 +512,14 @@ pub fn compare_table(runs: &[(String, Metrics)]) -> String {
             m.flow_outliers
                 .map_or("-".to_string(), |x| format!("{:.1}%", 100.0 * x)),
             m.render_stage.as_deref().unwrap_or("-"),
-            m.total_stage_s
+            m.total_stage_s,
+            f(m.lpips_mean, 4),
+            f(m.novel_lpips_mean, 4)
         );
     }
     s
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn ramp(w: usize, h: usize, c: usize, k: f32) -> Vec<f32> {
-        (0..w * h * c)
-            .map(|i| ((i * 37 % 251) as f32 * k).round().min(255.0))
-            .collect()
-    }
-
-    #[test]
-    fn psnr_known_values() {
-        let a = vec![0.0f32; 100];
-        let mut b = a.clone();
-        assert_eq!(psnr_u8(&a, &b), f64::INFINITY);
-        b.iter_mut().for_each(|x| *x = 1.0); // MSE 1 → 48.1308 dB
-        assert!((psnr_u8(&a, &b) - 48.130_803_608_679_1).abs() < 1e-9);
-        b.iter_mut().for_each(|x| *x = 255.0); // MSE 255² → 0 dB
-        assert!(psnr_u8(&a, &b).abs() < 1e-12);
-    }
-
-    /// Brute-force SSIM of one channel (0–255 levels): every pixel's 11×11 Gaussian
-    /// window, zero outside the image, averaged over all pixels.
-    fn ssim_brute(a: &[f32], b: &[f32], w: usize, h: usize) -> f64 {
-        let g = |d: isize| (-((d as f64).powi(2)) / 4.5).exp();
-        let norm: f64 = (-5..=5).map(g).sum::<f64>().powi(2);
-        let (c1, c2) = (6.5025, 58.5225);
-        let mut total = 0.0;
-        for cy in 0..h as isize {
-            for cx in 0..w as isize {
-                let mut m = [0f64; 5];
-                for dy in -5..=5isize {
-                    for dx in -5..=5isize {
-                        let (x, y) = (cx + dx, cy + dy);
-                        if x < 0 || y < 0 || x >= w as isize || y >= h as isize {
-                            continue;
-                        }
-                        let wt = g(dx) * g(dy) / norm;
-                        let i = y as usize * w + x as usize;
-                        let (p, q) = (a[i] as f64, b[i] as f64);
-                        m[0] += wt * p;
-                        m[1] += wt * q;
-                        m[2] += wt * p * p;
-                        m[3] += wt * q * q;
-                        m[4] += wt * p * q;
-                    }
-                }
-                let (vx, vy, cxy) = (m[2] - m[0] * m[0], m[3] - m[1] * m[1], m[4] - m[0] * m[1]);
-                total += ((2.0 * m[0] * m[1] + c1) * (2.0 * cxy + c2))
-                    / ((m[0] * m[0] + m[1] * m[1] + c1) * (vx + vy + c2));
-            }
-        }
-        total / (w * h) as f64
-    }
-
-    #[test]
-    fn ssim_identity_and_symmetry() {
-        let (w, h) = (24, 20);
-        let a = ramp(w, h, 3, 1.0);
-        assert!((ssim_u8(&a, &a, w, h, 3) - 1.0).abs() < 1e-9);
-        let b = ramp(w, h, 3, 0.7);
-        let s = ssim_u8(&a, &b, w, h, 3);
-        assert!(s < 0.999 && s > -1.0);
-        assert!((s - ssim_u8(&b, &a, w, h, 3)).abs() < 1e-9);
-    }
-
-    #[test]
-    fn ssim_matches_a_brute_force_window_sum() {
-        // one channel, and three channels as the mean of their brute-force values
-        let (w, h) = (13, 11);
-        let a = ramp(w, h, 1, 1.0);
-        let b = ramp(w, h, 1, 0.5);
-        let want = ssim_brute(&a, &b, w, h);
-        assert!((ssim_u8(&a, &b, w, h, 1) - want).abs() < 1e-6, "{want}");
-        let (x, y) = (vec![100.0f32; w * h], vec![110.0f32; w * h]);
-        assert!((ssim_u8(&x, &y, w, h, 1) - ssim_brute(&x, &y, w, h)).abs() < 1e-6);
-        let a3 = ramp(w, h, 3, 1.0);
-        let b3 = ramp(w, h, 3, 0.6);
-        let chan =
-            |v: &[f32], c: usize| -> Vec<f32> { v.iter().skip(c).step_by(3).copied().collect() };
-        let want3 = (0..3)
-            .map(|c| ssim_brute(&chan(&a3, c), &chan(&b3, c), w, h))
-            .sum::<f64>()
-            / 3.0;
-        assert!((ssim_u8(&a3, &b3, w, h, 3) - want3).abs() < 1e-6, "{want3}");
-    }
-
-    #[test]
-    fn renders_pair_by_name_then_by_order() {
-        let t: Vec<PathBuf> = ["a/test_0000.png", "a/test_0001.png"]
-            .map(PathBuf::from)
-            .into();
-        let r: Vec<PathBuf> = ["r/test_0001.png", "r/test_0000.png"]
-            .map(PathBuf::from)
-            .into();
-        let p = pair_renders(&t, &r).unwrap();
-        assert_eq!(p[0].1, PathBuf::from("r/test_0000.png"));
-        let r2: Vec<PathBuf> = ["r/0.png", "r/1.png"].map(PathBuf::from).into();
-        assert_eq!(
-            pair_renders(&t, &r2).unwrap()[1].1,
-            PathBuf::from("r/1.png")
-        );
-        assert!(pair_renders(&t, &r2[..1]).is_err());
-    }
-
-    #[test]
-    fn epe_is_found_nested() {
-        let v: serde_json::Value =
-            serde_json::from_str(r#"{"metrics": {"flow": {"EPE_px_s": 3.5}}}"#).unwrap();
-        assert_eq!(find_epe(&v), Some(3.5));
-        assert_eq!(find_epe(&serde_json::json!({"x": 1})), None);
-    }
-}
+#[path = "eval_tests.rs"]
+mod tests;

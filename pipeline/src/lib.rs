@@ -16,6 +16,7 @@ pub mod config_show;
 pub mod context;
 pub mod demo;
 pub mod eval;
+pub mod eval_lpips;
 pub mod experiment;
 pub mod graph;
 pub mod overrides;

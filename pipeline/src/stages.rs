@@ -328,10 +328,9 @@ mod tests {
         let g = defaults("gaussians").unwrap();
         assert_eq!(g.get("iterations"), Some(&Value::Integer(3500)));
         assert!(g["field"].is_table());
-        assert_eq!(
-            defaults("evflow").unwrap().get("epochs"),
-            Some(&Value::Integer(3))
-        );
+        let e = defaults("evflow").unwrap();
+        assert_eq!(e.get("epochs"), None, "the stopping rule by default");
+        assert_eq!(e["stop"].get("min_steps"), Some(&Value::Integer(10)));
         assert_eq!(
             defaults("assoc").unwrap().get("k"),
             Some(&Value::Integer(3))

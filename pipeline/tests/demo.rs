@@ -26,6 +26,7 @@ fn demo(f: &Fixture, out: &Path, reports: &Path) -> Output {
         .args(TINY)
         .env("DEGS_FAKE_LOG", &f.log)
         .env("DEGS_FAKE_REPORTS", reports)
+        .env("DEGS_LPIPS", "off")
         .env_remove("DEGS_FAKE_SLEEP")
         .env_remove("DEGS_FAKE_MEET");
     c.output().unwrap()

@@ -13,9 +13,15 @@ use std::fs;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+/// `degs ARGS` without LPIPS (its own test below).
 fn degs(args: &[&str]) -> Output {
+    degs_lpips(args, "off")
+}
+
+fn degs_lpips(args: &[&str], lpips: &str) -> Output {
     Command::new(env!("CARGO_BIN_EXE_degs"))
         .args(args)
+        .env("DEGS_LPIPS", lpips)
         .output()
         .unwrap()
 }
@@ -359,4 +365,49 @@ fn eval_prints_the_baselines_of_the_deform_report() {
     assert_eq!(m["render_stage"], "deform");
     assert_eq!(m["baselines"]["blend"]["psnr_mean"], 23.5);
     assert!(m["novel_psnr_mean"].is_null());
+}
+
+#[test]
+fn eval_reports_lpips_beside_psnr_when_the_weights_are_there() {
+    let d = tempfile::tempdir().unwrap();
+    let root = d.path().join("cache-root");
+    let scene_dir = tiny_scene(d.path());
+    let scene = Scene::open(&scene_dir).unwrap();
+    let g = d.path().join("g");
+    renders(&g, &scene, 0.0);
+    // Frame 1's render: every value moved by a quarter of the range (clamped).
+    let f1 = g.join("renders/0001.png");
+    let mut img = read_image(&f1).unwrap();
+    img.data.iter_mut().for_each(|v| *v = (*v + 0.25).min(1.0));
+    write_png(&f1, &img).unwrap();
+    fabricate_run(&root, "lp", &scene_dir, &g, None);
+    let run = root.join("runs/lp");
+    let o = degs_lpips(&["eval", run.to_str().unwrap()], "cached");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let m: serde_json::Value =
+        serde_json::from_slice(&fs::read(run.join("metrics.json")).unwrap()).unwrap();
+    if m["lpips_net"].is_null() {
+        // No weights in the cache (run `cargo test -p degs-lpips` online once).
+        let note = m["lpips_note"].as_str().unwrap();
+        assert!(note.contains("LPIPS unavailable"), "{note}");
+        eprintln!("SKIPPED: {note}");
+        return;
+    }
+    assert_eq!(m["lpips_net"], "vgg");
+    let frames = m["frames"].as_array().unwrap();
+    let l0 = frames[0]["lpips"].as_f64().unwrap();
+    let l1 = frames[1]["lpips"].as_f64().unwrap();
+    assert!(l0.abs() < 1e-9, "an exact render scores {l0}");
+    assert!(l1 > 0.01, "a brightened render scores {l1}");
+    let mean = m["lpips_mean"].as_f64().unwrap();
+    assert!((mean - (l0 + l1) / 2.0).abs() < 1e-12);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("LPIPS (vgg"), "{out}");
+    // Off: no LPIPS, and the note says so.
+    let o = degs(&["eval", run.to_str().unwrap()]);
+    assert!(o.status.success());
+    let m: serde_json::Value =
+        serde_json::from_slice(&fs::read(run.join("metrics.json")).unwrap()).unwrap();
+    assert!(m["lpips_mean"].is_null() && m["frames"][0].get("lpips").is_none());
+    assert!(m["lpips_note"].as_str().unwrap().contains("off"));
 }

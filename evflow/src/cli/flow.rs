@@ -17,9 +17,16 @@ pub struct FinetuneArgs {
     /// What to train: lora (LoRA adapters of --rank), full (all weights), none.
     #[arg(long)]
     pub mode: Option<Mode>,
-    /// Passes over the windows.
+    /// A fixed number of passes over the windows (unset: until the CM loss stops
+    /// improving, the `stop` settings).
     #[arg(long)]
     pub epochs: Option<usize>,
+    /// Stopping rule: steps that always run.
+    #[arg(long)]
+    pub min_steps: Option<usize>,
+    /// Stopping rule: steps never exceeded.
+    #[arg(long)]
+    pub max_steps: Option<usize>,
     /// Adam learning rate at the first step.
     #[arg(long)]
     pub lr_start: Option<f64>,
@@ -38,7 +45,8 @@ pub struct FinetuneArgs {
 /// [`FlowSettings`] (their `--help` shows its default: [`scene::cli::show_defaults`]).
 pub const FINETUNE_SETTING_FLAGS: &[(&str, &str)] = &[
     ("mode", "mode"),
-    ("epochs", "epochs"),
+    ("min_steps", "stop.min_steps"),
+    ("max_steps", "stop.max_steps"),
     ("lr_start", "lr_start"),
     ("lr_end", "lr_end"),
     ("rank", "rank"),
@@ -50,7 +58,9 @@ impl FinetuneArgs {
     pub fn run(&self) -> anyhow::Result<()> {
         let s = self.common.settings(|s| {
             s.mode = self.mode.unwrap_or(s.mode);
-            s.epochs = self.epochs.unwrap_or(s.epochs);
+            s.epochs = self.epochs.or(s.epochs);
+            s.stop.min_steps = self.min_steps.unwrap_or(s.stop.min_steps);
+            s.stop.max_steps = self.max_steps.unwrap_or(s.stop.max_steps);
             s.lr_start = self.lr_start.unwrap_or(s.lr_start);
             s.lr_end = self.lr_end.unwrap_or(s.lr_end);
             s.rank = self.rank.unwrap_or(s.rank);
