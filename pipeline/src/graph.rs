@@ -94,7 +94,9 @@ pub fn resolve(exp: &Experiment, ctx: &Context, hashes: &mut BinaryHashes) -> Re
                 toml::Value::Table(t) => canon::canonical_table(&t),
                 _ => Table::new(),
             };
-            let binary_hash = hashes.hash(&ctx.degs)?;
+            // Keyed by the code that makes scenes, not by the whole `degs` binary
+            // (pipeline/build.rs): rebuilding the runner keeps synthetic scenes cached.
+            let binary_hash = format!("synth-code-{}", env!("DEGS_SYNTH_CODE"));
             let key = key_of(stages::SYNTH, &binary_hash, &settings, &[]);
             Node {
                 stage: stages::SYNTH.into(),
@@ -218,5 +220,38 @@ mod tests {
         assert_ne!(base, key_of("s", "b", &Table::new(), &[("--scene", "k")]));
         assert_ne!(base, key_of("s", "b", &t, &[("--scene", "k2")]));
         assert_ne!(base, key_of("s", "b", &t, &[("--model", "k")]));
+    }
+
+    /// The synth stage's key follows the scene-making code, not the `degs` binary it
+    /// runs in: two different `degs` executables give the same key.
+    #[test]
+    fn synth_key_ignores_the_degs_binary() {
+        let dir = tempfile::tempdir().unwrap();
+        let exp = Experiment::parse(
+            "name = \"a\"\n[scene]\nsynth = \"rigid\"\n",
+            &dir.path().join("a.toml"),
+        )
+        .unwrap();
+        let key = |bytes: &[u8]| {
+            let degs = dir.path().join("degs");
+            std::fs::write(&degs, bytes).unwrap();
+            let ctx = Context {
+                cache: Cache::new(dir.path().join("c")),
+                stage_dir: Some(dir.path().join("none")),
+                degs,
+            };
+            let mut hashes = BinaryHashes::default();
+            let nodes = resolve(&exp, &ctx, &mut hashes).unwrap();
+            let synth = nodes.iter().find(|n| n.stage == stages::SYNTH).unwrap();
+            (
+                synth.key.clone().unwrap(),
+                synth.binary_hash.clone().unwrap(),
+            )
+        };
+        let (k1, h1) = key(b"one build");
+        let (k2, _) = key(b"another build of the runner");
+        assert_eq!(k1, k2);
+        assert_eq!(h1, format!("synth-code-{}", env!("DEGS_SYNTH_CODE")));
+        assert_eq!(env!("DEGS_SYNTH_CODE").len(), 32);
     }
 }
