@@ -1,0 +1,49 @@
+//! `import` — converters from the layouts public event datasets use to degs scene
+//! directories (docs/DESIGN.md §3, "Importing recordings"); backs `degs import`.
+//!
+//! Each layout module reads its source into a [`Recording`] (camera, frames with
+//! camera-to-world poses in the manifest's OpenGL axes, events, warnings about what it
+//! assumed); [`write_scene`] chooses the train and test frames and writes the scene.
+//! The pose conventions and their conversion are in [`convention`]. Each layout module
+//! also has an exporter (scene → layout), used by the round-trip tests.
+
+pub mod convention;
+pub mod ecd;
+pub mod recording;
+mod table;
+
+pub use recording::{
+    FrameImage, ImportOptions, ImportSummary, Recording, SourceFrame, Split, split_frames,
+    write_scene,
+};
+
+use scene::error::Result;
+use std::path::Path;
+
+/// The source layouts `degs import` understands.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Layout {
+    /// Event Camera Dataset: calib.txt, images.txt + images/, events.txt, groundtruth.txt.
+    Ecd,
+}
+
+impl Layout {
+    pub fn name(&self) -> &'static str {
+        match self {
+            Layout::Ecd => "ecd",
+        }
+    }
+}
+
+/// Read `src` in `layout` and write the scene directory `out`.
+pub fn import(
+    layout: Layout,
+    src: &Path,
+    opts: &ImportOptions,
+    out: &Path,
+) -> Result<ImportSummary> {
+    let rec = match layout {
+        Layout::Ecd => ecd::read_ecd(src)?,
+    };
+    write_scene(&rec, opts, out)
+}
