@@ -7,6 +7,7 @@
 //! The pose conventions and their conversion are in [`convention`]. Each layout module
 //! also has an exporter (scene → layout), used by the round-trip tests.
 
+pub mod aedat4;
 pub mod convention;
 pub mod ecd;
 pub mod recording;
@@ -25,12 +26,15 @@ use std::path::Path;
 pub enum Layout {
     /// Event Camera Dataset: calib.txt, images.txt + images/, events.txt, groundtruth.txt.
     Ecd,
+    /// One AEDAT 4.0 file (DAVIS): events and APS frames, no poses.
+    Aedat4,
 }
 
 impl Layout {
     pub fn name(&self) -> &'static str {
         match self {
             Layout::Ecd => "ecd",
+            Layout::Aedat4 => "aedat4",
         }
     }
 }
@@ -44,6 +48,9 @@ pub fn import(
 ) -> Result<ImportSummary> {
     let rec = match layout {
         Layout::Ecd => ecd::read_ecd(src)?,
+        Layout::Aedat4 => {
+            aedat4::read_aedat4_recording(src, opts.calib.as_deref(), opts.static_camera)?
+        }
     };
     write_scene(&rec, opts, out)
 }

@@ -21,10 +21,12 @@ pub const EVENTS_FILE: &str = "events.evs";
 pub enum FrameImage {
     /// An image file (PNG or JPEG), copied byte for byte.
     File(PathBuf),
-    /// 8-bit grey pixels, row-major (AEDAT4 APS frames), written as a grey PNG.
-    Gray8 {
+    /// 8-bit pixels, row-major, 1 (grey) or 3 (RGB) channels interleaved (AEDAT4 APS
+    /// frames), written as a PNG.
+    Pixels {
         width: u32,
         height: u32,
+        channels: u32,
         pixels: Vec<u8>,
     },
 }
@@ -63,6 +65,10 @@ pub struct ImportOptions {
     pub contrast_threshold: f64,
     /// Overrides the layout's frame encoding.
     pub frame_encoding: Option<FrameEncoding>,
+    /// Layouts without poses (AEDAT4): accept a camera that did not move (identity poses).
+    pub static_camera: bool,
+    /// Layouts without a calibration (AEDAT4): an ECD-style `calib.txt`.
+    pub calib: Option<PathBuf>,
 }
 
 impl Default for ImportOptions {
@@ -72,6 +78,8 @@ impl Default for ImportOptions {
             train_fps: None,
             contrast_threshold: DEFAULT_CONTRAST_THRESHOLD,
             frame_encoding: None,
+            static_camera: false,
+            calib: None,
         }
     }
 }
@@ -320,7 +328,7 @@ fn check_recording(rec: &Recording) -> Result<()> {
         let size = match &f.image {
             FrameImage::File(p) => image::image_dimensions(p)
                 .map_err(|e| Error::invalid(p, format!("cannot read image header: {e}")))?,
-            FrameImage::Gray8 { width, height, .. } => (*width, *height),
+            FrameImage::Pixels { width, height, .. } => (*width, *height),
         };
         if size != (cam.width, cam.height) {
             return Err(Error::Other(format!(
@@ -345,16 +353,17 @@ fn write_image(root: &Path, stem: &str, image: &FrameImage) -> Result<String> {
             scene::atomic::write_bytes_atomic(&root.join(&rel), &bytes)?;
             Ok(rel)
         }
-        FrameImage::Gray8 {
+        FrameImage::Pixels {
             width,
             height,
+            channels,
             pixels,
         } => {
             let rel = format!("{stem}.png");
             let img = Image {
                 width: *width,
                 height: *height,
-                channels: 1,
+                channels: *channels,
                 data: pixels.iter().map(|&c| c as f32 / 255.0).collect(),
             };
             write_png(root.join(&rel), &img)?;

@@ -5,7 +5,7 @@
 //! | `.txt` | ECD / rpg text, one event `t x y p` per line (t in s, p ∈ {0,1}) | [`text`] |
 //! | `.npz` | NumPy archive with arrays `x`, `y`, `t` (µs), `p` (HS-ERGB layout) | [`npz`] |
 //! | `.evs` | this project's columnar binary, memory-mappable | [`evs`] |
-//! | `.aedat4` | iniVation AEDAT 4.0 (DV software, DAVIS/DVXplorer cameras) | [`aedat4`] |
+//! | `.aedat4` | iniVation AEDAT 4.0 (DV software, DAVIS/DVXplorer cameras); APS frames: [`aedat4_frames`] | [`aedat4`] |
 //! | `.raw` | Prophesee / Metavision EVT 2.0 or EVT 3.0 (encoding named in its header) | [`prophesee`] |
 //! | `.es` | Event Stream 2.x, DVS or ATIS type (sepia, loris, ATIS cameras) | [`event_stream`] |
 //!
@@ -15,6 +15,7 @@
 //! writer refuses invalid streams and writes atomically.
 
 pub mod aedat4;
+pub mod aedat4_frames;
 pub mod event_stream;
 pub mod evs;
 pub mod npz;
@@ -25,6 +26,7 @@ use crate::error::{Error, Result};
 use crate::events::EventStream;
 use std::path::Path;
 
+pub use aedat4_frames::{ApsFrame, read_aedat4_frames};
 pub use event_stream::{read_es, write_es};
 pub use evs::{EvsMap, read_evs, write_evs};
 pub use npz::{read_npz, write_npz};

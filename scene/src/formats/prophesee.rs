@@ -351,7 +351,7 @@ mod tests {
             .unwrap();
         assert_eq!(h.encoding, Some(RawEncoding::Evt3));
         assert_eq!(h.sensor, Some((1280, 720)));
-        assert_eq!(h.data_start, 57);
+        assert_eq!(h.data_start, 58);
         // Older files: `% evt` and `% geometry`, no `% end`.
         let h = parse_header(b"% evt 2.0\n% geometry 640x480\n\x01\x02").unwrap();
         assert_eq!(
