@@ -102,5 +102,6 @@ pub fn read_aedat4_recording(
         events,
         frame_encoding: FrameEncoding::Linear,
         warnings,
+        held_out: None,
     })
 }

@@ -114,6 +114,7 @@ pub fn read_ecd(src: &Path) -> Result<Recording> {
         events,
         frame_encoding: FrameEncoding::Linear,
         warnings,
+        held_out: None,
     })
 }
 

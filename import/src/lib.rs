@@ -8,14 +8,16 @@
 //! also has an exporter (scene → layout), used by the round-trip tests.
 
 pub mod aedat4;
+pub mod blender;
 pub mod convention;
 pub mod ecd;
+pub mod hsergb;
 pub mod recording;
 mod table;
 
 pub use recording::{
-    FrameImage, ImportOptions, ImportSummary, Recording, SourceFrame, Split, split_frames,
-    write_scene,
+    FrameImage, ImportOptions, ImportSummary, Recording, SourceFrame, Split, split_by,
+    split_frames, write_scene,
 };
 
 use scene::error::Result;
@@ -28,6 +30,10 @@ pub enum Layout {
     Ecd,
     /// One AEDAT 4.0 file (DAVIS): events and APS frames, no poses.
     Aedat4,
+    /// HS-ERGB sequence: images_corrected/ + timestamp.txt, events_aligned/*.npz (×32).
+    Hsergb,
+    /// D-NeRF / Blender transforms_*.json with an event file beside them.
+    Blender,
 }
 
 impl Layout {
@@ -35,6 +41,8 @@ impl Layout {
         match self {
             Layout::Ecd => "ecd",
             Layout::Aedat4 => "aedat4",
+            Layout::Hsergb => "hsergb",
+            Layout::Blender => "blender",
         }
     }
 }
@@ -48,6 +56,8 @@ pub fn import(
 ) -> Result<ImportSummary> {
     let rec = match layout {
         Layout::Ecd => ecd::read_ecd(src)?,
+        Layout::Hsergb => hsergb::read_hsergb(src, opts.calib.as_deref())?,
+        Layout::Blender => blender::read_blender(src, &opts.blender)?,
         Layout::Aedat4 => {
             aedat4::read_aedat4_recording(src, opts.calib.as_deref(), opts.static_camera)?
         }

@@ -52,6 +52,8 @@ pub struct Recording {
     pub frame_encoding: FrameEncoding,
     /// What the converter assumed or left out (printed and kept in `import.json`).
     pub warnings: Vec<String>,
+    /// The layout's own test split (one flag per frame), used unless `--test-every`.
+    pub held_out: Option<Vec<bool>>,
 }
 
 /// How [`write_scene`] chooses and labels the frames.
@@ -67,8 +69,10 @@ pub struct ImportOptions {
     pub frame_encoding: Option<FrameEncoding>,
     /// Layouts without poses (AEDAT4): accept a camera that did not move (identity poses).
     pub static_camera: bool,
-    /// Layouts without a calibration (AEDAT4): an ECD-style `calib.txt`.
+    /// Layouts without a calibration (AEDAT4, HS-ERGB): an ECD-style `calib.txt`.
     pub calib: Option<PathBuf>,
+    /// Blender: the event file, and how normalised frame times map to seconds.
+    pub blender: crate::blender::BlenderOptions,
 }
 
 impl Default for ImportOptions {
@@ -80,6 +84,7 @@ impl Default for ImportOptions {
             frame_encoding: None,
             static_camera: false,
             calib: None,
+            blender: Default::default(),
         }
     }
 }
@@ -108,6 +113,19 @@ pub fn split_frames(
             "--test-every {n}: must be at least 2 (1 would hold out every frame)"
         ));
     }
+    split_by(
+        times,
+        |i| test_every.is_some_and(|n| i % n == n - 1),
+        train_fps,
+    )
+}
+
+/// [`split_frames`] with the test frames chosen by `is_test(index)`.
+pub fn split_by(
+    times: &[f64],
+    is_test: impl Fn(usize) -> bool,
+    train_fps: Option<f64>,
+) -> std::result::Result<Split, String> {
     if let Some(f) = train_fps
         && !(f.is_finite() && f > 0.0)
     {
@@ -121,7 +139,7 @@ pub fn split_frames(
     // A relative slack so that frames exactly 1/F apart (up to rounding) are all kept.
     let period = train_fps.map(|f| (1.0 / f) * (1.0 - 1e-9));
     for (i, &t) in times.iter().enumerate() {
-        if test_every.is_some_and(|n| i % n == n - 1) {
+        if is_test(i) {
             split.test.push(i);
             continue;
         }
@@ -234,7 +252,11 @@ pub fn write_scene(rec: &Recording, opts: &ImportOptions, out: &Path) -> Result<
         )));
     }
     let times: Vec<f64> = rec.frames.iter().map(|f| f.timestamp).collect();
-    let split = split_frames(&times, opts.test_every, opts.train_fps).map_err(Error::Other)?;
+    let split = match (&rec.held_out, opts.test_every) {
+        (Some(h), None) => split_by(&times, |i| h.get(i) == Some(&true), opts.train_fps),
+        _ => split_frames(&times, opts.test_every, opts.train_fps),
+    }
+    .map_err(Error::Other)?;
     let (t0, t1) = (times[0], times[times.len() - 1]);
     let span = t1 - t0;
     let encoding = opts.frame_encoding.unwrap_or(rec.frame_encoding);

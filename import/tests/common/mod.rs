@@ -24,9 +24,23 @@ pub fn tiny_config() -> SynthConfig {
     }
 }
 
+/// The tiny scene seen from a camera that does not move (objects still move).
+pub fn tiny_static_config() -> SynthConfig {
+    let mut cfg = tiny_config();
+    cfg.camera.sway = glam::DVec3::ZERO;
+    cfg.camera.yaw_deg = 0.0;
+    cfg.camera.pitch_deg = 0.0;
+    cfg
+}
+
 /// Write the tiny scene under `dir/name`; returns it opened, and its world.
 pub fn tiny_scene(dir: &Path, name: &str) -> (Scene, SynthWorld) {
-    let cfg = tiny_config();
+    write_scene(dir, name, &tiny_config())
+}
+
+/// Write the scene of `cfg` under `dir/name`; returns it opened, and its world.
+pub fn write_scene(dir: &Path, name: &str, cfg: &SynthConfig) -> (Scene, SynthWorld) {
+    let cfg = cfg.clone();
     let out = dir.join(name);
     synth::write_synthetic_scene(&cfg, &out).unwrap();
     (Scene::open(&out).unwrap(), SynthWorld::new(&cfg).unwrap())
