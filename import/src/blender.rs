@@ -15,21 +15,14 @@
 //! `transforms_val.json` is ignored. Blender PNGs are sRGB with alpha (composited over
 //! white when read), so the scene says `frame_encoding: srgb` unless the manifest says.
 
+pub use crate::recording::BlenderOptions;
 use crate::recording::{FrameImage, Recording, SourceFrame};
 use scene::Scene;
 use scene::atomic::{AtomicDir, write_bytes_atomic, write_json_atomic};
 use scene::error::{Error, Result};
 use scene::formats::{ReadOptions, read_events};
 use scene::manifest::{FrameEncoding, Manifest, TEST_FILE, TRAIN_FILE};
-use std::path::{Path, PathBuf};
-
-/// Where the events are and how normalised times map to seconds.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct BlenderOptions {
-    pub events: Option<PathBuf>,
-    pub time_offset: Option<f64>,
-    pub duration: Option<f64>,
-}
+use std::path::Path;
 
 const EVENT_NAMES: [&str; 6] = [
     "events.evs",

@@ -38,8 +38,8 @@ mod tests {
 
     #[test]
     fn opencv_forward_becomes_opengl_minus_z() {
-        // An OpenCV camera at (1, 2, 3) rotated 30° about world y.
-        let cv = Pose::new(DQuat::from_rotation_y(0.5236), DVec3::new(1.0, 2.0, 3.0));
+        // An OpenCV camera at (1, 2, 3) rotated 0.6 rad about world y.
+        let cv = Pose::new(DQuat::from_rotation_y(0.6), DVec3::new(1.0, 2.0, 3.0));
         let gl = opencv_to_opengl(cv);
         assert_eq!(gl.translation, cv.translation);
         // The viewing direction: +z of OpenCV = −z of OpenGL; image-down = −(GL up).

@@ -72,7 +72,16 @@ pub struct ImportOptions {
     /// Layouts without a calibration (AEDAT4, HS-ERGB): an ECD-style `calib.txt`.
     pub calib: Option<PathBuf>,
     /// Blender: the event file, and how normalised frame times map to seconds.
-    pub blender: crate::blender::BlenderOptions,
+    pub blender: BlenderOptions,
+}
+
+/// Blender layout: where the events are and how normalised times map to seconds
+/// (`crate::blender`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct BlenderOptions {
+    pub events: Option<PathBuf>,
+    pub time_offset: Option<f64>,
+    pub duration: Option<f64>,
 }
 
 impl Default for ImportOptions {

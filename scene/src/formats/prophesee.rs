@@ -164,7 +164,7 @@ fn push_us(ev: &mut EventStream, us: u64, x: u16, y: u16, on: bool) {
 
 fn decode_evt2(data: &[u8], ev: &mut EventStream) -> Decoded {
     let n = data.len() / 4;
-    if data.len() % 4 != 0 {
+    if !data.len().is_multiple_of(4) {
         return Err((n, format!("{} trailing bytes: truncated", data.len() % 4)));
     }
     let (mut high, mut epoch) = (0u64, 0u64);
@@ -193,7 +193,7 @@ fn decode_evt2(data: &[u8], ev: &mut EventStream) -> Decoded {
 
 fn decode_evt3(data: &[u8], ev: &mut EventStream) -> Decoded {
     let n = data.len() / 2;
-    if data.len() % 2 != 0 {
+    if !data.len().is_multiple_of(2) {
         return Err((n, "1 trailing byte: truncated".into()));
     }
     let (mut high, mut low, mut epoch) = (0u64, 0u64, 0u64);
@@ -252,7 +252,7 @@ fn microseconds(path: &Path, ev: &EventStream, period_bits: u32) -> Result<Vec<u
     let mut out = Vec::with_capacity(ev.len());
     for (i, &t) in ev.t.iter().enumerate() {
         let us = (t * 1e6).round();
-        if !(us >= 0.0 && us < 1.8e19) {
+        if !(0.0..1.8e19).contains(&us) {
             return Err(Error::invalid(
                 path,
                 format!("event {i}: timestamp {t} s cannot be stored"),
@@ -296,14 +296,14 @@ pub fn write_raw(path: impl AsRef<Path>, ev: &EventStream, encoding: RawEncoding
     match encoding {
         RawEncoding::Evt2 => {
             let mut high = None;
-            for i in 0..ev.len() {
-                let h = (us[i] >> 6) & 0x0FFF_FFFF;
+            for (i, &us) in us.iter().enumerate() {
+                let h = (us >> 6) & 0x0FFF_FFFF;
                 if high != Some(h) {
                     body.extend_from_slice(&((0x8u32 << 28) | h as u32).to_le_bytes());
                     high = Some(h);
                 }
                 let w = (u32::from(ev.p[i] > 0) << 28)
-                    | (((us[i] & 0x3F) as u32) << 22)
+                    | (((us & 0x3F) as u32) << 22)
                     | ((ev.x[i] as u32) << 11)
                     | ev.y[i] as u32;
                 body.extend_from_slice(&w.to_le_bytes());
@@ -312,8 +312,8 @@ pub fn write_raw(path: impl AsRef<Path>, ev: &EventStream, encoding: RawEncoding
         RawEncoding::Evt3 => {
             let (mut high, mut low, mut row) = (None, None, None);
             let mut word = |w: u16| body.extend_from_slice(&w.to_le_bytes());
-            for i in 0..ev.len() {
-                let (h, l) = ((us[i] >> 12) & 0xFFF, us[i] & 0xFFF);
+            for (i, &us) in us.iter().enumerate() {
+                let (h, l) = ((us >> 12) & 0xFFF, us & 0xFFF);
                 if high != Some(h) {
                     word(0x8000 | h as u16);
                     high = Some(h);
@@ -378,7 +378,7 @@ mod tests {
         let words: [u16; 9] = [
             0x8000 | 0xFFF,            // time high 0xFFF
             0x6000 | 0x005,            // time low 5 → t = 0xFFF005 µs
-            0x0000 | 7,                // y = 7
+            7,                         // EVT_ADDR_Y (type 0): y = 7
             0x3000 | 0x800 | 100,      // base x 100, ON
             0x4000 | 0b1000_0000_0101, // x 100, 102, 111
             0x5000 | 0b1000_0001,      // x 112, 119
