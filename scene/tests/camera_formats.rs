@@ -178,7 +178,7 @@ fn hostile_raw_files() {
         }
     }
     // Bit flips in the body: an error naming the file or a valid stream, never a panic.
-    for k in 0..2_000 {
+    for k in 0..600 {
         let mut b = bytes.clone();
         let i = 40 + (k * 7919) % (b.len() - 40);
         b[i] ^= 1 << (k % 8);
@@ -236,7 +236,7 @@ fn hostile_es_files() {
     }
     let e = err_text(read_es(&good, &opts(240, 180)));
     assert!(e.contains("346x260") && e.contains("240x180"), "{e}");
-    for k in 0..2_000 {
+    for k in 0..600 {
         let mut b = bytes.clone();
         let i = 16 + (k * 7919) % (b.len() - 16);
         b[i] ^= 1 << (k % 8);
