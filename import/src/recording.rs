@@ -76,7 +76,7 @@ pub struct ImportOptions {
 }
 
 /// Blender layout: where the events are and how normalised times map to seconds
-/// (`crate::blender`).
+/// (see the blender module).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct BlenderOptions {
     pub events: Option<PathBuf>,

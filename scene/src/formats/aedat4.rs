@@ -1,5 +1,5 @@
 //! AEDAT 4.0 reader (iniVation DV: DAVIS, DVXplorer): polarity events here, the APS
-//! frames in [`super::aedat4_frames`]; IMU samples and triggers are skipped.
+//! frames in the sibling module `aedat4_frames`; IMU samples and triggers are skipped.
 //!
 //! File layout (little-endian throughout), as checked against a real DAVIS346 recording:
 //!
