@@ -142,16 +142,39 @@ pub fn write(path: &Path, s: &Splats, degree: u32) -> Result<()> {
     })
 }
 
+/// A PLY as read: the Gaussians, their SH degree, and how many were dropped.
+#[derive(Debug)]
+pub struct PlyCloud {
+    pub splats: Splats,
+    pub degree: u32,
+    /// Gaussians whose opacity logit is −inf (fully transparent: other 3DGS tools write
+    /// these for pruned points); dropped, not an error.
+    pub dropped_transparent: usize,
+}
+
 /// Read a 3DGS PLY; returns the Gaussians and their SH degree (from the number of
 /// `f_rest` fields). Errors name the file: unreadable, not PLY, wrong property list,
-/// zero vertices, truncated payload, non-finite values.
+/// zero vertices, truncated payload, non-finite values (NaN anywhere, ±inf except an
+/// opacity logit of −inf, whose Gaussian is dropped: [`read_counted`] counts them).
 pub fn read(path: &Path) -> Result<(Splats, u32)> {
+    let c = read_counted(path)?;
+    Ok((c.splats, c.degree))
+}
+
+/// [`read`] with the count of dropped fully transparent Gaussians.
+pub fn read_counted(path: &Path) -> Result<PlyCloud> {
     let bytes = std::fs::read(path).at(path)?;
-    parse(path, &bytes)
+    parse_counted(path, &bytes)
 }
 
 /// [`read`] from bytes already in memory (`path` only names them in errors).
 pub fn parse(path: &Path, bytes: &[u8]) -> Result<(Splats, u32)> {
+    let c = parse_counted(path, bytes)?;
+    Ok((c.splats, c.degree))
+}
+
+/// [`read_counted`] from bytes already in memory.
+pub fn parse_counted(path: &Path, bytes: &[u8]) -> Result<PlyCloud> {
     let bad = |msg: String| Error::invalid(path, msg);
     if bytes.is_empty() {
         return Err(bad("empty file, not a PLY".into()));
@@ -231,8 +254,15 @@ pub fn parse(path: &Path, bytes: &[u8]) -> Result<(Splats, u32)> {
     }
     let nr = num_coeffs(degree) - 1;
     let mut s = Splats::with_capacity(verts.len());
+    let mut dropped = 0;
     for (i, Vertex(v)) in verts.iter().enumerate() {
-        if let Some(k) = v.iter().position(|x| !x.is_finite()) {
+        // exp(−inf) = 0: a Gaussian that renders nothing. Drop it (NaN stays an error).
+        let transparent = v[OPACITY] == f32::NEG_INFINITY;
+        if let Some(k) = v
+            .iter()
+            .enumerate()
+            .position(|(k, x)| !x.is_finite() && (!transparent || k != OPACITY))
+        {
             let name = property_names(3)
                 .into_iter()
                 .find(|n| slot(n) == Some(k))
@@ -241,6 +271,10 @@ pub fn parse(path: &Path, bytes: &[u8]) -> Result<(Splats, u32)> {
                 "Gaussian {i}: `{name}` is not finite ({})",
                 v[k]
             )));
+        }
+        if transparent {
+            dropped += 1;
+            continue;
         }
         let mut sh_rest = [0.0f32; 45];
         for c in 0..3 {
@@ -258,9 +292,18 @@ pub fn parse(path: &Path, bytes: &[u8]) -> Result<(Splats, u32)> {
             dynamic: true,
         });
     }
+    if s.is_empty() {
+        return Err(bad(format!(
+            "all {dropped} Gaussians have opacity −inf (fully transparent): nothing to load"
+        )));
+    }
     // The PLY carries no dynamic flags: none (every Gaussian counts as dynamic).
     s.dynamic.clear();
-    Ok((s, degree))
+    Ok(PlyCloud {
+        splats: s,
+        degree,
+        dropped_transparent: dropped,
+    })
 }
 
 fn find(hay: &[u8], needle: &[u8]) -> Option<usize> {

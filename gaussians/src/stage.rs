@@ -141,6 +141,9 @@ pub struct TrainReport {
     pub train_frames: usize,
     /// Initial Gaussians placed on surfaces (from the PLY or stereo; the rest random).
     pub init_surface_points: usize,
+    /// Gaussians of `--init-ply` dropped because their opacity logit is −inf (fully
+    /// transparent; other tools write these); 0 without a PLY.
+    pub init_ply_dropped_transparent: usize,
     pub test: Evaluation,
     /// The same on the novel-view split; absent when the scene has none.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -290,27 +293,29 @@ pub fn write_depths(model: &Model, views: &[View], dir: &Path) -> Result<()> {
 }
 
 /// Initial Gaussians: the PLY if given (all flagged dynamic), else as `settings.init`
-/// says; with the number of them placed on surfaces (PLY points or stereo points).
+/// says; with the number of them placed on surfaces (PLY points or stereo points) and
+/// the number of fully transparent PLY Gaussians dropped.
 fn initial_splats(
     settings: &TrainSettings,
     views: &[View],
     ply: Option<&Path>,
-) -> Result<(Splats, usize)> {
+) -> Result<(Splats, usize, usize)> {
     match ply {
         Some(p) => {
-            let (mut s, _) = crate::ply::read(p)?;
+            let r = crate::ply::read_counted(p)?;
+            let mut s = r.splats;
             if s.is_empty() {
                 return Err(Error::invalid(p, "the point cloud has no Gaussians"));
             }
             s.dynamic = vec![true; s.len()];
             let n = s.len();
-            Ok((s, n))
+            Ok((s, n, r.dropped_transparent))
         }
         None => {
             let cams: Vec<_> = views.iter().map(|v| v.camera).collect();
             let n = settings.init_points;
             let (near, far) = (settings.init_near, settings.init_far);
-            Ok(match settings.init {
+            let (splats, surface) = match settings.init {
                 Init::Stereo => {
                     init::stereo_splats(views, n, near, far, &settings.stereo, settings.seed)
                 }
@@ -319,7 +324,8 @@ fn initial_splats(
                     let (centre, half) = init::camera_bounds(&cams);
                     (init::random_splats(n, centre, half, settings.seed), 0)
                 }
-            })
+            };
+            Ok((splats, surface, 0))
         }
     }
 }
@@ -359,7 +365,7 @@ pub fn train(
     let test_views = load_views(&scene, &scene.test)?;
     let inputs = input_hashes(&scene, args.init_ply.as_deref())?;
     phases.start("init");
-    let (splats, init_surface_points) =
+    let (splats, init_surface_points, init_ply_dropped_transparent) =
         initial_splats(&settings, &views, args.init_ply.as_deref())?;
     let cams: Vec<_> = views.iter().map(|v| v.camera).collect();
     let extent = scene_extent(&settings, &cams);
@@ -408,6 +414,7 @@ pub fn train(
         static_split: split,
         train_frames: views.len(),
         init_surface_points,
+        init_ply_dropped_transparent,
         test,
         novel,
         settings,

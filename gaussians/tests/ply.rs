@@ -322,3 +322,76 @@ print('ok')
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+/// Three Gaussians in front of a camera at the origin (looking down −Z), degree 0.
+fn front_row() -> Splats {
+    [-0.4f32, 0.0, 0.4]
+        .iter()
+        .enumerate()
+        .map(|(i, &x)| Gaussian {
+            mean: [x, 0.0, -3.0],
+            log_scale: [-2.0; 3],
+            rotation: [1.0, 0.0, 0.0, 0.0],
+            opacity_logit: 2.0,
+            sh_dc: [i as f32 * 0.5, 1.0 - i as f32 * 0.5, 0.3],
+            sh_rest: [0.0; 45],
+            dynamic: true,
+        })
+        .collect()
+}
+
+#[test]
+fn minus_inf_opacities_are_dropped_and_counted_nan_and_plus_inf_are_not() {
+    use gaussians::raster::TileRasterizer;
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("other_tool.ply");
+    ply::write(&p, &front_row(), 0).unwrap();
+    let bytes = std::fs::read(&p).unwrap();
+    let hlen = header_of(&bytes).len();
+    // Degree 0: 17 floats per Gaussian, opacity the 10th. Gaussian 1 → −inf.
+    let opacity_at = |i: usize| hlen + i * 17 * 4 + 9 * 4;
+    let mut b = bytes.clone();
+    b[opacity_at(1)..opacity_at(1) + 4].copy_from_slice(&f32::NEG_INFINITY.to_le_bytes());
+    std::fs::write(&p, &b).unwrap();
+    let c = ply::read_counted(&p).unwrap();
+    assert_eq!((c.splats.len(), c.dropped_transparent, c.degree), (2, 1, 0));
+    // What is left is Gaussians 0 and 2, bit for bit.
+    let row = front_row();
+    let mut kept = Splats::with_capacity(2);
+    for i in [0, 2] {
+        kept.push(row.get(i));
+    }
+    assert_eq!(bits(&c.splats), bits(&kept));
+    // It renders, and exactly as the cloud without the transparent Gaussian.
+    let cam = scene::Camera {
+        intrinsics: scene::Intrinsics::from_fov_x(32, 24, 1.0),
+        cam_to_world: scene::Pose::default(),
+    };
+    let r = TileRasterizer::new();
+    let (a, _) = r.render_full(&c.splats, &cam, 0, [0.0; 3]);
+    let (e, _) = r.render_full(&kept, &cam, 0, [0.0; 3]);
+    assert_eq!(a.rgb, e.rgb);
+    assert!(a.rgb.iter().all(|v| v.is_finite()));
+    let centre = 12 * 32 + 16; // between the two kept Gaussians: covered by neither fully
+    let left = 12 * 32 + (15.5 - 0.4 / 3.0 * cam.intrinsics.fx).round() as usize;
+    assert!(a.alpha[left] > 0.5, "alpha {}", a.alpha[left]);
+    assert!(a.alpha[centre] < a.alpha[left]);
+    // NaN and +inf opacities stay errors; a cloud of only −inf has nothing to load.
+    for (v, want) in [(f32::NAN, "not finite"), (f32::INFINITY, "not finite")] {
+        let mut b = bytes.clone();
+        b[opacity_at(2)..opacity_at(2) + 4].copy_from_slice(&v.to_le_bytes());
+        std::fs::write(&p, &b).unwrap();
+        let e = ply::read(&p).unwrap_err().to_string();
+        assert!(
+            e.contains("other_tool.ply") && e.contains("Gaussian 2") && e.contains(want),
+            "{e}"
+        );
+    }
+    let mut b = bytes.clone();
+    for i in 0..3 {
+        b[opacity_at(i)..opacity_at(i) + 4].copy_from_slice(&f32::NEG_INFINITY.to_le_bytes());
+    }
+    std::fs::write(&p, &b).unwrap();
+    let e = ply::read(&p).unwrap_err().to_string();
+    assert!(e.contains("all 3 Gaussians have opacity −inf"), "{e}");
+}

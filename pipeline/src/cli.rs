@@ -187,6 +187,17 @@ pub enum Command {
         #[arg(long)]
         dry_run: bool,
     },
+    /// Convert a recording in a public dataset's layout into a scene directory
+    /// (transforms_train/test.json, images/, events.evs, import.json) and print what it
+    /// found: frames, time span, events, events per frame interval, frame encoding.
+    /// Layouts: ecd (calib.txt, images.txt + images/, events.txt, groundtruth.txt; poses
+    /// converted from OpenCV to OpenGL camera axes and interpolated to the frame times),
+    /// aedat4 (one DAVIS .aedat4 file: events + APS frames, no poses: needs
+    /// --static-camera), hsergb (images_corrected/ + timestamp.txt, events_aligned/*.npz
+    /// with coordinates ×32; a static camera: identity poses), blender (D-NeRF
+    /// transforms_*.json + an event file; normalised times mapped to seconds). See the
+    /// README, "Bring your own recording".
+    Import(ImportArgs),
     /// Event files.
     Events {
         #[command(subcommand)]
@@ -261,10 +272,84 @@ pub enum Command {
     },
 }
 
+/// The source layouts of `degs import`.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum ImportLayout {
+    /// Event Camera Dataset folder
+    Ecd,
+    /// One AEDAT 4.0 file (DAVIS events + APS frames)
+    Aedat4,
+    /// HS-ERGB sequence folder (images_corrected/, events_aligned/*.npz)
+    Hsergb,
+    /// D-NeRF / Blender folder (transforms_*.json) with an event file beside it
+    Blender,
+}
+
+impl ImportLayout {
+    pub fn layout(self) -> import::Layout {
+        match self {
+            ImportLayout::Ecd => import::Layout::Ecd,
+            ImportLayout::Aedat4 => import::Layout::Aedat4,
+            ImportLayout::Hsergb => import::Layout::Hsergb,
+            ImportLayout::Blender => import::Layout::Blender,
+        }
+    }
+}
+
+#[derive(Args)]
+pub struct ImportArgs {
+    /// Source layout
+    #[arg(value_enum)]
+    pub layout: ImportLayout,
+    /// The recording: a folder (ecd) or a file (aedat4)
+    pub src: PathBuf,
+    /// Output scene directory (written atomically; an existing one is replaced)
+    pub out: PathBuf,
+    /// Hold out every N-th frame (the N-th, 2N-th, …) as a test frame
+    #[arg(long, value_name = "N")]
+    pub test_every: Option<usize>,
+    /// Thin the train frames to at most F frames per second (the paper trains on 1/5
+    /// of the frame rate)
+    #[arg(long, value_name = "F")]
+    pub train_fps: Option<f64>,
+    /// Contrast threshold C of the event generation model, written to the manifest
+    #[arg(long, default_value_t = scene::manifest::DEFAULT_CONTRAST_THRESHOLD)]
+    pub contrast_threshold: f64,
+    /// How the frames' 8-bit codes map to intensity (default: the layout's; APS frames
+    /// of ecd/aedat4 are linear)
+    #[arg(long, value_enum)]
+    pub frame_encoding: Option<EncodingArg>,
+    /// aedat4: the camera did not move; every frame gets the identity pose
+    #[arg(long)]
+    pub static_camera: bool,
+    /// aedat4, hsergb: intrinsics from an ECD-style calib.txt (fx fy cx cy [k1 k2 p1 p2
+    /// k3]); without it they are guessed (fx = fy = width) with a warning
+    #[arg(long, value_name = "FILE")]
+    pub calib: Option<PathBuf>,
+    /// blender: the event file (default: events.* beside the transforms, or the
+    /// manifest's events.path)
+    #[arg(long, value_name = "FILE")]
+    pub events: Option<PathBuf>,
+    /// blender: seconds on the events' clock of normalised time 0 (default: the first
+    /// event's timestamp)
+    #[arg(long, value_name = "S", allow_hyphen_values = true)]
+    pub time_offset: Option<f64>,
+    /// blender: seconds spanned by normalised times 0…1 (default: the events' span)
+    #[arg(long, value_name = "S")]
+    pub duration: Option<f64>,
+}
+
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum EncodingArg {
+    Srgb,
+    Linear,
+}
+
 #[derive(Subcommand)]
 pub enum EventsCommand {
     /// Convert an event file between formats, chosen by extension: .txt (ECD `t x y p`),
-    /// .npz (x, y, t in µs, p), .evs (degs columnar binary), .aedat4 (read only).
+    /// .npz (x, y, t in µs, p), .evs (degs columnar binary), .aedat4 (read only),
+    /// .raw (Prophesee EVT 2.0/3.0; written as EVT 3.0), .es (Event Stream, DVS).
     /// The output is written atomically; a bad input gives one line naming the file.
     Convert {
         input: PathBuf,

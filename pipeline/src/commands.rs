@@ -1,6 +1,6 @@
 //! What each `degs` sub-command does, given its parsed command line ([`crate::cli`]).
 
-use crate::cli::{Command, ConfigCommand, EventsCommand, Where};
+use crate::cli::{Command, ConfigCommand, EncodingArg, EventsCommand, ImportArgs, Where};
 use crate::demo::{self, DemoOptions};
 use crate::experiment::Experiment;
 use crate::plan::Plan;
@@ -137,6 +137,7 @@ pub fn execute(command: Command) -> Result<()> {
             print!("{}", demo::format_summary(&summary));
             Ok(())
         }
+        Command::Import(args) => import_recording(&args),
         Command::Eval { run, place } => {
             let dir = place.run_dir(&run)?;
             let m = eval::eval_run(&dir)?;
@@ -341,5 +342,29 @@ fn convert_events(
         s.output_format,
         output.display()
     );
+    Ok(())
+}
+
+/// `degs import LAYOUT SRC OUT`: convert and print the summary.
+fn import_recording(a: &ImportArgs) -> Result<()> {
+    use scene::manifest::FrameEncoding;
+    let opts = import::ImportOptions {
+        test_every: a.test_every,
+        train_fps: a.train_fps,
+        contrast_threshold: a.contrast_threshold,
+        frame_encoding: a.frame_encoding.map(|e| match e {
+            EncodingArg::Srgb => FrameEncoding::Srgb,
+            EncodingArg::Linear => FrameEncoding::Linear,
+        }),
+        static_camera: a.static_camera,
+        calib: a.calib.clone(),
+        blender: import::blender::BlenderOptions {
+            events: a.events.clone(),
+            time_offset: a.time_offset,
+            duration: a.duration,
+        },
+    };
+    let summary = import::import(a.layout.layout(), &a.src, &opts, &a.out)?;
+    print!("{summary}");
     Ok(())
 }

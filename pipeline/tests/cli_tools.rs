@@ -262,3 +262,63 @@ fn synth_writes_every_preset_in_the_scene_layout() {
     let o = degs(&["synth", "--preset", "nope", "--out", out.to_str().unwrap()]);
     assert!(text(&o).contains("nope") && text(&o).contains("rigid"));
 }
+
+#[test]
+fn import_prints_what_it_found_and_refuses_an_aedat4_without_poses() {
+    let dir = tempfile::tempdir().unwrap();
+    let sample = scene::testdata::shared_data("aedat4_sample/sample.aedat4");
+    let sample = sample.to_str().unwrap();
+    let out = dir.path().join("davis");
+    let o = degs(&["import", "aedat4", sample, out.to_str().unwrap()]);
+    assert!(!o.status.success());
+    let e = text(&o);
+    assert!(
+        e.contains("sample.aedat4") && e.contains("--static-camera"),
+        "{e}"
+    );
+    assert!(!out.exists());
+    let o = degs(&[
+        "import",
+        "aedat4",
+        sample,
+        out.to_str().unwrap(),
+        "--static-camera",
+        "--test-every",
+        "2",
+        "--contrast-threshold",
+        "0.2",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let printed = String::from_utf8_lossy(&o.stdout);
+    for want in [
+        "346x260",
+        "4 over 0.120000 s",
+        "2 train, 2 test",
+        "6676",
+        "Linear",
+        "identity pose",
+    ] {
+        assert!(printed.contains(want), "{want:?} missing from:\n{printed}");
+    }
+    let s = Scene::open(&out).unwrap();
+    assert_eq!((s.train.frames.len(), s.test.frames.len()), (2, 2));
+    assert_eq!(s.contrast_threshold(), 0.2);
+    let summary: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(out.join("import.json")).unwrap()).unwrap();
+    assert_eq!(summary["events"], 6676);
+    // A bad flag value is refused, naming the flag.
+    let o = degs(&[
+        "import",
+        "aedat4",
+        sample,
+        out.to_str().unwrap(),
+        "--static-camera",
+        "--test-every",
+        "1",
+    ]);
+    assert!(
+        !o.status.success() && text(&o).contains("--test-every 1"),
+        "{}",
+        text(&o)
+    );
+}

@@ -1,5 +1,5 @@
-//! AEDAT 4.0 reader (iniVation DV: DAVIS, DVXplorer). Only polarity events are read;
-//! frames, IMU samples and triggers are skipped.
+//! AEDAT 4.0 reader (iniVation DV: DAVIS, DVXplorer): polarity events here, the APS
+//! frames in the sibling module `aedat4_frames`; IMU samples and triggers are skipped.
 //!
 //! File layout (little-endian throughout), as checked against a real DAVIS346 recording:
 //!
@@ -37,12 +37,12 @@ const EVENT_STRIDE: usize = 16;
 const MAX_PACKET: u64 = 1 << 30;
 
 /// A bounds-checked view of one FlatBuffer.
-struct Flat<'a> {
-    buf: &'a [u8],
+pub(super) struct Flat<'a> {
+    pub buf: &'a [u8],
 }
 
 impl<'a> Flat<'a> {
-    fn bytes<const N: usize>(&self, at: usize) -> std::result::Result<[u8; N], String> {
+    pub(super) fn bytes<const N: usize>(&self, at: usize) -> std::result::Result<[u8; N], String> {
         at.checked_add(N)
             .and_then(|end| self.buf.get(at..end))
             .map(|s| {
@@ -57,26 +57,30 @@ impl<'a> Flat<'a> {
                 )
             })
     }
-    fn u16(&self, at: usize) -> std::result::Result<u16, String> {
+    pub(super) fn u16(&self, at: usize) -> std::result::Result<u16, String> {
         self.bytes::<2>(at).map(u16::from_le_bytes)
     }
-    fn u32(&self, at: usize) -> std::result::Result<u32, String> {
+    pub(super) fn u32(&self, at: usize) -> std::result::Result<u32, String> {
         self.bytes::<4>(at).map(u32::from_le_bytes)
     }
-    fn i32(&self, at: usize) -> std::result::Result<i32, String> {
+    pub(super) fn i32(&self, at: usize) -> std::result::Result<i32, String> {
         self.bytes::<4>(at).map(i32::from_le_bytes)
     }
-    fn i64(&self, at: usize) -> std::result::Result<i64, String> {
+    pub(super) fn i64(&self, at: usize) -> std::result::Result<i64, String> {
         self.bytes::<8>(at).map(i64::from_le_bytes)
     }
 
     /// Position of the root table.
-    fn root(&self) -> std::result::Result<usize, String> {
+    pub(super) fn root(&self) -> std::result::Result<usize, String> {
         Ok(self.u32(0)? as usize)
     }
 
     /// Absolute position of field `i` of the table at `table`, `None` if absent.
-    fn field(&self, table: usize, i: usize) -> std::result::Result<Option<usize>, String> {
+    pub(super) fn field(
+        &self,
+        table: usize,
+        i: usize,
+    ) -> std::result::Result<Option<usize>, String> {
         let vtable = table as i64 - self.i32(table)? as i64;
         if vtable < 0 {
             return Err(format!("vtable offset of the table at {table} is negative"));
@@ -94,12 +98,12 @@ impl<'a> Flat<'a> {
     }
 
     /// Follow the `u32` offset stored at `at` (strings, vectors, tables).
-    fn deref(&self, at: usize) -> std::result::Result<usize, String> {
+    pub(super) fn deref(&self, at: usize) -> std::result::Result<usize, String> {
         Ok(at + self.u32(at)? as usize)
     }
 
     /// A byte vector/string starting at `at` (u32 length, then the bytes).
-    fn vector(&self, at: usize, stride: usize) -> std::result::Result<&'a [u8], String> {
+    pub(super) fn vector(&self, at: usize, stride: usize) -> std::result::Result<&'a [u8], String> {
         let n = self.u32(at)? as usize;
         let start = at + 4;
         n.checked_mul(stride)
@@ -148,10 +152,10 @@ fn parse_header(buf: &[u8]) -> std::result::Result<Header, String> {
 
 /// One stream declared in the XML info node.
 #[derive(Debug, Default, PartialEq)]
-struct StreamInfo {
-    id: i32,
-    type_id: String,
-    size: Option<(u32, u32)>,
+pub(super) struct StreamInfo {
+    pub id: i32,
+    pub type_id: String,
+    pub size: Option<(u32, u32)>,
 }
 
 /// Streams of the `infoNode` XML: each `<node name="N" path=".../outInfo/N/">` block with
@@ -202,7 +206,7 @@ fn parse_streams(xml: &str) -> Vec<StreamInfo> {
 }
 
 /// Decompress one packet body as the header's compression says.
-fn decompress(compression: i32, body: &[u8]) -> std::result::Result<Vec<u8>, String> {
+pub(super) fn decompress(compression: i32, body: &[u8]) -> std::result::Result<Vec<u8>, String> {
     let mut out = Vec::new();
     let result = match compression {
         0 => return Ok(body.to_vec()),
@@ -274,9 +278,17 @@ fn decode_events(buf: &[u8]) -> std::result::Result<Option<Packet>, String> {
     Ok(Some(p))
 }
 
-/// Read the polarity events of an AEDAT4 file.
-pub fn read_aedat4(path: impl AsRef<Path>, opts: &ReadOptions) -> Result<EventStream> {
-    let path = path.as_ref();
+/// An opened AEDAT4 file: its bytes, header, declared streams and packet table.
+pub(super) struct Container {
+    pub data: Vec<u8>,
+    pub compression: i32,
+    pub streams: Vec<StreamInfo>,
+    /// Per packet: (index, stream id, byte offset of its header, body range).
+    pub packets: Vec<(usize, i32, usize, std::ops::Range<usize>)>,
+}
+
+/// Read `path` and check its magic, header and packet table.
+pub(super) fn open(path: &Path) -> Result<Container> {
     let data = std::fs::read(path).at(path)?;
     let bad = |msg: String| Error::invalid(path, msg);
     if data.is_empty() {
@@ -303,15 +315,8 @@ pub fn read_aedat4(path: impl AsRef<Path>, opts: &ReadOptions) -> Result<EventSt
         })?;
     let header = parse_header(header_bytes).map_err(|m| bad(format!("IOHeader: {m}")))?;
     pos += header_bytes.len();
-
     let streams = parse_streams(&header.info);
-    let event_stream = streams
-        .iter()
-        .filter(|s| s.type_id == "EVTS")
-        .min_by_key(|s| s.id);
-    let (width, height) = resolve_sensor(path, event_stream.and_then(|s| s.size), opts)?;
 
-    // Packet table: (index, stream id, body range).
     let end = if header.data_table >= 0 {
         usize::try_from(header.data_table)
             .ok()
@@ -352,12 +357,32 @@ pub fn read_aedat4(path: impl AsRef<Path>, opts: &ReadOptions) -> Result<EventSt
         packets.push((packets.len(), id, pos, pos + 8..body));
         pos = body;
     }
+    Ok(Container {
+        data,
+        compression: header.compression,
+        streams,
+        packets,
+    })
+}
+
+/// Read the polarity events of an AEDAT4 file.
+pub fn read_aedat4(path: impl AsRef<Path>, opts: &ReadOptions) -> Result<EventStream> {
+    let path = path.as_ref();
+    let bad = |msg: String| Error::invalid(path, msg);
+    let file = open(path)?;
+    let event_stream = file
+        .streams
+        .iter()
+        .filter(|s| s.type_id == "EVTS")
+        .min_by_key(|s| s.id);
+    let (width, height) = resolve_sensor(path, event_stream.and_then(|s| s.size), opts)?;
     let wanted = event_stream.map(|s| s.id);
-    let decoded: Vec<Result<Option<Packet>>> = packets
+    let decoded: Vec<Result<Option<Packet>>> = file
+        .packets
         .par_iter()
         .filter(|(_, id, _, _)| wanted.is_none_or(|w| w == *id))
         .map(|(k, _, at, range)| {
-            decompress(header.compression, &data[range.clone()])
+            decompress(file.compression, &file.data[range.clone()])
                 .and_then(|buf| decode_events(&buf))
                 .map_err(|m| bad(format!("packet {k} at byte {at}: {m}")))
         })

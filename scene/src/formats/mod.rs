@@ -5,7 +5,9 @@
 //! | `.txt` | ECD / rpg text, one event `t x y p` per line (t in s, p ∈ {0,1}) | [`text`] |
 //! | `.npz` | NumPy archive with arrays `x`, `y`, `t` (µs), `p` (HS-ERGB layout) | [`npz`] |
 //! | `.evs` | this project's columnar binary, memory-mappable | [`evs`] |
-//! | `.aedat4` | iniVation AEDAT 4.0 (DV software, DAVIS/DVXplorer cameras) | [`aedat4`] |
+//! | `.aedat4` | iniVation AEDAT 4.0 (DV software, DAVIS/DVXplorer cameras); APS frames: [`aedat4_frames`] | [`aedat4`] |
+//! | `.raw` | Prophesee / Metavision EVT 2.0 or EVT 3.0 (encoding named in its header) | [`prophesee`] |
+//! | `.es` | Event Stream 2.x, DVS or ATIS type (sepia, loris, ATIS cameras) | [`event_stream`] |
 //!
 //! Every reader returns a stream that passed [`EventStream::validate`] (finite, sorted
 //! timestamps; pixels inside the sensor; polarity ±1) or an error naming the file and
@@ -13,16 +15,22 @@
 //! writer refuses invalid streams and writes atomically.
 
 pub mod aedat4;
+pub mod aedat4_frames;
+pub mod event_stream;
 pub mod evs;
 pub mod npz;
+pub mod prophesee;
 pub mod text;
 
 use crate::error::{Error, Result};
 use crate::events::EventStream;
 use std::path::Path;
 
+pub use aedat4_frames::{ApsFrame, read_aedat4_frames};
+pub use event_stream::{read_es, write_es};
 pub use evs::{EvsMap, read_evs, write_evs};
 pub use npz::{read_npz, write_npz};
+pub use prophesee::{RawEncoding, read_raw, write_raw};
 pub use text::{read_text, write_text};
 
 /// What a reader cannot learn from some files.
@@ -44,6 +52,10 @@ pub enum Format {
     Npz,
     Evs,
     Aedat4,
+    /// Prophesee `.raw` (EVT 2.0 / 3.0).
+    Raw,
+    /// Event Stream `.es`.
+    Es,
 }
 
 impl Format {
@@ -58,10 +70,12 @@ impl Format {
             "npz" => Ok(Format::Npz),
             "evs" => Ok(Format::Evs),
             "aedat4" => Ok(Format::Aedat4),
+            "raw" => Ok(Format::Raw),
+            "es" => Ok(Format::Es),
             _ => Err(Error::invalid(
                 path,
                 format!(
-                    "unknown event file extension {ext:?} (expected .txt, .npz, .evs or .aedat4)"
+                    "unknown event file extension {ext:?} (expected .txt, .npz, .evs, .aedat4, .raw or .es)"
                 ),
             )),
         }
@@ -73,6 +87,8 @@ impl Format {
             Format::Npz => "npz",
             Format::Evs => "evs",
             Format::Aedat4 => "aedat4",
+            Format::Raw => "raw",
+            Format::Es => "es",
         }
     }
 }
@@ -91,10 +107,13 @@ pub fn read_events(path: impl AsRef<Path>, opts: &ReadOptions) -> Result<EventSt
         Format::Npz => read_npz(path, opts),
         Format::Evs => read_evs(path, opts),
         Format::Aedat4 => aedat4::read_aedat4(path, opts),
+        Format::Raw => read_raw(path, opts),
+        Format::Es => read_es(path, opts),
     }
 }
 
-/// Write an event stream as `.evs` or `.txt`, chosen by extension.
+/// Write an event stream as `.evs`, `.txt`, `.npz`, `.raw` (EVT 3.0) or `.es` (DVS),
+/// chosen by extension.
 pub fn write_events(path: impl AsRef<Path>, ev: &EventStream) -> Result<()> {
     let path = path.as_ref();
     match Format::from_path(path)? {
@@ -102,6 +121,8 @@ pub fn write_events(path: impl AsRef<Path>, ev: &EventStream) -> Result<()> {
         Format::Text => write_text(path, ev),
         Format::Npz => write_npz(path, ev),
         Format::Aedat4 => Err(Error::invalid(path, "writing .aedat4 is not supported")),
+        Format::Raw => write_raw(path, ev, RawEncoding::Evt3),
+        Format::Es => write_es(path, ev),
     }
 }
 
@@ -118,8 +139,8 @@ pub struct ConvertSummary {
     pub t_last: f64,
 }
 
-/// Read any supported file and write it as `.evs`, `.txt` or `.npz` (by the output's
-/// extension). Backs `degs events convert IN OUT`.
+/// Read any supported file and write it as `.evs`, `.txt`, `.npz`, `.raw` or `.es` (by
+/// the output's extension). Backs `degs events convert IN OUT`.
 pub fn convert(
     input: impl AsRef<Path>,
     output: impl AsRef<Path>,

@@ -1,0 +1,219 @@
+//! The HS-ERGB layout (Tulyakov et al., TimeLens, CVPR 2021; the paper's real data): a
+//! static rig of an RGB camera and an event camera aligned to it.
+//!
+//! ```text
+//! SRC/images_corrected/NNNNNN.png   frames (or SRC/images/), sorted by name
+//! SRC/images_corrected/timestamp.txt one timestamp per frame, seconds
+//! SRC/events_aligned/NNNNNN.npz     events per frame interval (or SRC/events/), sorted
+//!                                   by name: x, y stored ×32, t in µs, p
+//! ```
+//!
+//! The camera does not move: every frame gets the identity pose. The intrinsics come
+//! from an ECD-style `calib.txt` (`--calib`), else a guess (fx = fy = width, centred)
+//! with a warning. The npz files are concatenated in name order (the result must be
+//! sorted); a file whose events fall outside its frame interval gets a warning (the
+//! clocks may disagree). Frames are ordinary camera PNGs: `frame_encoding: srgb`.
+
+use crate::ecd::read_calib;
+use crate::recording::{FrameImage, Recording, SourceFrame};
+use crate::table::{check_increasing, number, read_text, rows};
+use scene::atomic::{AtomicDir, write_bytes_atomic};
+use scene::error::{Error, IoContext, Result};
+use scene::events::EventStream;
+use scene::formats::{ReadOptions, read_npz, write_npz};
+use scene::manifest::FrameEncoding;
+use scene::{Intrinsics, Pose, Scene};
+use std::path::{Path, PathBuf};
+
+/// HS-ERGB stores event coordinates multiplied by this.
+pub const COORD_SCALE: f64 = 32.0;
+
+/// The first of `names` that is a directory under `src`.
+fn find_dir(src: &Path, names: &[&str]) -> Result<PathBuf> {
+    names
+        .iter()
+        .map(|n| src.join(n))
+        .find(|p| p.is_dir())
+        .ok_or_else(|| {
+            Error::invalid(
+                src,
+                format!("HS-ERGB layout: none of the folders {names:?} exists"),
+            )
+        })
+}
+
+/// Files in `dir` with extension `ext`, sorted by name.
+fn files(dir: &Path, ext: &str) -> Result<Vec<PathBuf>> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+        .at(dir)?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.extension()
+                .is_some_and(|e| e.to_string_lossy().eq_ignore_ascii_case(ext))
+        })
+        .collect();
+    v.sort();
+    Ok(v)
+}
+
+/// Read an HS-ERGB sequence folder.
+pub fn read_hsergb(src: &Path, calib: Option<&Path>) -> Result<Recording> {
+    let img_dir = find_dir(src, &["images_corrected", "images"])?;
+    let ev_dir = find_dir(src, &["events_aligned", "events"])?;
+    let images = files(&img_dir, "png")?;
+    let ts_path = img_dir.join("timestamp.txt");
+    let text = read_text(&ts_path)?;
+    let rows = rows(&ts_path, &text, 1, 1)?;
+    let times = rows
+        .iter()
+        .map(|r| number(&ts_path, r, 0, "timestamp"))
+        .collect::<Result<Vec<f64>>>()?;
+    check_increasing(&ts_path, &rows, &times)?;
+    if times.len() != images.len() || images.is_empty() {
+        return Err(Error::invalid(
+            &ts_path,
+            format!(
+                "{} timestamps for {} PNG frames in {} (need one per frame, at least one)",
+                times.len(),
+                images.len(),
+                img_dir.display()
+            ),
+        ));
+    }
+    let (w, h) = image::image_dimensions(&images[0])
+        .map_err(|e| Error::invalid(&images[0], format!("cannot read image header: {e}")))?;
+    let opts = ReadOptions {
+        sensor: Some((w, h)),
+        coord_scale: Some(COORD_SCALE),
+    };
+    let mut events = EventStream::new(w, h);
+    let mut warnings = Vec::new();
+    let npz = files(&ev_dir, "npz")?;
+    if npz.is_empty() {
+        return Err(Error::invalid(&ev_dir, "no .npz event files"));
+    }
+    let mut outside = 0;
+    for (k, p) in npz.iter().enumerate() {
+        let part = read_npz(p, &opts)?;
+        if let (Some(&a), Some(&b)) = (part.t.first(), part.t.last()) {
+            if events.t.last().is_some_and(|&l| a < l) {
+                return Err(Error::invalid(
+                    p,
+                    format!("events start at {a} s, before the previous file's last event"),
+                ));
+            }
+            // File k should hold the events between frames k and k+1.
+            let lo = times.get(k).copied().unwrap_or(f64::NEG_INFINITY);
+            let hi = times.get(k + 1).copied().unwrap_or(f64::INFINITY);
+            if a < lo - (hi - lo) || b > hi + (hi - lo) {
+                outside += 1;
+            }
+        }
+        events.t.extend_from_slice(&part.t);
+        events.x.extend_from_slice(&part.x);
+        events.y.extend_from_slice(&part.y);
+        events.p.extend_from_slice(&part.p);
+    }
+    if outside > 0 {
+        warnings.push(format!(
+            "{outside} of {} event files lie outside their frame interval: are timestamp.txt (s) and the npz t (µs) on one clock?",
+            npz.len()
+        ));
+    }
+    let camera = match calib {
+        Some(c) => read_calib(c, w, h)?,
+        None => {
+            warnings.push(format!(
+                "no calibration: assumed fx = fy = {w} px, centre at the image centre (pass --calib calib.txt)"
+            ));
+            Intrinsics {
+                width: w,
+                height: h,
+                fx: w as f64,
+                fy: w as f64,
+                cx: (w as f64 - 1.0) * 0.5,
+                cy: (h as f64 - 1.0) * 0.5,
+                distortion: None,
+            }
+        }
+    };
+    let frames = images
+        .into_iter()
+        .zip(&times)
+        .map(|(p, &t)| SourceFrame {
+            image: FrameImage::File(p),
+            timestamp: t,
+            pose: Pose::default(),
+        })
+        .collect();
+    Ok(Recording {
+        layout: "hsergb",
+        camera,
+        frames,
+        events,
+        frame_encoding: FrameEncoding::Srgb,
+        warnings,
+        held_out: None,
+    })
+}
+
+/// Write `scene` (train and test frames in time order, its events) in the HS-ERGB
+/// layout at `out`, with its camera as `calib.txt` beside the folders: the events before
+/// frame 1 go to file 0, those in [t_k, t_k+1) to file k, the rest to the last file.
+/// Poses are not written (the layout has none). For tests.
+pub fn export_hsergb(scene: &Scene, out: &Path) -> Result<()> {
+    let cam = &scene.train.camera;
+    if cam.width * 32 > 65536 || cam.height * 32 > 65536 {
+        return Err(Error::Other(format!(
+            "HS-ERGB export: {}x{} ×32 does not fit the npz's 16-bit coordinates",
+            cam.width, cam.height
+        )));
+    }
+    let dir = AtomicDir::new(out)?;
+    let root = dir.path();
+    let mut frames: Vec<_> = scene
+        .train
+        .frames
+        .iter()
+        .chain(&scene.test.frames)
+        .collect();
+    frames.sort_by(|a, b| a.timestamp.total_cmp(&b.timestamp));
+    let mut ts = String::new();
+    for (k, f) in frames.iter().enumerate() {
+        let src = scene.image_path(f);
+        let bytes = std::fs::read(&src).at(&src)?;
+        write_bytes_atomic(&root.join(format!("images_corrected/{k:06}.png")), &bytes)?;
+        ts.push_str(&format!("{}\n", f.timestamp));
+    }
+    write_bytes_atomic(&root.join("images_corrected/timestamp.txt"), ts.as_bytes())?;
+    let ev = scene.load_events()?;
+    let n = frames.len();
+    for k in 0..n.saturating_sub(1).max(1) {
+        let lo = if k == 0 {
+            f64::NEG_INFINITY
+        } else {
+            frames[k].timestamp
+        };
+        let hi = if k + 2 >= n {
+            f64::INFINITY
+        } else {
+            frames[k + 1].timestamp
+        };
+        let r = ev.window_range(lo, hi);
+        let s = 32u32;
+        let mut part = EventStream::new(ev.width * s, ev.height * s);
+        for i in r {
+            part.push(ev.t[i], ev.x[i] * s as u16, ev.y[i] * s as u16, ev.p[i]);
+        }
+        write_npz(root.join(format!("events_aligned/{k:06}.npz")), &part)?;
+    }
+    let k = &scene.train.camera;
+    let d = k.distortion.unwrap_or_default();
+    let calib = format!(
+        "{} {} {} {} {} {} {} {} {}\n",
+        k.fx, k.fy, k.cx, k.cy, d.k1, d.k2, d.p1, d.p2, d.k3
+    );
+    write_bytes_atomic(&root.join("calib.txt"), calib.as_bytes())?;
+    dir.commit()?;
+    Ok(())
+}

@@ -1,0 +1,66 @@
+//! `import` — converters from the layouts public event datasets use to degs scene
+//! directories (docs/DESIGN.md §3, "Importing recordings"); backs `degs import`.
+//!
+//! Each layout module reads its source into a [`Recording`] (camera, frames with
+//! camera-to-world poses in the manifest's OpenGL axes, events, warnings about what it
+//! assumed); [`write_scene`] chooses the train and test frames and writes the scene.
+//! The pose conventions and their conversion are in [`convention`]. Each layout module
+//! also has an exporter (scene → layout), used by the round-trip tests.
+
+pub mod aedat4;
+pub mod blender;
+pub mod convention;
+pub mod ecd;
+pub mod hsergb;
+pub mod recording;
+mod table;
+
+pub use recording::{
+    FrameImage, ImportOptions, ImportSummary, Recording, SourceFrame, Split, split_by,
+    split_frames, write_scene,
+};
+
+use scene::error::Result;
+use std::path::Path;
+
+/// The source layouts `degs import` understands.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Layout {
+    /// Event Camera Dataset: calib.txt, images.txt + images/, events.txt, groundtruth.txt.
+    Ecd,
+    /// One AEDAT 4.0 file (DAVIS): events and APS frames, no poses.
+    Aedat4,
+    /// HS-ERGB sequence: images_corrected/ + timestamp.txt, events_aligned/*.npz (×32).
+    Hsergb,
+    /// D-NeRF / Blender transforms_*.json with an event file beside them.
+    Blender,
+}
+
+impl Layout {
+    pub fn name(&self) -> &'static str {
+        match self {
+            Layout::Ecd => "ecd",
+            Layout::Aedat4 => "aedat4",
+            Layout::Hsergb => "hsergb",
+            Layout::Blender => "blender",
+        }
+    }
+}
+
+/// Read `src` in `layout` and write the scene directory `out`.
+pub fn import(
+    layout: Layout,
+    src: &Path,
+    opts: &ImportOptions,
+    out: &Path,
+) -> Result<ImportSummary> {
+    let rec = match layout {
+        Layout::Ecd => ecd::read_ecd(src)?,
+        Layout::Hsergb => hsergb::read_hsergb(src, opts.calib.as_deref())?,
+        Layout::Blender => blender::read_blender(src, &opts.blender)?,
+        Layout::Aedat4 => {
+            aedat4::read_aedat4_recording(src, opts.calib.as_deref(), opts.static_camera)?
+        }
+    };
+    write_scene(&rec, opts, out)
+}

@@ -1,0 +1,132 @@
+//! `degs import hsergb`: a synthetic scene seen by a static camera, exported to the
+//! HS-ERGB layout (events ×32 in one npz per frame interval) and imported back.
+
+mod common;
+use common::*;
+use import::hsergb::export_hsergb;
+use import::{ImportOptions, Layout, import};
+use scene::Scene;
+use scene::image_io::read_image;
+
+#[test]
+fn static_synthetic_scene_round_trips_through_the_hsergb_layout() {
+    let dir = tempfile::tempdir().unwrap();
+    let (orig, _) = write_scene(dir.path(), "synth", &tiny_static_config());
+    let first = orig.train.frames[0].cam_to_world;
+    assert!(
+        orig.test
+            .frames
+            .iter()
+            .all(|f| pose_diff(&f.cam_to_world, &first) == 0.0)
+    );
+    let src = dir.path().join("hsergb");
+    export_hsergb(&orig, &src).unwrap();
+    // 9 frames → 8 interval files.
+    assert_eq!(
+        std::fs::read_dir(src.join("events_aligned"))
+            .unwrap()
+            .count(),
+        8
+    );
+
+    let out = dir.path().join("back");
+    let opts = ImportOptions {
+        test_every: Some(2),
+        calib: Some(src.join("calib.txt")),
+        ..Default::default()
+    };
+    let s = import(Layout::Hsergb, &src, &opts, &out).unwrap();
+    assert_eq!((s.frames, s.train_frames, s.test_frames), (9, 5, 4));
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    let back = Scene::open(&out).unwrap();
+    assert_eq!(back.train.camera, orig.train.camera);
+    // Same frames and times; the static camera becomes the identity pose (the layout
+    // has no world frame), so every pose equals the first one as in the original.
+    for (a, b) in [(&orig.train, &back.train), (&orig.test, &back.test)] {
+        assert_eq!(a.frames.len(), b.frames.len());
+        for (fa, fb) in a.frames.iter().zip(&b.frames) {
+            assert_eq!(fa.timestamp, fb.timestamp);
+            assert_eq!(fa.time, fb.time);
+            assert_eq!(fb.cam_to_world, scene::Pose::default());
+            let (ia, ib) = (
+                read_image(orig.image_path(fa)).unwrap(),
+                read_image(back.image_path(fb)).unwrap(),
+            );
+            assert_eq!(ia, ib);
+        }
+    }
+    // Events: the same pixels and polarities; times rounded to the npz's whole µs.
+    let (ea, eb) = (orig.load_events().unwrap(), back.load_events().unwrap());
+    assert!(ea.len() > 100);
+    assert_eq!((&ea.x, &ea.y, &ea.p), (&eb.x, &eb.y, &eb.p));
+    let worst =
+        ea.t.iter()
+            .zip(&eb.t)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+    assert!(worst <= 0.5e-6 + 1e-12, "{worst}");
+    // Without --calib the intrinsics are guessed, and the summary says so.
+    let s = import(
+        Layout::Hsergb,
+        &src,
+        &ImportOptions::default(),
+        &dir.path().join("guess"),
+    )
+    .unwrap();
+    assert!(s.warnings.iter().any(|w| w.contains("--calib")));
+}
+
+#[test]
+fn bad_hsergb_folders_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let (orig, _) = write_scene(dir.path(), "synth", &tiny_static_config());
+    let src = dir.path().join("hsergb");
+    export_hsergb(&orig, &src).unwrap();
+    let ts = src.join("images_corrected/timestamp.txt");
+    let good = std::fs::read_to_string(&ts).unwrap();
+    std::fs::write(&ts, "0\n0.1\n").unwrap();
+    let e = import(
+        Layout::Hsergb,
+        &src,
+        &ImportOptions::default(),
+        &dir.path().join("x"),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("timestamp.txt") && e.contains("2 timestamps for 9 PNG frames"),
+        "{e}"
+    );
+    std::fs::write(&ts, good).unwrap();
+    // Event files out of order: the later file's events come first.
+    let (a, b) = (
+        src.join("events_aligned/000000.npz"),
+        src.join("events_aligned/000005.npz"),
+    );
+    let tmp = src.join("tmp.bin");
+    std::fs::rename(&a, &tmp).unwrap();
+    std::fs::rename(&b, &a).unwrap();
+    std::fs::rename(&tmp, &b).unwrap();
+    let e = import(
+        Layout::Hsergb,
+        &src,
+        &ImportOptions::default(),
+        &dir.path().join("x"),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains(".npz") && e.contains("before the previous file's last event"),
+        "{e}"
+    );
+    std::fs::remove_dir_all(src.join("events_aligned")).unwrap();
+    let e = import(
+        Layout::Hsergb,
+        &src,
+        &ImportOptions::default(),
+        &dir.path().join("x"),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("events_aligned"), "{e}");
+}
