@@ -48,6 +48,19 @@ pub fn load(dir: &Path) -> Result<Mlp<f32>> {
     let data = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
     let st = SafeTensors::deserialize(&data)
         .map_err(|e| Error::invalid(&path, format!("not a safetensors file: {e}")))?;
+    // The settings size the network: 4 bytes per parameter must be in the weights file
+    // before they are allocated (64 layers of 8192 would be 17 GB).
+    let params = Mlp::<f32>::param_count(&settings);
+    if params.saturating_mul(4) > data.len() {
+        return Err(Error::invalid(
+            &spath,
+            format!(
+                "settings describe {params} parameters but {} holds {} bytes",
+                WEIGHTS_FILE,
+                data.len()
+            ),
+        ));
+    }
     let mut mlp = Mlp::<f32>::new(settings, 0);
     let layers = mlp.layers.clone();
     for (i, l) in layers.iter().enumerate() {

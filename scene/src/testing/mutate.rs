@@ -208,10 +208,15 @@ impl Report {
                 .iter()
                 .take(8)
                 .map(|f| {
-                    format!(
-                        "  {:?} (fixed up: {}): {:?}",
-                        f.mutation, f.fixed_up, f.problem
-                    )
+                    let mut m = format!("{:?}", f.mutation);
+                    if m.len() > 160 {
+                        let cut = (0..=160)
+                            .rev()
+                            .find(|&i| m.is_char_boundary(i))
+                            .unwrap_or(0);
+                        m = format!("{}… ({} characters)", &m[..cut], m.len());
+                    }
+                    format!("  {m} (fixed up: {}): {:?}", f.fixed_up, f.problem)
                 })
                 .collect();
             panic!("{self}\n{}", list.join("\n"));
@@ -424,8 +429,7 @@ pub fn fuzz<T, E: Display>(
     let digits = digit_runs(original);
     let mut rng = Rng(plan.seed ^ 0x6D75_7461_7465);
     let clock = std::time::Instant::now();
-    let hook = std::panic::take_hook();
-    std::panic::set_hook(Box::new(|_| {}));
+    quiet_panics(true);
     for k in 0..plan.mutations {
         let mutation = draw(&mut rng, original, plan, &digits);
         let mut bytes = mutation.apply(original);
@@ -465,10 +469,29 @@ pub fn fuzz<T, E: Display>(
             });
         }
     }
-    std::panic::set_hook(hook);
+    quiet_panics(false);
     write(original);
     report.seconds = clock.elapsed().as_secs_f64();
     report
+}
+
+thread_local! {
+    static QUIET: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Silence the panic messages of this thread (the harness expects and reports them);
+/// other threads' panics are printed as usual.
+fn quiet_panics(on: bool) {
+    static HOOK: std::sync::Once = std::sync::Once::new();
+    HOOK.call_once(|| {
+        let previous = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if !QUIET.with(|q| q.get()) {
+                previous(info);
+            }
+        }));
+    });
+    QUIET.with(|q| q.set(on));
 }
 
 fn panic_text(payload: &(dyn std::any::Any + Send)) -> String {
