@@ -132,3 +132,17 @@ fn field_settings_larger_than_the_weights_are_refused_before_allocating() {
     );
     assert!(peak < 4 << 20, "{peak} bytes");
 }
+
+/// Regression (found by the harness): `"width": 0` in `field.json` made building the
+/// field panic (a uniform range of ±1/√0); now it is refused naming the file.
+#[test]
+fn field_of_width_zero_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    save_model(dir.path());
+    let path = dir.path().join("field.json");
+    let text = fs::read_to_string(&path).unwrap();
+    fs::write(&path, text.replace("\"width\": 8", "\"width\": 0")).unwrap();
+    let msg = Model::load(dir.path()).unwrap_err().to_string();
+    assert!(msg.contains(&path.display().to_string()), "{msg}");
+    assert!(msg.contains("field settings out of range"), "{msg}");
+}

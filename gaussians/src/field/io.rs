@@ -38,6 +38,7 @@ pub fn load(dir: &Path) -> Result<Mlp<f32>> {
     let settings: FieldSettings =
         serde_json::from_str(&text).map_err(|e| Error::invalid(&spath, e.to_string()))?;
     if settings.depth > 64
+        || settings.width == 0
         || settings.width > 8192
         || settings.pos_freqs > 32
         || settings.time_freqs > 32
@@ -76,10 +77,12 @@ pub fn load(dir: &Path) -> Result<Mlp<f32>> {
                 .tensor(&name)
                 .map_err(|_| Error::invalid(&path, format!("missing tensor {name}")))?;
             if t.dtype() != Dtype::F32 || t.shape() != shape.as_slice() {
+                // The expected shape comes from the settings: name both files.
                 return Err(Error::invalid(
                     &path,
                     format!(
-                        "tensor {name}: expected f32 {shape:?}, found {:?} {:?}",
+                        "tensor {name}: expected f32 {shape:?} (from {}), found {:?} {:?}",
+                        spath.display(),
                         t.dtype(),
                         t.shape()
                     ),

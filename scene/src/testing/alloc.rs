@@ -14,6 +14,7 @@
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Mutex, MutexGuard};
 
 static LIVE: AtomicUsize = AtomicUsize::new(0);
 static PEAK: AtomicUsize = AtomicUsize::new(0);
@@ -78,9 +79,24 @@ pub fn installed() -> bool {
     INSTALLED.load(Ordering::Relaxed)
 }
 
+/// Measurements are serialised: the counters are process-wide.
+static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
+
+/// Hold while measuring (the mutation harness holds it for a whole run).
+pub fn exclusive() -> MutexGuard<'static, ()> {
+    ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 /// Run `f` and return its result with the peak of live bytes above the level at the
-/// start (0 when the tracking allocator is not installed).
+/// start (0 when the tracking allocator is not installed). Waits for any other
+/// measurement of this process to end.
 pub fn peak_during<R>(f: impl FnOnce() -> R) -> (R, usize) {
+    let _guard = exclusive();
+    peak_while_exclusive(f)
+}
+
+/// [`peak_during`] for a caller that holds [`exclusive`].
+pub(crate) fn peak_while_exclusive<R>(f: impl FnOnce() -> R) -> (R, usize) {
     let base = LIVE.load(Ordering::Relaxed);
     PEAK.store(base, Ordering::Relaxed);
     let r = f();

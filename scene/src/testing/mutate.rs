@@ -20,7 +20,6 @@
 use super::alloc;
 use std::fmt::{self, Display};
 use std::path::Path;
-use std::sync::Mutex;
 
 /// One way of damaging a file; [`Mutation::apply`] reproduces it.
 #[derive(Clone, Debug, PartialEq)]
@@ -374,9 +373,6 @@ fn draw(rng: &mut Rng, original: &[u8], plan: &Plan, digits: &[(usize, usize)]) 
     }
 }
 
-/// Harness runs are serialised: the allocation counters are process-wide.
-static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
-
 /// Fuzz a reader with [`Plan::new`]`(seed)`: `file` is where the damaged copies are
 /// written (the reader may read the directory around it), `original` the valid bytes
 /// (written back at the end), `read` the reader under test.
@@ -398,7 +394,8 @@ pub fn fuzz<T, E: Display>(
     plan: &Plan,
     read: impl Fn(&Path) -> Result<T, E>,
 ) -> Report {
-    let _guard = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    // Harness runs and measurements are serialised: the counters are process-wide.
+    let _guard = alloc::exclusive();
     assert!(
         alloc::installed(),
         "declare `#[global_allocator] static A: scene::testing::TrackingAlloc = \
@@ -442,7 +439,7 @@ pub fn fuzz<T, E: Display>(
         };
         write(&bytes);
         let bound = plan.alloc_bound(bytes.len().max(original.len()));
-        let (outcome, peak) = alloc::peak_during(|| {
+        let (outcome, peak) = alloc::peak_while_exclusive(|| {
             std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
                 read(file).map(drop).map_err(|e| format!("{e:#}"))
             }))

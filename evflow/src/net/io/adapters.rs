@@ -114,6 +114,14 @@ pub fn load_adapters(net: &mut FlowNet, path: &Path) -> Result<()> {
         ));
     }
     let tensors = read_safetensors(path)?;
+    // The expected shapes hold the sidecar's rank: a mismatch names both files.
+    let with_rank = |e: Error| match e {
+        Error::Invalid { path, msg } => Error::Invalid {
+            path,
+            msg: format!("{msg} (rank {} from {})", meta.rank, side.display()),
+        },
+        other => other,
+    };
     for c in &mut net.convs {
         let [out, inp, kh, kw] = c.shape();
         let fan = inp * kh * kw;
@@ -122,13 +130,15 @@ pub fn load_adapters(net: &mut FlowNet, path: &Path) -> Result<()> {
             path,
             &format!("{}.lora_a", c.name),
             &[meta.rank, fan],
-        )?;
+        )
+        .map_err(with_rank)?;
         let b = take(
             &tensors,
             path,
             &format!("{}.lora_b", c.name),
             &[out, meta.rank],
-        )?;
+        )
+        .map_err(with_rank)?;
         let (dev, dt) = (&net.device, net.dtype);
         c.lora = Some(Lora {
             a: Tensor::<2>::from_data(
