@@ -4,7 +4,8 @@
 //!
 //! The scene is the tiny synthetic one of `degs_run.rs`, smaller still. A reference run
 //! goes through uninterrupted in its own cache; then, in a second cache, runs are killed
-//! after seeded fractions of the reference's wall time, in turn: the whole process
+//! seeded fractions of the reference's wall time after their first stage started, in
+//! turn: the whole process
 //! group (the runner and its stage at once, as a lost machine would), only the running
 //! stage process (the runner records the failure), only the runner (its stage dies with
 //! it). After each kill every sealed entry must verify; the last run goes to the end.
@@ -107,13 +108,21 @@ fn sigkill(target: &str) {
     let _ = status;
 }
 
-/// Process ids of the children of `pid` (the stage the runner is running).
+/// Process ids of the children of `pid` (the stage the runner is running), over all
+/// its threads (a stage is the child of the thread that started it).
 fn children(pid: u32) -> Vec<String> {
-    let path = format!("/proc/{pid}/task/{pid}/children");
-    std::fs::read_to_string(path)
-        .unwrap_or_default()
-        .split_whitespace()
-        .map(str::to_string)
+    let tasks = std::fs::read_dir(format!("/proc/{pid}/task"))
+        .into_iter()
+        .flatten();
+    tasks
+        .flatten()
+        .flat_map(|t| {
+            std::fs::read_to_string(t.path().join("children"))
+                .unwrap_or_default()
+                .split_whitespace()
+                .map(str::to_string)
+                .collect::<Vec<_>>()
+        })
         .collect()
 }
 
@@ -143,8 +152,9 @@ fn assert_consistent(w: &Workspace, when: &str) {
     }
 }
 
-/// Seeded fractions in [0.1, 0.4) (SplitMix64): each killed run gets this share of
-/// the reference's wall time, so five kills land before the work is done.
+/// Seeded fractions in [0, 0.3) (SplitMix64): each killed run gets this share of the
+/// reference's wall time after its first stage started, so kills land before the work
+/// is done.
 fn fractions(seed: u64, n: usize) -> Vec<f64> {
     let mut s = seed;
     (0..n)
@@ -154,7 +164,7 @@ fn fractions(seed: u64, n: usize) -> Vec<f64> {
             z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
             z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
             z ^= z >> 31;
-            0.1 + 0.3 * (z >> 11) as f64 / (1u64 << 53) as f64
+            0.3 * (z >> 11) as f64 / (1u64 << 53) as f64
         })
         .collect()
 }
@@ -176,6 +186,11 @@ fn runs_killed_at_seeded_points_resume_to_the_uninterrupted_result() {
     let mut kills = 0;
     for (i, f) in fractions(18, 5).into_iter().enumerate() {
         let mut child = spawn_run(&w, &exp);
+        // From the start of its first stage (hashing binaries and cache checks come
+        // before), so the kill lands while work is left.
+        while children(child.id()).is_empty() && child.try_wait().unwrap().is_none() {
+            std::thread::sleep(Duration::from_millis(2));
+        }
         let deadline = Instant::now() + full.mul_f64(f);
         while Instant::now() < deadline && child.try_wait().unwrap().is_none() {
             std::thread::sleep(Duration::from_millis(10));
