@@ -36,7 +36,7 @@ fn frames() -> Vec<FrameBindings> {
 }
 
 /// Recompute the trailing BLAKE3 checksum over everything before it.
-fn rehash(b: &mut Vec<u8>) {
+fn rehash(b: &mut [u8]) {
     if b.len() >= 32 {
         let n = b.len() - 32;
         let h = blake3::hash(&b[..n]);

@@ -32,7 +32,7 @@ fn evs_reader() {
     let bytes = fs::read(&path).unwrap();
     // The header's hash covers the columns: recompute it so damage reaches the checks
     // behind it.
-    let rehash = |b: &mut Vec<u8>| {
+    let rehash = |b: &mut [u8]| {
         if b.len() >= 64 {
             let h = blake3::hash(&b[64..]);
             b[32..64].copy_from_slice(h.as_bytes());

@@ -106,6 +106,9 @@ impl Mutation {
     }
 }
 
+/// Recomputes a format's checksum in a damaged copy.
+pub type Fixup = dyn Fn(&mut [u8]);
+
 /// How to fuzz one file.
 pub struct Plan<'a> {
     /// Damaged copies to try.
@@ -115,7 +118,7 @@ pub struct Plan<'a> {
     /// (width 4 or 8): the hostile-word mutations aim at them half of the time.
     pub length_fields: Vec<(usize, usize)>,
     /// Recomputes a checksum after the damage; applied to every other copy.
-    pub fixup: Option<&'a dyn Fn(&mut Vec<u8>)>,
+    pub fixup: Option<&'a Fixup>,
     /// A reader may allocate at most `alloc_per_byte × file size + alloc_slack` bytes.
     pub alloc_per_byte: usize,
     pub alloc_slack: usize,
