@@ -133,8 +133,22 @@ impl<'a> Cursor<'a> {
     }
 }
 
-/// Reads an `assoc.bin`, checking magic, version, checksum, counts and weights.
+/// Reads an `assoc.bin`, checking magic, version, checksum, counts and weights. Its
+/// in-memory form holds 4 bytes per Gaussian per frame however few are bound, so without
+/// the model at hand the Gaussians of all frames together are limited to
+/// [`MAX_GAUSSIANS`] (128 MiB); [`read_assoc_for`] takes the model's counts instead.
 pub fn read_assoc(path: &Path) -> Result<Vec<FrameBindings>> {
+    read_checked(path, None)
+}
+
+/// [`read_assoc`] for a model of `gaussians` Gaussians and `frames` train frames: a file
+/// for another model is refused before anything is allocated for it, so a damaged
+/// header cannot make the reader allocate more than the bindings of this model take.
+pub fn read_assoc_for(path: &Path, frames: usize, gaussians: usize) -> Result<Vec<FrameBindings>> {
+    read_checked(path, Some((frames, gaussians)))
+}
+
+fn read_checked(path: &Path, expect: Option<(usize, usize)>) -> Result<Vec<FrameBindings>> {
     let bytes = std::fs::read(path).at(path)?;
     if bytes.len() < 8 + 8 + 32 || &bytes[..8] != MAGIC {
         return Err(Error::invalid(
@@ -162,6 +176,16 @@ pub fn read_assoc(path: &Path) -> Result<Vec<FrameBindings>> {
         ));
     }
     let n_frames = c.u32("frame count")?;
+    if let Some((want, _)) = expect
+        && n_frames as usize != want
+    {
+        return Err(Error::invalid(
+            path,
+            format!("{n_frames} frames of bindings for {want} train frames"),
+        ));
+    }
+    // Offsets allocated so far over all frames (bounded when no model is given).
+    let mut offsets_total = 0usize;
     let mut frames = Vec::new();
     for fi in 0..n_frames {
         let t0 = c.f64("t0")?;
@@ -179,6 +203,27 @@ pub fn read_assoc(path: &Path) -> Result<Vec<FrameBindings>> {
             return Err(Error::invalid(
                 path,
                 format!("frame {fi}: k = {k}, {bound} bound of {gaussians} Gaussians"),
+            ));
+        }
+        if let Some((_, want)) = expect
+            && gaussians != want
+        {
+            return Err(Error::invalid(
+                path,
+                format!(
+                    "frame {fi}: bindings for {gaussians} Gaussians but the model has {want}: \
+                     from another warm-up?"
+                ),
+            ));
+        }
+        offsets_total += gaussians + 1;
+        if expect.is_none() && offsets_total > MAX_GAUSSIANS + n_frames as usize {
+            return Err(Error::invalid(
+                path,
+                format!(
+                    "frame {fi}: more than {MAX_GAUSSIANS} Gaussians over all frames \
+                     (read it with the model's counts: read_assoc_for)"
+                ),
             ));
         }
         let record = 8 + 12 * k as usize;

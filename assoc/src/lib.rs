@@ -12,7 +12,7 @@ pub mod stage;
 pub mod unproject;
 
 pub use bind::{Bindings, bind_nearest, footprint_radii};
-pub use file::{FrameBindings, read_assoc, write_assoc};
+pub use file::{FrameBindings, read_assoc, read_assoc_for, write_assoc};
 pub use frame::{FrameError, FrameStats, associate_frame};
 pub use unproject::{LiftedEvents, lift_events};
 

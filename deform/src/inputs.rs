@@ -139,27 +139,8 @@ impl Inputs {
             std::fs::read_to_string(&settings_file).map_err(|e| Error::io(&settings_file, e))?;
         let warmup: TrainSettings = scene::cli::settings::parse(&text, &settings_file)?;
         let assoc_file = assoc_dir.join("assoc.bin");
-        let frames = assoc::read_assoc(&assoc_file)?;
-        if frames.len() != views.len() {
-            return Err(Error::invalid(
-                &assoc_file,
-                format!(
-                    "{} frames of bindings for {} train frames",
-                    frames.len(),
-                    views.len()
-                ),
-            ));
-        }
-        let n = model.splats.len();
-        if let Some(f) = frames.iter().find(|f| f.bindings.gaussians() != n) {
-            return Err(Error::invalid(
-                &assoc_file,
-                format!(
-                    "bindings for {} Gaussians but the model has {n}: from another warm-up?",
-                    f.bindings.gaussians()
-                ),
-            ));
-        }
+        // Counts checked against the model before the reader allocates for them.
+        let frames = assoc::read_assoc_for(&assoc_file, views.len(), model.splats.len())?;
         let assoc_delta_t = frames.first().map_or(s.assoc.delta_t, |f| f.delta_t);
         Ok(Inputs {
             scene,

@@ -132,6 +132,15 @@ pub fn remove_stale_temps(dir: &Path) -> Result<()> {
     Ok(())
 }
 
+/// Whether `pid` runs. A zombie (killed, its parent gone too, and not reaped: in a
+/// container whose init does not reap) is dead: its temp files are stale.
 fn process_alive(pid: u32) -> bool {
-    Path::new(&format!("/proc/{pid}")).exists()
+    let Ok(stat) = fs::read_to_string(format!("/proc/{pid}/stat")) else {
+        return Path::new(&format!("/proc/{pid}")).exists();
+    };
+    // `pid (comm) S …`: the state follows the last `)`.
+    let state = stat
+        .rfind(')')
+        .and_then(|i| stat[i + 1..].trim_start().chars().next());
+    !matches!(state, Some('Z' | 'X'))
 }

@@ -243,11 +243,51 @@ fn write_exr_channels(path: &Path, w: u32, h: u32, channels: &[(&str, &[f32])]) 
     })
 }
 
+/// Refuse an EXR whose headers declare more pixel data than its bytes can hold, before
+/// the decoder allocates for them: at most 1032 decoded bytes per file byte (deflate's
+/// largest ratio; the other codecs expand less) and one 8-byte offset per chunk.
+fn check_exr_sizes(path: &Path, bytes: &[u8]) -> Result<()> {
+    let meta = guarded(path, || {
+        x::MetaData::read_from_buffered(bytes, false)
+            .map_err(|e| Error::invalid(path, format!("cannot read EXR header: {e}")))
+    })?;
+    let limit = bytes.len().saturating_mul(1032);
+    for (i, h) in meta.headers.iter().enumerate() {
+        let (w, ht) = (h.layer_size.width(), h.layer_size.height());
+        // Bound the pixel count before anything multiplies it (no overflow below).
+        let pixels = w.checked_mul(ht).filter(|&p| p <= limit);
+        let sample_bytes = pixels.and_then(|p| {
+            h.channels.list.iter().try_fold(0usize, |acc, c| {
+                acc.checked_add(p.checked_mul(c.sample_type.bytes_per_sample())?)
+            })
+        });
+        let fits = !h.deep
+            && sample_bytes.is_some_and(|b| b <= limit)
+            && h.chunk_count
+                .checked_mul(8)
+                .is_some_and(|b| b <= bytes.len());
+        if !fits {
+            return Err(Error::invalid(
+                path,
+                format!(
+                    "EXR layer {i} declares {w}x{ht} pixels of {} channels in {} chunks, \
+                     more than its {} bytes can hold (corrupt)",
+                    h.channels.list.len(),
+                    h.chunk_count,
+                    bytes.len()
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Read the named channels (f32 or f16; converted to f32) of the first layer of an
 /// EXR; returns `(w, h, channel data in the order asked)`.
 fn read_exr_channels(path: &Path, names: &[&str]) -> Result<(u32, u32, Vec<Vec<f32>>)> {
     use x::{ReadChannels, ReadLayers};
     let bytes = std::fs::read(path).at(path)?;
+    check_exr_sizes(path, &bytes)?;
     let image = guarded(path, || {
         x::read()
             .no_deep_data()

@@ -20,6 +20,7 @@ pub mod metrics;
 pub mod optim;
 pub mod report;
 pub mod testdata;
+pub mod testing;
 pub use formats::{ReadOptions, read_events, write_evs};
 pub use image_io::Image;
 pub use manifest::{EventsRef, Frame, Manifest, Scene};

@@ -38,6 +38,7 @@ pub fn load(dir: &Path) -> Result<Mlp<f32>> {
     let settings: FieldSettings =
         serde_json::from_str(&text).map_err(|e| Error::invalid(&spath, e.to_string()))?;
     if settings.depth > 64
+        || settings.width == 0
         || settings.width > 8192
         || settings.pos_freqs > 32
         || settings.time_freqs > 32
@@ -48,6 +49,19 @@ pub fn load(dir: &Path) -> Result<Mlp<f32>> {
     let data = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
     let st = SafeTensors::deserialize(&data)
         .map_err(|e| Error::invalid(&path, format!("not a safetensors file: {e}")))?;
+    // The settings size the network: 4 bytes per parameter must be in the weights file
+    // before they are allocated (64 layers of 8192 would be 17 GB).
+    let params = Mlp::<f32>::param_count(&settings);
+    if params.saturating_mul(4) > data.len() {
+        return Err(Error::invalid(
+            &spath,
+            format!(
+                "settings describe {params} parameters but {} holds {} bytes",
+                WEIGHTS_FILE,
+                data.len()
+            ),
+        ));
+    }
     let mut mlp = Mlp::<f32>::new(settings, 0);
     let layers = mlp.layers.clone();
     for (i, l) in layers.iter().enumerate() {
@@ -63,10 +77,12 @@ pub fn load(dir: &Path) -> Result<Mlp<f32>> {
                 .tensor(&name)
                 .map_err(|_| Error::invalid(&path, format!("missing tensor {name}")))?;
             if t.dtype() != Dtype::F32 || t.shape() != shape.as_slice() {
+                // The expected shape comes from the settings: name both files.
                 return Err(Error::invalid(
                     &path,
                     format!(
-                        "tensor {name}: expected f32 {shape:?}, found {:?} {:?}",
+                        "tensor {name}: expected f32 {shape:?} (from {}), found {:?} {:?}",
+                        spath.display(),
                         t.dtype(),
                         t.shape()
                     ),

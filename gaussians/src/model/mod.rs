@@ -132,13 +132,14 @@ impl Model {
         }
         let ppath = dir.join(PLY_FILE);
         let (mut splats, degree) = crate::ply::read(&ppath)?;
+        // A disagreement between the two files names both: either may be the wrong one.
         if splats.len() != info.gaussians {
             return Err(Error::invalid(
                 &ppath,
                 format!(
                     "{} Gaussians but {} says {}",
                     splats.len(),
-                    INFO_FILE,
+                    ipath.display(),
                     info.gaussians
                 ),
             ));
@@ -146,7 +147,11 @@ impl Model {
         if degree != info.sh_degree {
             return Err(Error::invalid(
                 &ppath,
-                format!("SH degree {degree} but {INFO_FILE} says {}", info.sh_degree),
+                format!(
+                    "SH degree {degree} but {} says {}",
+                    ipath.display(),
+                    info.sh_degree
+                ),
             ));
         }
         if let Some(text) = legacy_flags {

@@ -22,6 +22,9 @@ use npyz::{TypeChar, WriterBuilder};
 use std::io::{Read, Write};
 use std::path::Path;
 
+/// Deflate expands its input at most 1032-fold: a member claiming more is corrupt.
+const MAX_DEFLATE_RATIO: u64 = 1032;
+
 /// A numeric column as stored (integers kept exact).
 enum Column {
     Int(Vec<i64>),
@@ -164,14 +167,25 @@ fn read_column(
     let mut entry = zip
         .by_name(name)
         .map_err(|e| bad(format!("cannot open: {e}")))?;
-    let size = entry.size();
-    // Read the member fully (bounded by its declared size) so a lying header cannot make
-    // the npy reader allocate more than the data holds.
-    let mut data = Vec::with_capacity(size.min(1 << 30) as usize);
+    // Read the member fully so a lying npy header cannot make the npy reader allocate
+    // more than the data holds. The zip's declared size is not trusted for the buffer:
+    // it grows with what actually decompresses, at most the declared size and at most
+    // what deflate can expand the stored bytes to.
+    let limit = entry
+        .size()
+        .min(entry.compressed_size().saturating_mul(MAX_DEFLATE_RATIO) + 1024);
+    let mut data = Vec::new();
     (&mut entry)
-        .take(size)
+        .take(limit)
         .read_to_end(&mut data)
         .map_err(|e| bad(format!("cannot decompress: {e}")))?;
+    if (data.len() as u64) < entry.size() {
+        return Err(bad(format!(
+            "declares {} bytes but holds {} (truncated or corrupt)",
+            entry.size(),
+            data.len()
+        )));
+    }
     let mut body: &[u8] = &data;
     let header = npyz::NpyHeader::from_reader(&mut body)
         .map_err(|e| bad(format!("not a valid .npy: {e}")))?;

@@ -93,15 +93,14 @@ pub fn save_adapters(net: &FlowNet, path: &Path) -> Result<()> {
 
 /// Load adapters saved by [`save_adapters`] into `net` (replacing any it has).
 pub fn load_adapters(net: &mut FlowNet, path: &Path) -> Result<()> {
-    let text = std::fs::read_to_string(sidecar(path)).map_err(|e| Error::Io {
-        path: sidecar(path),
-        err: e,
-    })?;
+    let side = sidecar(path);
+    let text = std::fs::read_to_string(&side).map_err(|e| Error::io(&side, e))?;
     let meta: AdapterMeta = serde_json::from_str(&text)
-        .map_err(|e| Error::invalid(sidecar(path), format!("bad adapter sidecar: {e}")))?;
+        .map_err(|e| Error::invalid(&side, format!("bad adapter sidecar: {e}")))?;
+    // The settings come from the sidecar: its errors name it.
     if meta.net != net.config {
         return Err(Error::invalid(
-            path,
+            &side,
             format!(
                 "adapter is for network {:?}, not {:?}",
                 meta.net, net.config
@@ -110,11 +109,19 @@ pub fn load_adapters(net: &mut FlowNet, path: &Path) -> Result<()> {
     }
     if meta.rank == 0 || !meta.alpha.is_finite() {
         return Err(Error::invalid(
-            path,
+            &side,
             "adapter rank must be > 0 and alpha finite",
         ));
     }
     let tensors = read_safetensors(path)?;
+    // The expected shapes hold the sidecar's rank: a mismatch names both files.
+    let with_rank = |e: Error| match e {
+        Error::Invalid { path, msg } => Error::Invalid {
+            path,
+            msg: format!("{msg} (rank {} from {})", meta.rank, side.display()),
+        },
+        other => other,
+    };
     for c in &mut net.convs {
         let [out, inp, kh, kw] = c.shape();
         let fan = inp * kh * kw;
@@ -123,13 +130,15 @@ pub fn load_adapters(net: &mut FlowNet, path: &Path) -> Result<()> {
             path,
             &format!("{}.lora_a", c.name),
             &[meta.rank, fan],
-        )?;
+        )
+        .map_err(with_rank)?;
         let b = take(
             &tensors,
             path,
             &format!("{}.lora_b", c.name),
             &[out, meta.rank],
-        )?;
+        )
+        .map_err(with_rank)?;
         let (dev, dt) = (&net.device, net.dtype);
         c.lora = Some(Lora {
             a: Tensor::<2>::from_data(

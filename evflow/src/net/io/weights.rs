@@ -21,6 +21,10 @@ use scene::error::{Error, Result};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
+/// Largest base width C and number of voxel bins B a weights file may declare.
+const MAX_BASE: usize = 1 << 14;
+const MAX_BINS: usize = 1024;
+
 /// Sidecar of a weights file.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct WeightsMeta {
@@ -67,11 +71,17 @@ impl FlowNet {
         dtype: DType,
     ) -> Result<FlowNet> {
         let side = sidecar(path);
+        // Errors about the settings name the file they came from.
+        let mut origin = path;
         let config = match std::fs::read_to_string(&side) {
             Ok(text) => {
                 let meta: WeightsMeta = serde_json::from_str(&text)
                     .map_err(|e| Error::invalid(&side, format!("bad weights sidecar: {e}")))?;
+                origin = &side;
                 meta.net
+            }
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                return Err(Error::io(&side, e));
             }
             Err(_) => config.ok_or_else(|| {
                 Error::invalid(
@@ -82,12 +92,14 @@ impl FlowNet {
             })?,
         };
         if config.base == 0
+            || config.base > MAX_BASE
             || config.bins == 0
+            || config.bins > MAX_BINS
             || !config.max_flow.is_finite()
             || config.max_flow <= 0.0
         {
             return Err(Error::invalid(
-                path,
+                origin,
                 format!("invalid network settings {config:?}"),
             ));
         }
@@ -103,7 +115,8 @@ impl FlowNet {
         device: &Device,
         dtype: DType,
     ) -> Result<FlowNet> {
-        if config.base == 0 || config.base > 1 << 14 || config.bins == 0 || config.bins > 1024 {
+        if config.base == 0 || config.base > MAX_BASE || config.bins == 0 || config.bins > MAX_BINS
+        {
             return Err(Error::invalid(
                 path,
                 format!(

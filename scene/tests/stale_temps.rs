@@ -1,0 +1,38 @@
+//! Temp outputs of dead processes are removed; a killed process whose zombie nobody
+//! reaps counts as dead (regression: found by `tests/tests/kill_resume.rs`, where the
+//! killed runner's stage left `KEY.tmp-RUNNER.tmp-STAGE` behind for good because the
+//! container's init did not reap it).
+
+use scene::atomic::remove_stale_temps;
+use std::fs;
+use std::process::Command;
+
+#[test]
+fn temps_of_zombies_and_dead_processes_are_removed_and_live_ones_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    // A child that exits and is not waited for: a zombie while this test runs.
+    let mut zombie = Command::new("true").spawn().unwrap();
+    let zpid = zombie.id();
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+    loop {
+        let stat = fs::read_to_string(format!("/proc/{zpid}/stat")).unwrap();
+        let state = stat.rsplit(')').next().unwrap().trim_start().chars().next();
+        if state == Some('Z') {
+            break;
+        }
+        assert!(std::time::Instant::now() < deadline, "{stat}");
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    let mine = std::process::id();
+    let zombie_temp = dir.path().join(format!("key.tmp-{mine}.tmp-{zpid}"));
+    let live_temp = dir.path().join("live.tmp-1"); // init
+    let dead_temp = dir.path().join("other.tmp-4194304"); // above Linux's pid_max
+    for d in [&zombie_temp, &live_temp, &dead_temp] {
+        fs::create_dir_all(d).unwrap();
+    }
+    remove_stale_temps(dir.path()).unwrap();
+    assert!(!zombie_temp.exists());
+    assert!(!dead_temp.exists());
+    assert!(live_temp.exists());
+    zombie.wait().unwrap();
+}
