@@ -140,9 +140,7 @@ impl JointTrainer {
             &cam0,
             &x0,
             (t1 - t0) as f32,
-            &mut offsets,
-            &mut events,
-            &mut weights,
+            (&mut offsets, &mut events, &mut weights),
         );
         let inp = MotionInputs {
             dt: (t1 - t0) as f32,
@@ -210,7 +208,7 @@ impl JointTrainer {
 }
 
 impl JointTrainer {
-    /// Empty the CSR ranges (`offsets`, `events`, `weights`) of the bound Gaussians whose events'
+    /// Empty the CSR ranges (`csr`: offsets, events, weights) of the bound Gaussians whose events'
     /// mean flow over the span `dt` disagrees with their neighbours' in the image
     /// ([`crate::neighbours`]; centres `x0` seen by `cam`); returns the events removed.
     fn drop_disagreeing(
@@ -219,10 +217,9 @@ impl JointTrainer {
         cam: &ProjCam<f32>,
         x0: &[[f32; 3]],
         dt: f32,
-        offsets: &mut Vec<u32>,
-        events: &mut Vec<u64>,
-        weights: &mut Vec<f32>,
+        csr: (&mut Vec<u32>, &mut Vec<u64>, &mut Vec<f32>),
     ) -> usize {
+        let (offsets, events, weights) = csr;
         let s = &self.settings.motion_neighbours;
         if s.radius_px <= 0.0 {
             return 0;
