@@ -45,13 +45,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let events = scene.load_events()?;
     let e = estimate_contrast(&linear, 3, &times, &events.as_slice(), log_eps, &s)?;
     println!(
-        "manifest C {:.4}; estimate C {:.4} ± {:.4} (95 %: {:.4}–{:.4}), C+ {:?}, C- {:?}, \
+        "manifest C {:.4}; estimate C {:.4}, bootstrap std {:?}, 95 % {:?}, C+ {:?}, C- {:?}, \
          {} pixel-intervals, {} inliers, median |residual| {:.2} events",
         scene.contrast_threshold(),
         e.c,
         e.std,
-        e.ci95[0],
-        e.ci95[1],
+        e.ci95,
         e.c_pos,
         e.c_neg,
         e.pixels,

@@ -96,13 +96,17 @@ impl Default for EstimateSettings {
 pub struct ContrastEstimate {
     /// `C` from every usable pixel.
     pub c: f64,
-    /// Bootstrap standard deviation of `c`.
-    pub std: f64,
+    /// Bootstrap standard deviation of `c` (`None`: fewer than 2 resamples).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub std: Option<f64>,
     /// Bootstrap 2.5 % and 97.5 % quantiles of `c`.
-    pub ci95: [f64; 2],
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ci95: Option<[f64; 2]>,
     /// `C⁺` from the pixels that brightened, `C⁻` from those that darkened (`None`:
     /// fewer than `min_pixels`).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub c_pos: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub c_neg: Option<f64>,
     /// Pixel-intervals that passed the brightness checks, and those kept by the fit.
     pub pixels: usize,
@@ -306,9 +310,9 @@ pub fn estimate_contrast(
         let m = boot.iter().sum::<f64>() / boot.len() as f64;
         let var = boot.iter().map(|b| (b - m).powi(2)).sum::<f64>() / (boot.len() - 1) as f64;
         let q = |f: f64| boot[((f * (boot.len() - 1) as f64).round() as usize).min(boot.len() - 1)];
-        (var.sqrt(), [q(0.025), q(0.975)])
+        (Some(var.sqrt()), Some([q(0.025), q(0.975)]))
     } else {
-        (f64::NAN, [f64::NAN, f64::NAN])
+        (None, None)
     };
     Ok(ContrastEstimate {
         c,
@@ -328,6 +332,7 @@ pub struct ContrastReport {
     pub mode: ContrastMode,
     /// `contrast_threshold` or the manifest's.
     pub given: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub estimate: Option<ContrastEstimate>,
     /// Why there is no estimate.
     #[serde(skip_serializing_if = "Option::is_none")]
