@@ -122,6 +122,8 @@ struct Sample {
     n: f64,
 }
 
+/// Luminance of pixel `i` of a planar frame (Rec. 709 of RGB; the value itself for one
+/// channel) and its largest channel (for the clipping check).
 fn luminance(frame: &[f32], plane: usize, i: usize, channels: usize) -> (f64, f64) {
     let (mut y, mut top) = (0.0, f64::NEG_INFINITY);
     for (k, w) in LUMA.iter().enumerate().take(channels) {
