@@ -12,7 +12,8 @@
 //! - **Bound events are dropped from `L_motion`** when they have no flow (no `.evflow`
 //!   window covers them, or their flow is beyond the flow network's range and was
 //!   discarded when read) or are outliers among their Gaussian's events
-//!   ([`crate::motion_loss`]).
+//!   ([`crate::motion_loss`]), or belong to a Gaussian whose events' mean flow
+//!   disagrees with its neighbours' in the image ([`crate::neighbours`]).
 
 use crate::event_counts::IntervalCounts;
 use serde::Serialize;
@@ -56,6 +57,9 @@ pub struct Fallbacks {
     pub bindings_dropped_no_flow: u64,
     /// … as outliers among their Gaussian's events.
     pub bindings_dropped_outliers: u64,
+    /// … because their Gaussian's mean flow disagreed with its neighbours'
+    /// ([`crate::neighbours`]).
+    pub bindings_dropped_disagreeing: u64,
     /// Events of the stream whose flow was beyond the flow network's range (discarded
     /// when read; included in `events_without_flow`).
     pub flows_out_of_range: usize,
@@ -74,10 +78,12 @@ impl Fallbacks {
         } += 1;
     }
 
-    /// Count the bound events one `L_motion` left out: `(no flow, outliers)`.
-    pub fn drop_bindings(&mut self, no_flow: usize, outliers: usize) {
+    /// Count the bound events one `L_motion` left out: `(no flow, outliers,
+    /// disagreeing with the neighbours)`.
+    pub fn drop_bindings(&mut self, no_flow: usize, outliers: usize, disagreeing: usize) {
         self.bindings_dropped_no_flow += no_flow as u64;
         self.bindings_dropped_outliers += outliers as u64;
-        self.bindings_dropped += (no_flow + outliers) as u64;
+        self.bindings_dropped_disagreeing += disagreeing as u64;
+        self.bindings_dropped += (no_flow + outliers + disagreeing) as u64;
     }
 }

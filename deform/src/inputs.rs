@@ -3,6 +3,7 @@
 //! the bindings of `assoc`. Every error names the file it is about.
 
 use crate::camera_path::{CameraPath, Interp};
+use crate::contrast::{ContrastEstimate, estimate_contrast};
 use crate::event_counts::EventCounts;
 use crate::event_image::srgb_to_linear;
 use crate::settings::{DeformSettings, FrameEncoding};
@@ -36,7 +37,12 @@ pub struct Inputs {
     pub flows_out_of_range: usize,
     /// The interpolated camera path through the train frames.
     pub path: CameraPath,
+    /// The `C` the training starts from (given or estimated, as `settings.contrast` says).
     pub contrast: f64,
+    /// `contrast_threshold`, or the manifest's when that is 0.
+    pub contrast_given: f64,
+    /// `C` estimated from the train frames and events, or why there is none.
+    pub contrast_estimate: std::result::Result<ContrastEstimate, String>,
     /// Whether the stored frames are sRGB (else linear).
     pub srgb: bool,
     pub model: Model,
@@ -109,7 +115,7 @@ impl Inputs {
             FrameEncoding::Linear => false,
             FrameEncoding::Auto => scene.train.frame_encoding.is_none_or(|e| e.is_srgb()),
         };
-        let linear = views
+        let linear: Vec<Vec<f32>> = views
             .iter()
             .map(|v| {
                 if srgb {
@@ -126,10 +132,22 @@ impl Inputs {
             .map_err(|e| Error::invalid(&train_file, e))?;
         let path = CameraPath::from_trajectory(&scene.train_trajectory(), Interp::Linear)
             .map_err(|e| Error::invalid(&train_file, e))?;
-        let contrast = if s.contrast_threshold > 0.0 {
+        let contrast_given = if s.contrast_threshold > 0.0 {
             s.contrast_threshold
         } else {
             scene.contrast_threshold()
+        };
+        let contrast_estimate = estimate_contrast(
+            &linear,
+            3,
+            &times,
+            &events.as_slice(),
+            s.pseudo.log_eps,
+            &s.contrast_estimate,
+        );
+        let contrast = match &contrast_estimate {
+            Ok(e) if s.contrast.uses_estimate() => e.c,
+            _ => contrast_given,
         };
         let (flow_u, flow_v, flows_out_of_range) =
             read_flows(flows, events.len(), s.motion.flow_range_px)?;
@@ -155,6 +173,8 @@ impl Inputs {
             flows_out_of_range,
             path,
             contrast,
+            contrast_given,
+            contrast_estimate,
             srgb,
             model,
             warmup,

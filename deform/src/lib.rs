@@ -14,7 +14,9 @@
 //! | [`flow`] | `F_ego` (Eq. 9) from camera velocity and inverse depth, `F_gs` (Eq. 10) in the paper's and the exact form; backward |
 //! | [`event_counts`] | per-interval cumulative signed event counts at fine time bins: the count of any pixel over any sub-interval in two lookups |
 //! | [`event_image`] | pseudo images (Eq. 11, nearest frame; two-sided baseline), `L_event` with gradients w.r.t. the render and `C`; sRGB ↔ linear |
+//! | [`contrast`] | the contrast threshold `C` estimated from frames and events (robust fit of counts on log changes, bootstrap spread); the modes given / estimate / learn |
 //! | [`motion_loss`] | `L_motion` (Eq. 12) over CSR bindings with a robust norm; gradients w.r.t. `F_ego` and `F_gs` |
+//! | [`neighbours`] | bound Gaussians whose events' mean flow disagrees with their neighbours' in the image (dropped from `L_motion`) |
 //! | [`schedule`] | loss weights γ1, γ2(iter) (Eq. 13) |
 //! | [`lie`] | SO(3) exp/log and Jacobians, the two pose perturbations and gradient conversion between them |
 //! | [`real`] | the float trait |
@@ -33,11 +35,12 @@
 //! [`fallbacks`] says on degenerate inputs; [`stage`] writes the outputs
 //! and `report.json`; [`settings`] holds every setting. The kernels depend only on
 //! `scene`, `glam`, `rayon` and `serde`. Imports between modules go one way only: any module may use the leaves
-//! `real` and `lie`, and `event_image` and `fallbacks` use `event_counts`.
+//! `real` and `lie`, and `event_image`, `fallbacks` and `contrast` use `event_counts`.
 
 pub mod baselines;
 pub mod camera_check;
 pub mod camera_path;
+pub mod contrast;
 pub mod event_counts;
 pub mod event_image;
 pub mod fallbacks;
@@ -45,6 +48,7 @@ pub mod flow;
 pub mod inputs;
 pub mod lie;
 pub mod motion_loss;
+pub mod neighbours;
 pub mod posenet;
 pub mod real;
 pub mod schedule;

@@ -1,9 +1,11 @@
 //! Settings of the joint training (`deform train --config settings.toml`; every key has
 //! a default, unknown keys are errors).
 
+use crate::contrast::{ContrastMode, EstimateSettings};
 use crate::event_counts::CountSettings;
 use crate::event_image::{PseudoMode, PseudoSettings};
 use crate::motion_loss::MotionSettings;
+use crate::neighbours::NeighbourSettings;
 use crate::posenet::PoseNetSettings;
 use crate::schedule::LossSchedule;
 use serde::{Deserialize, Serialize};
@@ -56,8 +58,15 @@ pub struct DeformSettings {
     pub posenet_warmup: u32,
     /// Adam learning rate of the PoseNet.
     pub posenet_lr: f64,
-    /// Contrast threshold C; 0 takes the manifest's.
+    /// The given contrast threshold C; 0 takes the manifest's.
     pub contrast_threshold: f64,
+    /// Which C the training uses: `given` (the above), `estimate` (from the frames and
+    /// events; the given C when there is too little signal), `learn` (the given C, then
+    /// learned through `L_event`), `estimate_learn` ([`crate::contrast`]).
+    pub contrast: ContrastMode,
+    pub contrast_estimate: EstimateSettings,
+    /// Adam learning rate of `log C` in the learning modes.
+    pub contrast_lr: f64,
     pub frame_encoding: FrameEncoding,
     /// Fine time bins of the per-pixel event counts.
     pub counts: CountSettings,
@@ -66,6 +75,9 @@ pub struct DeformSettings {
     /// `two_sided` (both neighbours, blended in log space by the distance in time).
     pub pseudo_mode: PseudoMode,
     pub motion: MotionSettings,
+    /// Bound Gaussians whose events' flow disagrees with their neighbours' are left
+    /// out of `L_motion` (`radius_px = 0`: never).
+    pub motion_neighbours: NeighbourSettings,
     pub flow_form: FlowForm,
     /// Span Δt of the motion loss in seconds (`t1 = t0 + Δt`); 0 takes the
     /// association window's half-width δt.
@@ -92,11 +104,15 @@ impl Default for DeformSettings {
             posenet_warmup: 300,
             posenet_lr: 1e-3,
             contrast_threshold: 0.0,
+            contrast: ContrastMode::default(),
+            contrast_estimate: EstimateSettings::default(),
+            contrast_lr: 0.01,
             frame_encoding: FrameEncoding::Auto,
             counts: CountSettings::default(),
             pseudo: PseudoSettings::default(),
             pseudo_mode: PseudoMode::Nearest,
             motion: MotionSettings::default(),
+            motion_neighbours: NeighbourSettings::default(),
             flow_form: FlowForm::Paper,
             motion_span: 0.0,
             rebind_every: 500,
@@ -121,6 +137,16 @@ impl DeformSettings {
         finite_nonneg("schedule.gamma2_max", self.schedule.gamma2_max)?;
         finite_nonneg("posenet_lr", self.posenet_lr)?;
         finite_nonneg("contrast_threshold", self.contrast_threshold)?;
+        finite_nonneg("contrast_lr", self.contrast_lr)?;
+        let e = &self.contrast_estimate;
+        finite_nonneg("contrast_estimate.min_log_change", e.min_log_change)?;
+        finite_nonneg("contrast_estimate.black_level", e.black_level)?;
+        if !(e.saturation.is_finite() && e.saturation > e.black_level) {
+            return Err(format!(
+                "contrast_estimate.saturation must be finite and > black_level (got {})",
+                e.saturation
+            ));
+        }
         finite_nonneg("motion_span", self.motion_span)?;
         finite_nonneg("pseudo.band", self.pseudo.band)?;
         if self.counts.bins == 0 {

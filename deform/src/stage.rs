@@ -20,6 +20,7 @@
 
 use crate::baselines::{Baselines, Recording};
 use crate::camera_check::CameraCheck;
+use crate::contrast::ContrastReport;
 use crate::fallbacks::Fallbacks;
 use crate::inputs::Inputs;
 use crate::posenet::PoseNet;
@@ -115,7 +116,11 @@ pub struct TrainReport {
     /// What the training left out on degenerate inputs (skipped `L_event`, dropped
     /// bindings, flows out of range; `deform::fallbacks`).
     pub fallbacks: Fallbacks,
+    /// The `C` used at the end (learned, estimated or given: see `contrast`).
     pub contrast_threshold: f64,
+    /// The given `C`, its estimate from the recording with the spread, the `C` the
+    /// training started from and the one it ended with.
+    pub contrast: ContrastReport,
     pub frames_srgb: bool,
     pub gaussians: usize,
     /// Every `log_every`-th iteration's figures (losses, PSNR, bound Gaussians, …).
@@ -225,7 +230,15 @@ pub fn train(
         timings: tr.timings,
         rebinds: tr.rebinds,
         fallbacks: tr.fallbacks,
-        contrast_threshold: d.contrast,
+        contrast_threshold: tr.contrast,
+        contrast: ContrastReport {
+            mode: settings.contrast,
+            given: d.contrast_given,
+            estimate: d.contrast_estimate.clone().ok(),
+            estimate_error: d.contrast_estimate.clone().err(),
+            initial: d.contrast,
+            last: tr.contrast,
+        },
         frames_srgb: d.srgb,
         gaussians: model.splats.len(),
         curve,

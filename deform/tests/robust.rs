@@ -133,6 +133,21 @@ fn a_normal_recording_skips_and_drops_nothing() {
     }
     assert!(steps.iter().all(|s| s.l_event > 0.0));
     assert!(steps.iter().any(|s| s.l_motion > 0.0 && s.bound > 0));
+    // The fixture is too small to estimate C: the default `estimate` falls back to the
+    // given C and says why.
+    let c = &r["contrast"];
+    assert_eq!(
+        (c["mode"].as_str(), c["given"].as_f64()),
+        (Some("estimate"), Some(0.1))
+    );
+    assert!(c.get("estimate").is_none(), "{c}");
+    let why = c["estimate_error"].as_str().unwrap();
+    assert!(why.contains("too little signal"), "{why}");
+    assert_eq!(
+        (c["initial"].as_f64(), c["last"].as_f64()),
+        (Some(0.1), Some(0.1))
+    );
+    assert!(steps.iter().all(|s| s.contrast == 0.1));
 }
 
 #[test]

@@ -75,8 +75,8 @@ fn intervals_without_length_or_events_are_skipped_and_counted() {
     f.skip_event(EventSkip::NoEvents);
     f.skip_event(EventSkip::NoEvents);
     f.skip_event(EventSkip::NoValidPixels);
-    f.drop_bindings(3, 2);
-    f.drop_bindings(0, 1);
+    f.drop_bindings(3, 2, 4);
+    f.drop_bindings(0, 1, 0);
     assert_eq!(
         (
             f.event_steps_skipped,
@@ -90,9 +90,10 @@ fn intervals_without_length_or_events_are_skipped_and_counted() {
         (
             f.bindings_dropped,
             f.bindings_dropped_no_flow,
-            f.bindings_dropped_outliers
+            f.bindings_dropped_outliers,
+            f.bindings_dropped_disagreeing
         ),
-        (6, 3, 3)
+        (10, 3, 3, 4)
     );
 }
 
@@ -186,4 +187,50 @@ fn a_wild_flow_among_three_events_is_dropped_and_the_loss_is_that_of_the_other_t
 fn the_default_flow_range_is_the_shipped_networks() {
     let net = evflow::net::NetConfig::default();
     assert_eq!(MotionSettings::default().flow_range_px, net.max_flow);
+}
+
+#[test]
+fn a_gaussian_whose_flow_disagrees_with_its_neighbours_is_dropped() {
+    use crate::neighbours::{NeighbourSettings, disagreeing};
+    // A 5 × 5 patch of Gaussians 1 px apart moving (3, −1) px over the span with ±0.2 px
+    // of jitter; one in the middle reports (9, 4), one at the corner has no flow, one far
+    // away is alone.
+    let mut px = Vec::new();
+    let mut flow = Vec::new();
+    for k in 0..25 {
+        let (x, y) = ((k % 5) as f32, (k / 5) as f32);
+        px.push([10.0 + x, 20.0 + y]);
+        let j = 0.2 * ((k * 7 % 5) as f32 - 2.0) / 2.0;
+        flow.push(Some([3.0 + j, -1.0 - j]));
+    }
+    flow[12] = Some([9.0, 4.0]);
+    flow[0] = None;
+    px.push([50.0, 50.0]);
+    flow.push(Some([-30.0, 0.0]));
+    let s = NeighbourSettings::default();
+    let out = disagreeing(&px, &flow, &s);
+    let dropped: Vec<usize> = (0..out.len()).filter(|&i| out[i]).collect();
+    assert_eq!(dropped, [12]);
+    // Within the tolerance: kept.
+    flow[12] = Some([4.5, -1.0]);
+    assert!(!disagreeing(&px, &flow, &s).contains(&true));
+    // A region whose flow genuinely varies (a spread of ±4 px) keeps an odd one of 5 px.
+    let varied: Vec<Option<[f32; 2]>> = (0..26)
+        .map(|k| Some([4.0 * ((k * 3 % 5) as f32 - 2.0) / 2.0, 0.0]))
+        .collect();
+    let mut v = varied.clone();
+    v[12] = Some([5.0, 0.0]);
+    assert!(!disagreeing(&px, &v, &s)[12]);
+    // Radius 0 turns the check off; too few neighbours decide nothing.
+    flow[12] = Some([9.0, 4.0]);
+    let off = NeighbourSettings {
+        radius_px: 0.0,
+        ..s
+    };
+    assert!(!disagreeing(&px, &flow, &off).contains(&true));
+    let few = NeighbourSettings {
+        min_neighbours: 30,
+        ..s
+    };
+    assert!(!disagreeing(&px, &flow, &few).contains(&true));
 }

@@ -2,6 +2,7 @@
 //! finite differences in `f64`.
 
 mod camera_path;
+mod contrast;
 mod events;
 mod fallbacks;
 mod flow;

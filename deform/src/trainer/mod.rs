@@ -11,6 +11,7 @@
 //! `L_motion` (the corrected camera's velocity in `F_ego`).
 
 use crate::camera_check::{CameraCheck, pose_error};
+use crate::contrast::LearnedContrast;
 use crate::event_image::{PseudoImage, PseudoInputs, event_loss, pseudo_image, srgb_to_linear};
 use crate::fallbacks::{EventSkip, Fallbacks, interval_skip};
 use crate::inputs::Inputs;
@@ -56,8 +57,11 @@ pub struct JointStep {
     pub gaussians: usize,
     /// `L_event` was skipped (RGB-only supervision; [`crate::fallbacks`]).
     pub event_skipped: bool,
-    /// Bound events left out of this iteration's `L_motion` (no flow, outliers).
+    /// Bound events left out of this iteration's `L_motion` (no flow, outliers,
+    /// Gaussians disagreeing with their neighbours).
     pub bindings_dropped: usize,
+    /// The contrast threshold after this iteration.
+    pub contrast: f64,
 }
 
 /// The joint training state around the warm-up's trainer.
@@ -74,6 +78,9 @@ pub struct JointTrainer {
     pub rebinds: u32,
     /// What the training left out so far (degenerate inputs).
     pub fallbacks: Fallbacks,
+    /// The contrast threshold `C` in use; learned when the settings say so.
+    pub contrast: f64,
+    learned_contrast: Option<LearnedContrast>,
     rng: rand_chacha::ChaCha8Rng,
     pseudo: PseudoImage<f32>,
     span: f64,
@@ -164,6 +171,11 @@ impl JointTrainer {
                 events_without_flow: d.flow_u.iter().filter(|u| !u.is_finite()).count(),
                 ..Fallbacks::default()
             },
+            contrast: d.contrast,
+            learned_contrast: settings
+                .contrast
+                .learns()
+                .then(|| LearnedContrast::new(d.contrast, settings.contrast_lr)),
             rng: rand_chacha::ChaCha8Rng::seed_from_u64(settings.seed),
             pseudo: PseudoImage::default(),
             span,
@@ -286,17 +298,17 @@ impl JointTrainer {
         // RGB gradient on the rendered centres (one pass back through the field).
         let clock = Instant::now();
         let mut motion = MotionGrads::default();
-        let (l_motion, bound, [no_flow, outliers]) = if g2 > 0.0 {
+        let (l_motion, bound, [no_flow, outliers, disagreeing]) = if g2 > 0.0 {
             self.motion_term(d, i, &rv, g2 as f32, &mut motion)
         } else {
-            (0.0, 0, [0, 0])
+            (0.0, 0, [0; 3])
         };
         self.timings.motion += clock.elapsed().as_secs_f64();
 
         let clock = Instant::now();
         self.posenet_grad.fill(0.0);
         let mut grads = self.backward_with_motion(r, d, &rv, &grad, &motion);
-        self.fallbacks.drop_bindings(no_flow, outliers);
+        self.fallbacks.drop_bindings(no_flow, outliers, disagreeing);
         drop(rv);
         self.timings.rgb += clock.elapsed().as_secs_f64();
 
@@ -333,7 +345,8 @@ impl JointTrainer {
             bound,
             gaussians: self.inner.splats.len(),
             event_skipped: self.fallbacks.event_steps_skipped > skipped,
-            bindings_dropped: no_flow + outliers,
+            bindings_dropped: no_flow + outliers + disagreeing,
+            contrast: self.contrast,
         }
     }
 
@@ -361,7 +374,7 @@ impl JointTrainer {
             left: &d.linear[j],
             right: &d.linear[j + 1],
             channels: 3,
-            contrast: d.contrast as f32,
+            contrast: self.contrast as f32,
         };
         pseudo_image(
             &inp,
@@ -383,6 +396,10 @@ impl JointTrainer {
         if el.valid == 0 {
             self.fallbacks.skip_event(EventSkip::NoValidPixels);
             return 0.0;
+        }
+        if let Some(lc) = &mut self.learned_contrast {
+            lc.step(f64::from(el.d_contrast));
+            self.contrast = lc.value();
         }
         for (gi, &c) in g.iter_mut().zip(rgb) {
             *gi *= g1 * if d.srgb { srgb_slope(c) } else { 1.0 };

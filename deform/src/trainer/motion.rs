@@ -47,7 +47,7 @@ impl JointTrainer {
     /// Eq. 12 over the Gaussians bound at train frame `i` (rendered as `rv`, whose
     /// deformed centres are `x(t0)`): writes `γ2·∂L/∂θ` into `out`; returns
     /// `(L_motion, bound Gaussians, [bound events left out for want of a flow, as
-    /// outliers])`.
+    /// outliers, with Gaussians that disagree with their neighbours])`.
     pub(super) fn motion_term(
         &self,
         d: &Inputs,
@@ -55,16 +55,16 @@ impl JointTrainer {
         rv: &ViewRender<<TileRasterizer as Rasterizer>::State>,
         g2: f32,
         out: &mut MotionGrads,
-    ) -> (f64, usize, [usize; 2]) {
+    ) -> (f64, usize, [usize; 3]) {
         let b = &self.bindings[i];
         if b.gaussians() != self.inner.splats.len() {
-            return (0.0, 0, [0, 0]);
+            return (0.0, 0, [0; 3]);
         }
         let idx: Vec<usize> = (0..b.gaussians())
             .filter(|&g| !b.of(g).0.is_empty())
             .collect();
         if idx.is_empty() {
-            return (0.0, 0, [0, 0]);
+            return (0.0, 0, [0; 3]);
         }
         let t0 = d.times[i];
         let t1 = if i + 1 < d.times.len() {
@@ -135,6 +135,13 @@ impl JointTrainer {
         if paper {
             ego_flow(&pinhole, &vel, pts, (1.0 / NEAR) as f32, &mut fego);
         }
+        let disagreeing = self.drop_disagreeing(
+            d,
+            &cam0,
+            &x0,
+            (t1 - t0) as f32,
+            (&mut offsets, &mut events, &mut weights),
+        );
         let inp = MotionInputs {
             dt: (t1 - t0) as f32,
             bindings: CsrBindings {
@@ -161,6 +168,7 @@ impl JointTrainer {
         let dropped = [
             ml.missing_events + ml.dropped_non_finite,
             ml.dropped_outliers,
+            disagreeing,
         ];
         if ml.bound == 0 {
             return (0.0, idx.len(), dropped);
@@ -196,6 +204,61 @@ impl JointTrainer {
             out.field = Deformation::backward(&self.inner.field, &c1, &dl);
         }
         (ml.loss as f64, idx.len(), dropped)
+    }
+}
+
+impl JointTrainer {
+    /// Empty the CSR ranges (`csr`: offsets, events, weights) of the bound Gaussians whose events'
+    /// mean flow over the span `dt` disagrees with their neighbours' in the image
+    /// ([`crate::neighbours`]; centres `x0` seen by `cam`); returns the events removed.
+    fn drop_disagreeing(
+        &self,
+        d: &Inputs,
+        cam: &ProjCam<f32>,
+        x0: &[[f32; 3]],
+        dt: f32,
+        csr: (&mut Vec<u32>, &mut Vec<u64>, &mut Vec<f32>),
+    ) -> usize {
+        let (offsets, events, weights) = csr;
+        let s = &self.settings.motion_neighbours;
+        if s.radius_px <= 0.0 {
+            return 0;
+        }
+        let range = |k: usize| offsets[k] as usize..offsets[k + 1] as usize;
+        let px: Vec<[f32; 2]> = x0
+            .iter()
+            .map(|p| cam.project(p).map_or([f32::NAN; 2], |(q, _)| q))
+            .collect();
+        let flow: Vec<Option<[f32; 2]>> = (0..x0.len())
+            .map(|k| {
+                let (mut sum, mut n) = ([0.0f32; 2], 0usize);
+                for &e in &events[range(k)] {
+                    let (u, v) = (d.flow_u[e as usize], d.flow_v[e as usize]);
+                    if u.is_finite() && v.is_finite() {
+                        sum = [sum[0] + u, sum[1] + v];
+                        n += 1;
+                    }
+                }
+                (n > 0).then(|| [sum[0] / n as f32 * dt, sum[1] / n as f32 * dt])
+            })
+            .collect();
+        let drop = crate::neighbours::disagreeing(&px, &flow, s);
+        if !drop.contains(&true) {
+            return 0;
+        }
+        let (mut kept, mut kept_w, mut new_offsets) = (Vec::new(), Vec::new(), vec![0u32]);
+        let mut removed = 0;
+        for (k, &out) in drop.iter().enumerate() {
+            if out {
+                removed += range(k).len();
+            } else {
+                kept.extend_from_slice(&events[range(k)]);
+                kept_w.extend_from_slice(&weights[range(k)]);
+            }
+            new_offsets.push(kept.len() as u32);
+        }
+        (*events, *weights, *offsets) = (kept, kept_w, new_offsets);
+        removed
     }
 }
 
