@@ -53,7 +53,7 @@ pub fn field_motion_px(
 /// `out[i] = max(out[i], motion of Gaussian i under d)` in world units.
 fn accumulate_motion(splats: &Splats, d: &Deltas, out: &mut [f32]) {
     let moved = field::apply_deltas(&splats.means, &splats.log_scales, &splats.rotations, d);
-    for i in 0..splats.len() {
+    for (i, out_i) in out.iter_mut().enumerate() {
         let dx = d.dx[i];
         let shift = (dx[0] * dx[0] + dx[1] * dx[1] + dx[2] * dx[2]).sqrt();
         let s0 = splats.log_scales[i].map(f32::exp);
@@ -64,8 +64,8 @@ fn accumulate_motion(splats: &Splats, d: &Deltas, out: &mut [f32]) {
             .fold(0.0f32, f32::max);
         let angle = quat_angle(splats.rotations[i], moved.rotations[i]);
         let m = shift + s_max * (angle + rel_scale);
-        if m > out[i] {
-            out[i] = m;
+        if m > *out_i {
+            *out_i = m;
         }
     }
 }
