@@ -10,13 +10,13 @@
 //!
 //! APS frames are linear readouts, so the scene says `frame_encoding: linear`.
 
-use crate::ecd::read_calib;
+use crate::ecd::calib_or_guess;
 use crate::recording::{FrameImage, Recording, SourceFrame};
+use scene::Pose;
 use scene::error::{Error, Result};
 use scene::formats::aedat4::read_aedat4;
 use scene::formats::{ReadOptions, read_aedat4_frames};
 use scene::manifest::FrameEncoding;
-use scene::{Intrinsics, Pose};
 use std::path::Path;
 
 /// Read `file` (events and frames); `calib` and `static_camera` as in the module doc.
@@ -50,23 +50,7 @@ pub fn read_aedat4_recording(
         "no poses in the file: all {} frames use the identity pose (--static-camera)",
         frames.len()
     )];
-    let camera = match calib {
-        Some(c) => read_calib(c, w, h)?,
-        None => {
-            warnings.push(format!(
-                "no calibration: assumed fx = fy = {w} px, centre at the image centre (pass --calib calib.txt)"
-            ));
-            Intrinsics {
-                width: w,
-                height: h,
-                fx: w as f64,
-                fy: w as f64,
-                cx: (w as f64 - 1.0) * 0.5,
-                cy: (h as f64 - 1.0) * 0.5,
-                distortion: None,
-            }
-        }
-    };
+    let camera = calib_or_guess(calib, w, h, &mut warnings)?;
     let mut out: Vec<SourceFrame> = Vec::with_capacity(frames.len());
     for (k, f) in frames.into_iter().enumerate() {
         if (f.width, f.height, f.position) != (w, h, (0, 0)) {

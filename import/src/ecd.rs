@@ -150,6 +150,31 @@ fn read_images_txt(src: &Path) -> Result<Vec<(f64, PathBuf)>> {
     Ok(out)
 }
 
+/// The camera of `calib` (ECD `calib.txt`), or without one a guess (fx = fy = width,
+/// centre at the image centre) with a warning saying so.
+pub fn calib_or_guess(
+    calib: Option<&Path>,
+    w: u32,
+    h: u32,
+    warnings: &mut Vec<String>,
+) -> Result<Intrinsics> {
+    if let Some(c) = calib {
+        return read_calib(c, w, h);
+    }
+    warnings.push(format!(
+        "no calibration: assumed fx = fy = {w} px, centre at the image centre (pass --calib calib.txt)"
+    ));
+    Ok(Intrinsics {
+        width: w,
+        height: h,
+        fx: w as f64,
+        fy: w as f64,
+        cx: (w as f64 - 1.0) * 0.5,
+        cy: (h as f64 - 1.0) * 0.5,
+        distortion: None,
+    })
+}
+
 /// `calib.txt`: `fx fy cx cy` and optionally `k1 k2 p1 p2 k3` (missing ones are 0).
 pub fn read_calib(path: &Path, width: u32, height: u32) -> Result<Intrinsics> {
     let text = read_text(path)?;
@@ -230,13 +255,7 @@ pub fn read_groundtruth(path: &Path) -> Result<Trajectory> {
 pub fn export_ecd(scene: &Scene, extra_poses: &[(f64, Pose)], out: &Path) -> Result<()> {
     let dir = AtomicDir::new(out)?;
     let root = dir.path();
-    let mut frames: Vec<_> = scene
-        .train
-        .frames
-        .iter()
-        .chain(&scene.test.frames)
-        .collect();
-    frames.sort_by(|a, b| a.timestamp.total_cmp(&b.timestamp));
+    let frames = crate::recording::frames_by_time(scene);
     let mut images = String::from("# timestamp filename\n");
     let mut poses: Vec<(f64, Pose)> = Vec::new();
     for (k, f) in frames.iter().enumerate() {

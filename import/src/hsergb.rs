@@ -14,7 +14,7 @@
 //! sorted); a file whose events fall outside its frame interval gets a warning (the
 //! clocks may disagree). Frames are ordinary camera PNGs: `frame_encoding: srgb`.
 
-use crate::ecd::read_calib;
+use crate::ecd::calib_or_guess;
 use crate::recording::{FrameImage, Recording, SourceFrame};
 use crate::table::{check_increasing, number, read_text, rows};
 use scene::atomic::{AtomicDir, write_bytes_atomic};
@@ -22,7 +22,7 @@ use scene::error::{Error, IoContext, Result};
 use scene::events::EventStream;
 use scene::formats::{ReadOptions, read_npz, write_npz};
 use scene::manifest::FrameEncoding;
-use scene::{Intrinsics, Pose, Scene};
+use scene::{Pose, Scene};
 use std::path::{Path, PathBuf};
 
 /// HS-ERGB stores event coordinates multiplied by this.
@@ -120,23 +120,7 @@ pub fn read_hsergb(src: &Path, calib: Option<&Path>) -> Result<Recording> {
             npz.len()
         ));
     }
-    let camera = match calib {
-        Some(c) => read_calib(c, w, h)?,
-        None => {
-            warnings.push(format!(
-                "no calibration: assumed fx = fy = {w} px, centre at the image centre (pass --calib calib.txt)"
-            ));
-            Intrinsics {
-                width: w,
-                height: h,
-                fx: w as f64,
-                fy: w as f64,
-                cx: (w as f64 - 1.0) * 0.5,
-                cy: (h as f64 - 1.0) * 0.5,
-                distortion: None,
-            }
-        }
-    };
+    let camera = calib_or_guess(calib, w, h, &mut warnings)?;
     let frames = images
         .into_iter()
         .zip(&times)
@@ -171,13 +155,7 @@ pub fn export_hsergb(scene: &Scene, out: &Path) -> Result<()> {
     }
     let dir = AtomicDir::new(out)?;
     let root = dir.path();
-    let mut frames: Vec<_> = scene
-        .train
-        .frames
-        .iter()
-        .chain(&scene.test.frames)
-        .collect();
-    frames.sort_by(|a, b| a.timestamp.total_cmp(&b.timestamp));
+    let frames = crate::recording::frames_by_time(scene);
     let mut ts = String::new();
     for (k, f) in frames.iter().enumerate() {
         let src = scene.image_path(f);

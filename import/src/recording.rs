@@ -248,6 +248,18 @@ impl std::fmt::Display for ImportSummary {
     }
 }
 
+/// A scene's train and test frames together, by time (for the exporters).
+pub fn frames_by_time(scene: &scene::Scene) -> Vec<&scene::manifest::Frame> {
+    let mut frames: Vec<_> = scene
+        .train
+        .frames
+        .iter()
+        .chain(&scene.test.frames)
+        .collect();
+    frames.sort_by(|a, b| a.timestamp.total_cmp(&b.timestamp));
+    frames
+}
+
 /// Write `rec` as a scene directory at `out` (atomically; an existing one is replaced):
 /// `transforms_train.json`, `transforms_test.json`, `images/{train,test}_NNNN.*`,
 /// `events.evs`, `import.json` (the summary). Frame `time` is the timestamp normalised
