@@ -152,9 +152,11 @@ fn assert_consistent(w: &Workspace, when: &str) {
     }
 }
 
-/// Seeded fractions in [0, 0.3) (SplitMix64): each killed run gets this share of the
-/// reference's wall time after its first stage started, so kills land before the work
-/// is done.
+/// Seeded fractions in [0, 0.3) (SplitMix64): each killed run is killed this share of
+/// [`KILL_WINDOW`] after its first stage started, so the kill lands while that stage
+/// (and every stage after it) is still to finish, whatever the machine's speed.
+const KILL_WINDOW: Duration = Duration::from_millis(100);
+
 fn fractions(seed: u64, n: usize) -> Vec<f64> {
     let mut s = seed;
     (0..n)
@@ -173,9 +175,7 @@ fn fractions(seed: u64, n: usize) -> Vec<f64> {
 fn runs_killed_at_seeded_points_resume_to_the_uninterrupted_result() {
     let reference = Workspace::new();
     let exp = reference.experiment("resume", EXPERIMENT);
-    let clock = Instant::now();
     let out = reference.degs(&["run", exp.to_str().unwrap(), "-j", "1", "--quiet"]);
-    let full = clock.elapsed();
     assert!(out.status.success(), "{}", stderr(&out));
     let want = reference.run_record("resume");
     let want_outputs = outputs(&want);
@@ -191,7 +191,7 @@ fn runs_killed_at_seeded_points_resume_to_the_uninterrupted_result() {
         while children(child.id()).is_empty() && child.try_wait().unwrap().is_none() {
             std::thread::sleep(Duration::from_millis(2));
         }
-        let deadline = Instant::now() + full.mul_f64(f);
+        let deadline = Instant::now() + KILL_WINDOW.mul_f64(f);
         while Instant::now() < deadline && child.try_wait().unwrap().is_none() {
             std::thread::sleep(Duration::from_millis(10));
         }
