@@ -443,13 +443,44 @@ fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, spec: &Spec) -> Resul
         .map_err(|e| err(&e))?;
     chart
         .configure_series_labels()
-        .position(SeriesLabelPosition::LowerRight)
+        .position(legend_position(legend_corner(
+            &anchors,
+            (xs.start, ys.start, xs.end, ys.end),
+        )))
         .background_style(WHITE.mix(0.85))
         .border_style(BLACK)
         .label_font(("sans-serif", 14))
         .draw()
         .map_err(|e| err(&e))?;
     Ok(())
+}
+
+/// The corners a legend may take, in order of preference on ties.
+pub const LEGEND_CORNERS: [&str; 4] = ["lower right", "upper right", "lower left", "upper left"];
+
+/// The corner (index into [`LEGEND_CORNERS`]) of the plotting area `(x0, y0, x1, y1)`
+/// (pixels, y down) for the legend box: the one whose box region (40 % of the width, a
+/// third of the height) holds the fewest points, the earlier corner on ties.
+pub fn legend_corner(points: &[(i32, i32)], area: (i32, i32, i32, i32)) -> usize {
+    let (x0, y0, x1, y1) = area;
+    let (w, h) = ((x1 - x0) * 2 / 5, (y1 - y0) / 3);
+    let origins = [(x1 - w, y1 - h), (x1 - w, y0), (x0, y1 - h), (x0, y0)];
+    let inside = |&(cx, cy): &(i32, i32)| {
+        points
+            .iter()
+            .filter(|&&(x, y)| x >= cx && x <= cx + w && y >= cy && y <= cy + h)
+            .count()
+    };
+    (0..4).min_by_key(|&k| inside(&origins[k])).unwrap_or(0)
+}
+
+fn legend_position(corner: usize) -> SeriesLabelPosition {
+    match corner {
+        1 => SeriesLabelPosition::UpperRight,
+        2 => SeriesLabelPosition::LowerLeft,
+        3 => SeriesLabelPosition::UpperLeft,
+        _ => SeriesLabelPosition::LowerRight,
+    }
 }
 
 #[cfg(test)]

@@ -236,3 +236,32 @@ fn points_come_from_the_reports_and_shared_entries_count_once() {
     assert_eq!(json["models"][1]["total_s"], 61.0);
     assert_eq!(json["flows"][0]["locm_s"], 4.0);
 }
+
+#[test]
+fn the_legend_takes_the_emptiest_corner() {
+    use super::draw::{LEGEND_CORNERS, legend_corner};
+    let area = (0, 0, 100, 90);
+    // No points: the preferred corner.
+    assert_eq!(LEGEND_CORNERS[legend_corner(&[], area)], "lower right");
+    // A point in the lower right box (x ≥ 60, y ≥ 60) moves it up.
+    assert_eq!(
+        LEGEND_CORNERS[legend_corner(&[(90, 80)], area)],
+        "upper right"
+    );
+    // Points in both right boxes: lower left.
+    assert_eq!(
+        LEGEND_CORNERS[legend_corner(&[(90, 80), (70, 10)], area)],
+        "lower left"
+    );
+    // Every corner taken, the lower left by one point and the others by two.
+    let pts = [
+        (90, 80),
+        (95, 85),
+        (70, 10),
+        (75, 5),
+        (10, 70),
+        (5, 5),
+        (20, 20),
+    ];
+    assert_eq!(LEGEND_CORNERS[legend_corner(&pts, area)], "lower left");
+}
