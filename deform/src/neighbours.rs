@@ -54,20 +54,22 @@ pub fn disagreeing(px: &[[f32; 2]], flow: &[Option<[f32; 2]>], s: &NeighbourSett
             grid.entry(cell(*p)).or_default().push(i);
         }
     }
-    let (mut nu, mut nv, mut dev) = (Vec::new(), Vec::new(), Vec::new());
+    // Scratch buffers reused for every Gaussian (this runs at every motion step).
+    let (mut near, mut nu, mut nv, mut dev) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for (i, (p, f)) in px.iter().zip(flow).enumerate() {
         let Some(f) = *f else { continue };
         if !(p[0].is_finite() && p[1].is_finite()) {
             continue;
         }
         let (cx, cy) = cell(*p);
-        let mut near: Vec<[f32; 2]> = Vec::new();
+        near.clear();
         for (dx, dy) in (-1..=1).flat_map(|a| (-1..=1).map(move |b| (a, b))) {
             for &j in grid.get(&(cx + dx, cy + dy)).into_iter().flatten() {
                 let q = px[j];
                 let d2 = (q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2);
                 if j != i && d2 <= r * r {
-                    near.push(flow[j].expect("gridded Gaussians have a flow"));
+                    let g: [f32; 2] = flow[j].expect("gridded Gaussians have a flow");
+                    near.push(g);
                 }
             }
         }
