@@ -46,6 +46,7 @@ fn rehash(b: &mut [u8]) {
 
 #[test]
 fn assoc_reader() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("assoc.bin");
     write_assoc(&path, &frames()).unwrap();
@@ -63,6 +64,7 @@ fn assoc_reader() {
 /// model's counts a header that disagrees is refused before any allocation.
 #[test]
 fn frames_claiming_huge_models_are_refused() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("assoc.bin");
     let mut b = b"DEGSASC\0".to_vec();

@@ -16,6 +16,7 @@ use std::path::{Path, PathBuf};
 
 #[test]
 fn evflow_reader() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("0000.evflow");
     let n = 120;
@@ -39,6 +40,7 @@ fn evflow_reader() {
 
 #[test]
 fn flo_reader() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("flow.flo");
     let u: Vec<f32> = (0..12 * 9).map(|k| k as f32 * 0.25).collect();
@@ -69,6 +71,7 @@ fn load_weights(path: &Path) -> scene::Result<FlowNet> {
 
 #[test]
 fn weights_reader() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let (_, path) = tiny_net(dir.path());
     let bytes = fs::read(&path).unwrap();
@@ -82,6 +85,7 @@ fn weights_reader() {
 /// Bare weights (no sidecar): the settings come from the damaged tensors themselves.
 #[test]
 fn bare_weights_reader() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let (_, path) = tiny_net(dir.path());
     fs::remove_file(sidecar(&path)).unwrap();
@@ -94,6 +98,7 @@ fn bare_weights_reader() {
 
 #[test]
 fn weights_sidecar_reader() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let (_, path) = tiny_net(dir.path());
     let side = sidecar(&path);
@@ -105,6 +110,7 @@ fn weights_sidecar_reader() {
 
 #[test]
 fn adapter_and_sidecar_readers() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let (mut net, _) = tiny_net(dir.path());
     net.attach_lora(2, 4.0, 5);
@@ -129,6 +135,7 @@ fn adapter_and_sidecar_readers() {
 /// The real ECD ground truth: `flow.npy` (1×2×180×240 float64) and `calib.txt`.
 #[test]
 fn ecd_ground_truth_readers() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let real = |f: &str| {
         fs::read(scene::testdata::shared_data(&format!(
@@ -154,6 +161,7 @@ fn ecd_ground_truth_readers() {
 /// both now name the sidecar.
 #[test]
 fn sidecar_errors_name_the_sidecar() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let (net, path) = tiny_net(dir.path());
     let side = sidecar(&path);

@@ -54,28 +54,33 @@ fn fuzz_model_file(name: &str, seed: u64, mutations: usize, length_fields: Vec<(
 
 #[test]
 fn ply_reader() {
+    let _alone = scene::testing::alloc::exclusive();
     fuzz_model_file(PLY_FILE, 31, 2000, vec![]);
 }
 
 #[test]
 fn model_json_reader() {
+    let _alone = scene::testing::alloc::exclusive();
     fuzz_model_file(INFO_FILE, 32, 2000, vec![]);
 }
 
 #[test]
 fn field_readers() {
+    let _alone = scene::testing::alloc::exclusive();
     fuzz_model_file("field.safetensors", 33, 1000, vec![(0, 8)]);
     fuzz_model_file("field.json", 34, 1000, vec![]);
 }
 
 #[test]
 fn dynamic_flags_reader() {
+    let _alone = scene::testing::alloc::exclusive();
     fuzz_model_file(FLAGS_FILE, 35, 1000, vec![(0, 8)]);
 }
 
 /// An ASCII PLY (other tools write these): its vertex count is text.
 #[test]
 fn ascii_ply_reader() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("ascii.ply");
     let names = gaussians::ply::property_names(0);
@@ -97,6 +102,7 @@ fn ascii_ply_reader() {
 
 #[test]
 fn warmup_settings_reader() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     scene::cli::settings::write_resolved(dir.path(), &TrainSettings::default()).unwrap();
     let path = dir.path().join("settings.toml");
@@ -114,6 +120,7 @@ fn warmup_settings_reader() {
 /// parameters before looking at the weights file. Now the count is checked against it.
 #[test]
 fn field_settings_larger_than_the_weights_are_refused_before_allocating() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     save_model(dir.path());
     let path = dir.path().join("field.json");
@@ -137,6 +144,7 @@ fn field_settings_larger_than_the_weights_are_refused_before_allocating() {
 /// field panic (a uniform range of ±1/√0); now it is refused naming the file.
 #[test]
 fn field_of_width_zero_is_refused() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     save_model(dir.path());
     let path = dir.path().join("field.json");

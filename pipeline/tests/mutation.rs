@@ -45,6 +45,7 @@ rebind_every = 10
 
 #[test]
 fn experiment_reader_synthetic_scene() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("tiny.toml");
     let mut plan = Plan::new(51);
@@ -54,6 +55,7 @@ fn experiment_reader_synthetic_scene() {
 
 #[test]
 fn experiment_reader_scene_directory() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     fs::create_dir_all(dir.path().join("scene")).unwrap();
     let path = dir.path().join("real.toml");
@@ -88,6 +90,7 @@ fn stage(name: &str, action: Action) -> StageRecord {
 
 #[test]
 fn run_record_reader() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("run.json");
     RunRecord {
@@ -114,6 +117,7 @@ fn run_record_reader() {
 /// checked here.
 #[test]
 fn cache_entry_manifest_reader() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let entry = dir.path().join("entry");
     fs::create_dir_all(entry.join("renders")).unwrap();
@@ -128,6 +132,7 @@ fn cache_entry_manifest_reader() {
 
 #[test]
 fn binary_hashes_reader() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let c = Cache::new(dir.path());
     let bin = dir.path().join("gaussians");

@@ -26,6 +26,7 @@ fn sensor(w: u32, h: u32) -> ReadOptions {
 
 #[test]
 fn evs_reader() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("events.evs");
     formats::write_evs(&path, &common::stream(300, 64, 48, 1)).unwrap();
@@ -50,6 +51,7 @@ fn evs_reader() {
 /// The first 1500 lines of the real ECD recording (240×180, no header line).
 #[test]
 fn text_reader_on_real_ecd_events() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("events.txt");
     let text = fs::read_to_string(common::ecd()).unwrap();
@@ -65,6 +67,7 @@ fn text_reader_on_real_ecd_events() {
 /// A file of [`formats::write_text`], whose header line gives the sensor.
 #[test]
 fn text_reader_with_header() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("events.txt");
     formats::write_text(&path, &common::stream(200, 64, 48, 3)).unwrap();
@@ -78,6 +81,7 @@ fn text_reader_with_header() {
 
 #[test]
 fn npz_reader() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("events.npz");
     formats::write_npz(&path, &common::microsecond_stream(200)).unwrap();
@@ -89,6 +93,7 @@ fn npz_reader() {
 /// The real DAVIS346 recording (429 kB: events, frames, IMU).
 #[test]
 fn aedat4_reader_on_real_recording() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("sample.aedat4");
     let bytes = fs::read(scene::testdata::shared_data("aedat4_sample/sample.aedat4")).unwrap();
@@ -149,6 +154,7 @@ fn write_scene(dir: &Path) {
 
 #[test]
 fn manifest_reader() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     write_scene(dir.path());
     let path = dir.path().join(scene::manifest::TRAIN_FILE);
@@ -160,6 +166,7 @@ fn manifest_reader() {
 /// `transforms_train.json`.
 #[test]
 fn scene_directory_with_damaged_manifest() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     write_scene(dir.path());
     let path = dir.path().join(scene::manifest::TRAIN_FILE);
@@ -174,6 +181,7 @@ fn scene_directory_with_damaged_manifest() {
 
 #[test]
 fn png_reader() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("frame.png");
     let mut img = Image::new(24, 16, 3);
@@ -191,6 +199,7 @@ fn png_reader() {
 
 #[test]
 fn exr_depth_reader() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("depth.exr");
     let depth: Vec<f32> = (0..24 * 16).map(|k| 1.0 + k as f32 * 0.01).collect();
@@ -204,6 +213,7 @@ fn exr_depth_reader() {
 
 #[test]
 fn exr_flow_reader() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("flow.exr");
     let u: Vec<f32> = (0..20 * 10).map(|k| k as f32 * 0.5 - 20.0).collect();
@@ -222,6 +232,7 @@ fn exr_flow_reader() {
 /// the directory claimed (up to 1 GiB) before reading a byte.
 #[test]
 fn npz_member_claiming_a_huge_size_is_refused_without_allocating_it() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("events.npz");
     formats::write_npz(&path, &common::microsecond_stream(20)).unwrap();
@@ -244,6 +255,7 @@ fn npz_member_claiming_a_huge_size_is_refused_without_allocating_it() {
 /// decoder allocated 2.6 GB. Now its declared size is checked against the file first.
 #[test]
 fn exr_declaring_more_pixels_than_it_can_hold_is_refused_before_decoding() {
+    let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("flow.exr");
     let u: Vec<f32> = (0..20 * 10).map(|k| k as f32 * 0.5 - 20.0).collect();

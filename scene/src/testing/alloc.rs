@@ -82,9 +82,35 @@ pub fn installed() -> bool {
 /// Measurements are serialised: the counters are process-wide.
 static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
 
-/// Hold while measuring (the mutation harness holds it for a whole run).
-pub fn exclusive() -> MutexGuard<'static, ()> {
-    ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner())
+thread_local! {
+    /// How many [`Exclusive`] guards this thread holds (the lock is re-entrant per thread).
+    static DEPTH: std::cell::Cell<u32> = const { std::cell::Cell::new(0) };
+}
+
+/// The process's measurement lock, held by this thread until dropped.
+pub struct Exclusive {
+    _guard: Option<MutexGuard<'static, ()>>,
+}
+
+impl Drop for Exclusive {
+    fn drop(&mut self) {
+        DEPTH.with(|d| d.set(d.get() - 1));
+    }
+}
+
+/// Hold while measuring. The mutation harness holds it for a whole run, and every test of
+/// a binary that installs [`TrackingAlloc`] should hold it for its whole body: a test's
+/// set-up (writing a file through a buffer, say) allocates too, and must not land inside
+/// another test's measurement. Re-entrant: a thread that holds it may take it again.
+pub fn exclusive() -> Exclusive {
+    let depth = DEPTH.with(|d| {
+        let v = d.get();
+        d.set(v + 1);
+        v
+    });
+    Exclusive {
+        _guard: (depth == 0).then(|| ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner())),
+    }
 }
 
 /// Run `f` and return its result with the peak of live bytes above the level at the
