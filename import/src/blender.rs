@@ -15,26 +15,16 @@
 //! `transforms_val.json` is ignored. Blender PNGs are sRGB with alpha (composited over
 //! white when read), so the scene says `frame_encoding: srgb` unless the manifest says.
 
-pub use crate::recording::BlenderOptions;
-use crate::recording::{FrameImage, Recording, SourceFrame};
+use crate::aligned::{TimeMap, event_file, read_for_sensor};
+use crate::recording::{EventsAlignment, FrameImage, Recording, SourceFrame};
 use scene::Scene;
 use scene::atomic::{AtomicDir, write_bytes_atomic, write_json_atomic};
 use scene::error::{Error, Result};
-use scene::formats::{ReadOptions, read_events};
 use scene::manifest::{FrameEncoding, Manifest, TEST_FILE, TRAIN_FILE};
 use std::path::Path;
 
-const EVENT_NAMES: [&str; 6] = [
-    "events.evs",
-    "events.txt",
-    "events.npz",
-    "events.aedat4",
-    "events.raw",
-    "events.es",
-];
-
 /// Read a D-NeRF / Blender folder plus its events.
-pub fn read_blender(src: &Path, o: &BlenderOptions) -> Result<Recording> {
+pub fn read_blender(src: &Path, o: &EventsAlignment) -> Result<Recording> {
     let train_path = src.join(TRAIN_FILE);
     let train = Manifest::read(&train_path)?;
     let test_path = src.join(TEST_FILE);
@@ -44,39 +34,11 @@ pub fn read_blender(src: &Path, o: &BlenderOptions) -> Result<Recording> {
         None
     };
     let cam = train.camera;
-    let events_path = match (&o.events, &train.events) {
-        (Some(p), _) => p.clone(),
-        (None, Some(e)) => src.join(&e.path),
-        (None, None) => EVENT_NAMES
-            .iter()
-            .map(|n| src.join(n))
-            .find(|p| p.is_file())
-            .ok_or_else(|| {
-                Error::invalid(
-                    &train_path,
-                    format!("no event file: none of {EVENT_NAMES:?} beside it; pass --events FILE"),
-                )
-            })?,
-    };
-    let events = read_events(
-        &events_path,
-        &ReadOptions {
-            sensor: Some((cam.width, cam.height)),
-            coord_scale: None,
-        },
-    )?;
+    let events_ref = train.events.as_ref().map(|e| e.path.as_str());
+    let events_path = event_file(src, o, events_ref, &train_path)?;
+    let events = read_for_sensor(&events_path, cam.width, cam.height)?;
     let mut warnings = Vec::new();
-    let (e0, e1) = (
-        events.t.first().copied().unwrap_or(0.0),
-        events.t.last().copied().unwrap_or(0.0),
-    );
-    let offset = o.time_offset.unwrap_or(e0);
-    let duration = o.duration.unwrap_or(e1 - e0);
-    if !(offset.is_finite() && duration.is_finite() && duration >= 0.0) {
-        return Err(Error::Other(format!(
-            "time offset {offset} / duration {duration}: must be finite, duration ≥ 0"
-        )));
-    }
+    let times = TimeMap::new(o, &events)?;
     let mut frames = Vec::new();
     let splits = [
         (Some(&train), false, &train_path),
@@ -100,7 +62,7 @@ pub fn read_blender(src: &Path, o: &BlenderOptions) -> Result<Recording> {
                 f.timestamp
             } else {
                 normalised_only += 1;
-                offset + f.time * duration
+                times.seconds(f.time)
             };
             let mut image = src.join(&f.file_path);
             if image.extension().is_none() {
@@ -116,12 +78,7 @@ pub fn read_blender(src: &Path, o: &BlenderOptions) -> Result<Recording> {
             ));
         }
     }
-    if normalised_only > 0 && (o.time_offset.is_none() || o.duration.is_none()) {
-        warnings.push(format!(
-            "{normalised_only} frames have only a normalised time: placed on the events' span {e0} … {e1} s \
-             (pass --time-offset and --duration if the frames span another interval)"
-        ));
-    }
+    warnings.extend(times.warning(normalised_only, &events));
     frames.sort_by(|a, b| a.1.timestamp.total_cmp(&b.1.timestamp));
     let held_out = frames.iter().map(|f| f.0).collect();
     Ok(Recording {

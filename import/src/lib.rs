@@ -8,16 +8,18 @@
 //! also has an exporter (scene → layout), used by the round-trip tests.
 
 pub mod aedat4;
+pub mod aligned;
 pub mod blender;
 pub mod convention;
 pub mod ecd;
 pub mod hsergb;
+pub mod nerfies;
 pub mod recording;
 mod table;
 
 pub use recording::{
-    FrameImage, ImportOptions, ImportSummary, Recording, SourceFrame, Split, split_by,
-    split_frames, write_scene,
+    EventsAlignment, FrameImage, ImportOptions, ImportSummary, Recording, SourceFrame, Split,
+    split_by, split_frames, write_scene,
 };
 
 use scene::error::Result;
@@ -34,6 +36,9 @@ pub enum Layout {
     Hsergb,
     /// D-NeRF / Blender transforms_*.json with an event file beside them.
     Blender,
+    /// nerfies / HyperNeRF / NeRF-DS: dataset.json, metadata.json, camera/, rgb/Nx/,
+    /// with an event file beside them.
+    Nerfies,
 }
 
 impl Layout {
@@ -43,6 +48,7 @@ impl Layout {
             Layout::Aedat4 => "aedat4",
             Layout::Hsergb => "hsergb",
             Layout::Blender => "blender",
+            Layout::Nerfies => "nerfies",
         }
     }
 }
@@ -57,7 +63,8 @@ pub fn import(
     let rec = match layout {
         Layout::Ecd => ecd::read_ecd(src)?,
         Layout::Hsergb => hsergb::read_hsergb(src, opts.calib.as_deref())?,
-        Layout::Blender => blender::read_blender(src, &opts.blender)?,
+        Layout::Blender => blender::read_blender(src, &opts.alignment)?,
+        Layout::Nerfies => nerfies::read_nerfies(src, &opts.alignment, opts.downscale)?,
         Layout::Aedat4 => {
             aedat4::read_aedat4_recording(src, opts.calib.as_deref(), opts.static_camera)?
         }

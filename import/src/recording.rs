@@ -71,14 +71,16 @@ pub struct ImportOptions {
     pub static_camera: bool,
     /// Layouts without a calibration (AEDAT4, HS-ERGB): an ECD-style `calib.txt`.
     pub calib: Option<PathBuf>,
-    /// Blender: the event file, and how normalised frame times map to seconds.
-    pub blender: BlenderOptions,
+    /// Blender, nerfies: the event file, and how normalised frame times map to seconds.
+    pub alignment: EventsAlignment,
+    /// Nerfies: read the frames of `rgb/{N}x/` (default: 1, else the smallest there).
+    pub downscale: Option<u32>,
 }
 
-/// Blender layout: where the events are and how normalised times map to seconds
-/// (see the blender module).
+/// Layouts whose frames carry only a normalised time (blender, nerfies): where the
+/// events are and how normalised times map to seconds (see [`crate::aligned`]).
 #[derive(Clone, Debug, Default, PartialEq)]
-pub struct BlenderOptions {
+pub struct EventsAlignment {
     pub events: Option<PathBuf>,
     pub time_offset: Option<f64>,
     pub duration: Option<f64>,
@@ -93,7 +95,8 @@ impl Default for ImportOptions {
             frame_encoding: None,
             static_camera: false,
             calib: None,
-            blender: Default::default(),
+            alignment: Default::default(),
+            downscale: None,
         }
     }
 }

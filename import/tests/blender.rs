@@ -3,7 +3,8 @@
 
 mod common;
 use common::*;
-use import::blender::{BlenderOptions, export_blender};
+use import::EventsAlignment;
+use import::blender::export_blender;
 use import::{ImportOptions, Layout, import};
 use scene::Scene;
 use scene::image_io::read_image;
@@ -19,7 +20,7 @@ fn synthetic_scene_round_trips_through_the_blender_layout() {
 
     let out = dir.path().join("back");
     let opts = ImportOptions {
-        blender: BlenderOptions {
+        alignment: EventsAlignment {
             events: None,
             time_offset: Some(0.0),
             duration: Some(0.5),

@@ -195,7 +195,9 @@ pub enum Command {
     /// aedat4 (one DAVIS .aedat4 file: events + APS frames, no poses: needs
     /// --static-camera), hsergb (images_corrected/ + timestamp.txt, events_aligned/*.npz
     /// with coordinates ×32; a static camera: identity poses), blender (D-NeRF
-    /// transforms_*.json + an event file; normalised times mapped to seconds). See the
+    /// transforms_*.json + an event file; normalised times mapped to seconds), nerfies
+    /// (nerfies / HyperNeRF / NeRF-DS: dataset.json, metadata.json, camera/*.json,
+    /// rgb/Nx/ + an event file; time ids mapped to seconds, scene.json applied). See the
     /// README, "Bring your own recording".
     Import(ImportArgs),
     /// Event files.
@@ -283,6 +285,9 @@ pub enum ImportLayout {
     Hsergb,
     /// D-NeRF / Blender folder (transforms_*.json) with an event file beside it
     Blender,
+    /// nerfies / HyperNeRF / NeRF-DS capture (dataset.json, metadata.json, camera/,
+    /// rgb/Nx/) with an event file beside it
+    Nerfies,
 }
 
 impl ImportLayout {
@@ -292,6 +297,7 @@ impl ImportLayout {
             ImportLayout::Aedat4 => import::Layout::Aedat4,
             ImportLayout::Hsergb => import::Layout::Hsergb,
             ImportLayout::Blender => import::Layout::Blender,
+            ImportLayout::Nerfies => import::Layout::Nerfies,
         }
     }
 }
@@ -326,17 +332,22 @@ pub struct ImportArgs {
     /// k3]); without it they are guessed (fx = fy = width) with a warning
     #[arg(long, value_name = "FILE")]
     pub calib: Option<PathBuf>,
-    /// blender: the event file (default: events.* beside the transforms, or the
-    /// manifest's events.path)
+    /// blender, nerfies: the event file (default: events.* beside the layout's files, or
+    /// the blender manifest's events.path)
     #[arg(long, value_name = "FILE")]
     pub events: Option<PathBuf>,
-    /// blender: seconds on the events' clock of normalised time 0 (default: the first
+    /// blender, nerfies: seconds on the events' clock of normalised time 0 (default: the first
     /// event's timestamp)
     #[arg(long, value_name = "S", allow_hyphen_values = true)]
     pub time_offset: Option<f64>,
-    /// blender: seconds spanned by normalised times 0…1 (default: the events' span)
+    /// blender, nerfies: seconds spanned by normalised times 0…1 (default: the events'
+    /// span)
     #[arg(long, value_name = "S")]
     pub duration: Option<f64>,
+    /// nerfies: read the frames of rgb/Nx/ (intrinsics scaled by 1/N; default: rgb/1x/,
+    /// else the smallest N there)
+    #[arg(long, value_name = "N")]
+    pub downscale: Option<u32>,
 }
 
 #[derive(Clone, Copy, Debug, clap::ValueEnum)]

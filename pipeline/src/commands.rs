@@ -358,11 +358,12 @@ fn import_recording(a: &ImportArgs) -> Result<()> {
         }),
         static_camera: a.static_camera,
         calib: a.calib.clone(),
-        blender: import::blender::BlenderOptions {
+        alignment: import::EventsAlignment {
             events: a.events.clone(),
             time_offset: a.time_offset,
             duration: a.duration,
         },
+        downscale: a.downscale,
     };
     let summary = import::import(a.layout.layout(), &a.src, &opts, &a.out)?;
     print!("{summary}");

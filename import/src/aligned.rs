@@ -1,0 +1,108 @@
+//! Frames with only a normalised time (blender `time`, nerfies `time_id`/`warp_id`)
+//! beside an event file: finding that file, reading it for the frames' sensor, and
+//! placing the frames on the events' clock (`timestamp = offset + time · duration`).
+
+use crate::recording::EventsAlignment;
+use scene::error::{Error, Result};
+use scene::events::EventStream;
+use scene::formats::{ReadOptions, read_events};
+use std::path::{Path, PathBuf};
+
+/// Event file names looked for beside a layout's files, in this order.
+pub const EVENT_NAMES: [&str; 6] = [
+    "events.evs",
+    "events.txt",
+    "events.npz",
+    "events.aedat4",
+    "events.raw",
+    "events.es",
+];
+
+/// The event file: `--events`, else the layout's own reference (relative to `src`), else
+/// the first of [`EVENT_NAMES`] in `src`. `described_by` names the layout file in the
+/// error when none is found.
+pub fn event_file(
+    src: &Path,
+    o: &EventsAlignment,
+    layout_ref: Option<&str>,
+    described_by: &Path,
+) -> Result<PathBuf> {
+    if let Some(p) = &o.events {
+        return Ok(p.clone());
+    }
+    if let Some(r) = layout_ref {
+        return Ok(src.join(r));
+    }
+    EVENT_NAMES
+        .iter()
+        .map(|n| src.join(n))
+        .find(|p| p.is_file())
+        .ok_or_else(|| {
+            Error::invalid(
+                described_by,
+                format!("no event file: none of {EVENT_NAMES:?} beside it; pass --events FILE"),
+            )
+        })
+}
+
+/// Read the events of a `width × height` sensor.
+pub fn read_for_sensor(path: &Path, width: u32, height: u32) -> Result<EventStream> {
+    read_events(
+        path,
+        &ReadOptions {
+            sensor: Some((width, height)),
+            coord_scale: None,
+        },
+    )
+}
+
+/// Maps normalised frame times in [0, 1] to seconds on the events' clock.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TimeMap {
+    pub offset: f64,
+    pub duration: f64,
+    /// Whether offset and duration were both given (else taken from the events' span).
+    pub given: bool,
+}
+
+impl TimeMap {
+    /// `--time-offset` / `--duration`, each defaulting to the events' first timestamp and
+    /// their span.
+    pub fn new(o: &EventsAlignment, events: &EventStream) -> Result<Self> {
+        let (e0, e1) = span(events);
+        let offset = o.time_offset.unwrap_or(e0);
+        let duration = o.duration.unwrap_or(e1 - e0);
+        if !(offset.is_finite() && duration.is_finite() && duration >= 0.0) {
+            return Err(Error::Other(format!(
+                "time offset {offset} / duration {duration}: must be finite, duration ≥ 0"
+            )));
+        }
+        Ok(TimeMap {
+            offset,
+            duration,
+            given: o.time_offset.is_some() && o.duration.is_some(),
+        })
+    }
+
+    pub fn seconds(&self, normalised: f64) -> f64 {
+        self.offset + normalised * self.duration
+    }
+
+    /// The warning to give when `n` frames were placed by a guessed map (none if given).
+    pub fn warning(&self, n: usize, events: &EventStream) -> Option<String> {
+        let (e0, e1) = span(events);
+        (n > 0 && !self.given).then(|| {
+            format!(
+                "{n} frames have only a normalised time: placed on the events' span {e0} … {e1} s \
+                 (pass --time-offset and --duration if the frames span another interval)"
+            )
+        })
+    }
+}
+
+fn span(events: &EventStream) -> (f64, f64) {
+    (
+        events.t.first().copied().unwrap_or(0.0),
+        events.t.last().copied().unwrap_or(0.0),
+    )
+}
