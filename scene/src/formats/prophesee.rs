@@ -5,7 +5,11 @@
 //! recent versions, else by the first line that does not start with `%`), then the
 //! words of the encoding, little-endian. The header names the encoding (`% evt 2.0`,
 //! `% evt 3.0`, or `% format EVT2` / `% format EVT3;height=H;width=W`) and the sensor
-//! (`% geometry WxH`, or the `width`/`height` of the format line).
+//! (`% geometry WxH`, or the `width`/`height` of the format line; older Metavision
+//! files name only the HAL plugin, whose sensor is known: see `sensor_of_plugin`).
+//! Checked once against two real Metavision recordings (an EVT 2.0 Gen3 file, 539 481
+//! events, and an EVT 3.0 Gen4.1 file with vectors, 219 596 events; BENCHMARKS.md,
+//! "Real .raw files"); they are not kept in the repository (their licence).
 //!
 //! **EVT 2.0**: 32-bit words, type in bits 31..28. `CD_OFF` (0x0) / `CD_ON` (0x1):
 //! timestamp LSBs in 27..22, x in 21..11, y in 10..0; `EVT_TIME_HIGH` (0x8): the 28
@@ -59,6 +63,7 @@ fn parse_header(bytes: &[u8]) -> std::result::Result<RawHeader, String> {
         data_start: 0,
     };
     let (mut w, mut ht) = (None, None);
+    let mut plugin = None;
     let mut pos = 0;
     while pos < bytes.len() && bytes[pos] == b'%' {
         let end = bytes[pos..]
@@ -103,6 +108,7 @@ fn parse_header(bytes: &[u8]) -> std::result::Result<RawHeader, String> {
                     }
                 }
             }
+            "plugin_name" => plugin = Some(value.to_string()),
             "geometry" => {
                 let (a, b) = value
                     .split_once('x')
@@ -115,8 +121,23 @@ fn parse_header(bytes: &[u8]) -> std::result::Result<RawHeader, String> {
     if let (None, Some(w), Some(ht)) = (h.sensor, w, ht) {
         h.sensor = Some((w, ht));
     }
+    if h.sensor.is_none() {
+        h.sensor = plugin.as_deref().and_then(sensor_of_plugin);
+    }
     h.data_start = pos;
     Ok(h)
+}
+
+/// The sensor of a Prophesee HAL plugin, for older files whose header names only the
+/// plugin (`% plugin_name hal_plugin_gen41_evk3`): Gen3 / Gen3.1 are VGA (640×480),
+/// Gen4 / Gen4.1 and the IMX636 are HD (1280×720). Unknown plugins give `None`.
+fn sensor_of_plugin(name: &str) -> Option<(u32, u32)> {
+    let chip = name.strip_prefix("hal_plugin_")?.split('_').next()?;
+    match chip {
+        "gen3" | "gen31" => Some((640, 480)),
+        "gen4" | "gen41" | "imx636" => Some((1280, 720)),
+        _ => None,
+    }
 }
 
 fn dimension(v: &str) -> std::result::Result<u32, String> {
@@ -352,6 +373,19 @@ mod tests {
         assert_eq!(h.encoding, Some(RawEncoding::Evt3));
         assert_eq!(h.sensor, Some((1280, 720)));
         assert_eq!(h.data_start, 58);
+        // Headers of real files that name only the plugin (Metavision 2020 recordings).
+        let h = parse_header(
+            b"% Date 2020-09-25 07:48:29\n% evt 3.0\n% firmware_version 3.2.3\n\
+              % integrator_name Prophesee\n% plugin_name hal_plugin_gen41_evk3\n\x00\x80",
+        )
+        .unwrap();
+        assert_eq!((h.encoding, h.sensor), (Some(RawEncoding::Evt3), Some((1280, 720))));
+        let h = parse_header(b"% plugin_name hal_plugin_gen3_fx3\n% evt 2.0\n\x00").unwrap();
+        assert_eq!(h.sensor, Some((640, 480)));
+        let h = parse_header(b"% plugin_name hal_plugin_gen3_fx3\n% geometry 320x240\n\x00");
+        assert_eq!(h.unwrap().sensor, Some((320, 240)), "the geometry line wins");
+        let h = parse_header(b"% plugin_name hal_plugin_sony_x\n% evt 2.0\n\x00").unwrap();
+        assert_eq!(h.sensor, None);
         // Older files: `% evt` and `% geometry`, no `% end`.
         let h = parse_header(b"% evt 2.0\n% geometry 640x480\n\x01\x02").unwrap();
         assert_eq!(
