@@ -3,7 +3,7 @@
 //!
 //! ```text
 //! SRC/images_corrected/NNNNNN.png   frames (or SRC/images/), sorted by name
-//! SRC/images_corrected/timestamp.txt one timestamp per frame, seconds
+//! SRC/images_corrected/timestamp.txt one timestamp per frame, seconds (or µs: detected)
 //! SRC/events_aligned/NNNNNN.npz     events per frame interval (or SRC/events/), sorted
 //!                                   by name: x, y stored ×32, t in µs, p
 //! ```
@@ -56,6 +56,23 @@ fn files(dir: &Path, ext: &str) -> Result<Vec<PathBuf>> {
     Ok(v)
 }
 
+/// The unit of `timestamp.txt` in seconds: 1 (seconds), or 1e-6 when the values read as
+/// microseconds overlap the events' time span better (loaders of the dataset compare
+/// frame timestamps with the npz `t` directly, so files in µs exist). Overlap is the
+/// intersection over union of the two spans.
+fn timestamp_unit(times: &[f64], events: &EventStream) -> f64 {
+    let (Some(&e0), Some(&e1)) = (events.t.first(), events.t.last()) else {
+        return 1.0;
+    };
+    let score = |unit: f64| {
+        let (f0, f1) = (times[0] * unit, times[times.len() - 1] * unit);
+        let inter = (f1.min(e1) - f0.max(e0)).max(0.0);
+        let union = f1.max(e1) - f0.min(e0);
+        if union > 0.0 { inter / union } else { 1.0 }
+    };
+    if score(1e-6) > score(1.0) { 1e-6 } else { 1.0 }
+}
+
 /// Read an HS-ERGB sequence folder.
 pub fn read_hsergb(src: &Path, calib: Option<&Path>) -> Result<Recording> {
     let img_dir = find_dir(src, &["images_corrected", "images"])?;
@@ -92,8 +109,8 @@ pub fn read_hsergb(src: &Path, calib: Option<&Path>) -> Result<Recording> {
     if npz.is_empty() {
         return Err(Error::invalid(&ev_dir, "no .npz event files"));
     }
-    let mut outside = 0;
-    for (k, p) in npz.iter().enumerate() {
+    let mut spans = Vec::with_capacity(npz.len());
+    for p in &npz {
         let part = read_npz(p, &opts)?;
         if let (Some(&a), Some(&b)) = (part.t.first(), part.t.last()) {
             if events.t.last().is_some_and(|&l| a < l) {
@@ -102,21 +119,40 @@ pub fn read_hsergb(src: &Path, calib: Option<&Path>) -> Result<Recording> {
                     format!("events start at {a} s, before the previous file's last event"),
                 ));
             }
-            // File k should hold the events between frames k and k+1.
-            let lo = times.get(k).copied().unwrap_or(f64::NEG_INFINITY);
-            let hi = times.get(k + 1).copied().unwrap_or(f64::INFINITY);
-            if a < lo - (hi - lo) || b > hi + (hi - lo) {
-                outside += 1;
-            }
+            spans.push(Some((a, b)));
+        } else {
+            spans.push(None);
         }
         events.t.extend_from_slice(&part.t);
         events.x.extend_from_slice(&part.x);
         events.y.extend_from_slice(&part.y);
         events.p.extend_from_slice(&part.p);
     }
+    let unit = timestamp_unit(&times, &events);
+    let times: Vec<f64> = times.iter().map(|t| t * unit).collect();
+    if unit != 1.0 {
+        warnings.push(format!(
+            "timestamp.txt read as microseconds: its values span the events' µs clock \
+             ({} … {} s), not seconds",
+            times[0],
+            times[times.len() - 1]
+        ));
+    }
+    // File k should hold the events between frames k and k+1.
+    let outside = spans
+        .iter()
+        .enumerate()
+        .filter(|(k, span)| {
+            span.is_some_and(|(a, b)| {
+                let lo = times.get(*k).copied().unwrap_or(f64::NEG_INFINITY);
+                let hi = times.get(k + 1).copied().unwrap_or(f64::INFINITY);
+                a < lo - (hi - lo) || b > hi + (hi - lo)
+            })
+        })
+        .count();
     if outside > 0 {
         warnings.push(format!(
-            "{outside} of {} event files lie outside their frame interval: are timestamp.txt (s) and the npz t (µs) on one clock?",
+            "{outside} of {} event files lie outside their frame interval: are timestamp.txt and the npz t (µs) on one clock?",
             npz.len()
         ));
     }

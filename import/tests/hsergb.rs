@@ -130,3 +130,40 @@ fn bad_hsergb_folders_are_named() {
     .to_string();
     assert!(e.contains("events_aligned"), "{e}");
 }
+
+/// Loaders of HS-ERGB compare `timestamp.txt` with the npz `t` directly, so a
+/// timestamp file in µs is read as µs (detected from the events' span, with a warning).
+#[test]
+fn timestamps_in_microseconds_are_detected() {
+    let dir = tempfile::tempdir().unwrap();
+    let (orig, _) = write_scene(dir.path(), "synth", &tiny_static_config());
+    let src = dir.path().join("hsergb");
+    export_hsergb(&orig, &src).unwrap();
+    let ts = src.join("images_corrected/timestamp.txt");
+    let us: String = std::fs::read_to_string(&ts)
+        .unwrap()
+        .lines()
+        .map(|l| format!("{}\n", l.trim().parse::<f64>().unwrap() * 1e6))
+        .collect();
+    std::fs::write(&ts, us).unwrap();
+    let opts = ImportOptions {
+        test_every: Some(2),
+        calib: Some(src.join("calib.txt")),
+        ..Default::default()
+    };
+    let out = dir.path().join("back");
+    let s = import(Layout::Hsergb, &src, &opts, &out).unwrap();
+    assert_eq!(s.warnings.len(), 1, "{:?}", s.warnings);
+    assert!(s.warnings[0].contains("microseconds"), "{:?}", s.warnings);
+    let back = Scene::open(&out).unwrap();
+    for (a, b) in [(&orig.train, &back.train), (&orig.test, &back.test)] {
+        for (fa, fb) in a.frames.iter().zip(&b.frames) {
+            assert!(
+                (fa.timestamp - fb.timestamp).abs() < 1e-12,
+                "{} vs {}",
+                fa.timestamp,
+                fb.timestamp
+            );
+        }
+    }
+}

@@ -379,11 +379,18 @@ mod tests {
               % integrator_name Prophesee\n% plugin_name hal_plugin_gen41_evk3\n\x00\x80",
         )
         .unwrap();
-        assert_eq!((h.encoding, h.sensor), (Some(RawEncoding::Evt3), Some((1280, 720))));
+        assert_eq!(
+            (h.encoding, h.sensor),
+            (Some(RawEncoding::Evt3), Some((1280, 720)))
+        );
         let h = parse_header(b"% plugin_name hal_plugin_gen3_fx3\n% evt 2.0\n\x00").unwrap();
         assert_eq!(h.sensor, Some((640, 480)));
         let h = parse_header(b"% plugin_name hal_plugin_gen3_fx3\n% geometry 320x240\n\x00");
-        assert_eq!(h.unwrap().sensor, Some((320, 240)), "the geometry line wins");
+        assert_eq!(
+            h.unwrap().sensor,
+            Some((320, 240)),
+            "the geometry line wins"
+        );
         let h = parse_header(b"% plugin_name hal_plugin_sony_x\n% evt 2.0\n\x00").unwrap();
         assert_eq!(h.sensor, None);
         // Older files: `% evt` and `% geometry`, no `% end`.
