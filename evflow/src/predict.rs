@@ -126,6 +126,50 @@ pub struct WindowEval {
     pub gt_mean_err_px: Option<f64>,
     /// Fraction of events whose displacement error exceeds 3 px.
     pub outliers: Option<f64>,
+    /// Events scored against ground truth (the weight of this window in the means).
+    #[serde(default)]
+    pub gt_events: usize,
+}
+
+/// Sums of per-event flow errors against ground truth, matching events by their index
+/// into the scene's stream; noise events (ground truth 0 by convention) are left out.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct GtErrorSums {
+    /// Σ |flow − gt|, px/s.
+    pub err_px_s: f64,
+    /// Σ |flow − gt| · window span, px.
+    pub err_px: f64,
+    /// Events whose error over the window exceeds 3 px.
+    pub outliers: usize,
+    /// Events scored.
+    pub events: usize,
+}
+
+impl GtErrorSums {
+    /// Add the errors of `flow` (one window, `span` seconds long).
+    pub fn add(&mut self, flow: &EvFlow, gt: &synth::gt::EventFlowGt, span: f64) {
+        for (k, &idx) in flow.index.iter().enumerate() {
+            let Ok(j) = gt.index.binary_search(&idx) else {
+                continue;
+            };
+            if gt.object[j] == synth::gt::NOISE_ID {
+                continue;
+            }
+            let du = flow.u[k] as f64 - gt.u[j] as f64;
+            let dv = flow.v[k] as f64 - gt.v[j] as f64;
+            let err = du.hypot(dv);
+            self.err_px_s += err;
+            self.err_px += err * span;
+            self.outliers += usize::from(err * span > 3.0);
+            self.events += 1;
+        }
+    }
+
+    /// Means per event: (px/s, px, outlier fraction); None when no event was scored.
+    pub fn means(&self) -> Option<(f64, f64, f64)> {
+        let n = self.events as f64;
+        (self.events > 0).then(|| (self.err_px_s / n, self.err_px / n, self.outliers as f64 / n))
+    }
 }
 
 /// Variance of the IWE at the window centre with the dense flow ÷ with zero flow.
@@ -170,29 +214,34 @@ pub fn eval_window(
     let Some(gt) = gt else {
         return e;
     };
-    let span = w.duration();
-    let (mut sum, mut sum_px, mut out, mut n) = (0.0, 0.0, 0usize, 0usize);
-    for (k, &idx) in flow.index.iter().enumerate() {
-        let Ok(j) = gt.index.binary_search(&idx) else {
-            continue;
-        };
-        if gt.object[j] == synth::gt::NOISE_ID {
-            continue;
-        }
-        let du = (flow.u[k] - gt.u[j]) as f64;
-        let dv = (flow.v[k] - gt.v[j]) as f64;
-        let err = (du * du + dv * dv).sqrt();
-        sum += err;
-        sum_px += err * span;
-        out += usize::from(err * span > 3.0);
-        n += 1;
-    }
-    if n > 0 {
-        e.gt_mean_err_px_s = Some(sum / n as f64);
-        e.gt_mean_err_px = Some(sum_px / n as f64);
-        e.outliers = Some(out as f64 / n as f64);
+    let mut sums = GtErrorSums::default();
+    sums.add(flow, gt, w.duration());
+    if let Some((px_s, px, out)) = sums.means() {
+        e.gt_mean_err_px_s = Some(px_s);
+        e.gt_mean_err_px = Some(px);
+        e.outliers = Some(out);
+        e.gt_events = sums.events;
     }
     e
+}
+
+/// Per-event means of the windows' ground-truth errors (px/s, px, outlier fraction), all
+/// windows pooled: each window's mean weighted by its scored events.
+pub fn pooled_means(eval: &[WindowEval]) -> (Option<f64>, Option<f64>, Option<f64>) {
+    let n: usize = eval.iter().map(|e| e.gt_events).sum();
+    let pooled = |f: &dyn Fn(&WindowEval) -> Option<f64>| {
+        (n > 0).then(|| {
+            eval.iter()
+                .filter_map(|e| f(e).map(|v| v * e.gt_events as f64))
+                .sum::<f64>()
+                / n as f64
+        })
+    };
+    (
+        pooled(&|e| e.gt_mean_err_px_s),
+        pooled(&|e| e.gt_mean_err_px),
+        pooled(&|e| e.outliers),
+    )
 }
 
 /// What prediction wrote.
@@ -203,7 +252,8 @@ pub struct PredictReport {
     pub events: usize,
     pub files: Vec<PathBuf>,
     pub eval: Vec<WindowEval>,
-    /// Mean over windows with ground truth (px/s); `None` without ground truth.
+    /// Mean over the events with ground truth, all windows pooled (px/s); `None`
+    /// without ground truth. `degs eval` computes the same figure from the files.
     pub mean_err_px_s: Option<f64>,
     pub mean_err_px: Option<f64>,
     pub outliers: Option<f64>,
@@ -266,9 +316,63 @@ pub fn predict_all(
         let v: Vec<f64> = r.eval.iter().filter_map(f).collect();
         (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
     };
-    r.mean_err_px_s = mean(&|e| e.gt_mean_err_px_s);
-    r.mean_err_px = mean(&|e| e.gt_mean_err_px);
-    r.outliers = mean(&|e| e.outliers);
+    (r.mean_err_px_s, r.mean_err_px, r.outliers) = pooled_means(&r.eval);
     r.warp_gain_mean = mean(&|e| Some(e.warp_gain)).unwrap_or(1.0);
     Ok(r)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two windows with 1 and 3 scored events: the report's mean is the mean over the
+    /// 4 events (what `degs eval` computes from the files), not the mean of 2 means.
+    #[test]
+    fn flow_errors_are_pooled_over_events() {
+        let gt = synth::gt::EventFlowGt {
+            width: 8,
+            height: 8,
+            index: vec![0, 1, 2, 3, 4],
+            u: vec![0.0; 5],
+            v: vec![0.0; 5],
+            object: vec![1, 1, 1, 1, synth::gt::NOISE_ID],
+        };
+        let flow = |index: Vec<u64>, u: Vec<f32>| EvFlow {
+            width: 8,
+            height: 8,
+            t_a: 0.0,
+            t_b: 0.5,
+            t_ref: 0.0,
+            source_hash: [0; 32],
+            v: vec![0.0; index.len()],
+            index,
+            u,
+        };
+        // Window A: event 0 off by 10 px/s. Window B: events 1..3 off by 2 px/s, and a
+        // noise event (4) that is not scored however wrong.
+        let a = flow(vec![0], vec![10.0]);
+        let b = flow(vec![1, 2, 3, 4], vec![2.0, -2.0, 2.0, 99.0]);
+        let mut all = GtErrorSums::default();
+        let mut evals = Vec::new();
+        for f in [&a, &b] {
+            let mut one = GtErrorSums::default();
+            one.add(f, &gt, 0.5);
+            all.add(f, &gt, 0.5);
+            let (px_s, px, out) = one.means().unwrap();
+            evals.push(WindowEval {
+                gt_mean_err_px_s: Some(px_s),
+                gt_mean_err_px: Some(px),
+                outliers: Some(out),
+                gt_events: one.events,
+                ..Default::default()
+            });
+        }
+        assert_eq!(all.events, 4);
+        let (px_s, px, out) = pooled_means(&evals);
+        assert!((px_s.unwrap() - 4.0).abs() < 1e-12, "{px_s:?}"); // (10 + 3·2) / 4
+        assert_eq!(all.means().unwrap().0, 4.0);
+        assert!((px.unwrap() - 2.0).abs() < 1e-12);
+        assert!((out.unwrap() - 0.25).abs() < 1e-12); // only the 5 px error of A
+        assert_eq!(pooled_means(&[]), (None, None, None));
+    }
 }

@@ -220,7 +220,7 @@ pub fn flow_error(flow_dir: &Path, gt_path: &Path) -> Result<Option<FlowError>> 
         .filter(|p| p.extension().is_some_and(|e| e == "evflow"))
         .collect();
     files.sort();
-    let (mut sum, mut sum_px, mut out, mut n) = (0.0f64, 0.0f64, 0usize, 0usize);
+    let mut sums = evflow::predict::GtErrorSums::default();
     for f in &files {
         let flow = evflow::flowfile::read_evflow(f)?;
         if (flow.width, flow.height) != (gt.width, gt.height) {
@@ -234,28 +234,13 @@ pub fn flow_error(flow_dir: &Path, gt_path: &Path) -> Result<Option<FlowError>> 
                 gt.height
             );
         }
-        let span = flow.t_b - flow.t_a;
-        for (k, idx) in flow.index.iter().enumerate() {
-            let Ok(j) = gt.index.binary_search(idx) else {
-                continue;
-            };
-            if gt.object[j] == synth::gt::NOISE_ID {
-                continue;
-            }
-            let du = flow.u[k] as f64 - gt.u[j] as f64;
-            let dv = flow.v[k] as f64 - gt.v[j] as f64;
-            let err = du.hypot(dv);
-            sum += err;
-            sum_px += err * span;
-            out += usize::from(err * span > 3.0);
-            n += 1;
-        }
+        sums.add(&flow, &gt, flow.t_b - flow.t_a);
     }
-    Ok((n > 0).then(|| FlowError {
-        epe_px_s: sum / n as f64,
-        err_px: Some(sum_px / n as f64),
-        outliers: Some(out as f64 / n as f64),
-        events: n,
+    Ok(sums.means().map(|(epe, px, out)| FlowError {
+        epe_px_s: epe,
+        err_px: Some(px),
+        outliers: Some(out),
+        events: sums.events,
     }))
 }
 
