@@ -152,10 +152,9 @@ impl Inputs {
         let (flow_u, flow_v, flows_out_of_range) =
             read_flows(flows, events.len(), s.motion.flow_range_px)?;
         let model = Model::load(model_dir)?;
-        let settings_file = model_dir.join("settings.toml");
-        let text =
-            std::fs::read_to_string(&settings_file).map_err(|e| Error::io(&settings_file, e))?;
-        let warmup: TrainSettings = scene::cli::settings::parse(&text, &settings_file)?;
+        // The warm-up's resolved settings, validated like the warm-up's own input.
+        let warmup: TrainSettings =
+            scene::cli::settings::read_file(&model_dir.join("settings.toml"))?;
         let assoc_file = assoc_dir.join("assoc.bin");
         // Counts checked against the model before the reader allocates for them.
         let frames = assoc::read_assoc_for(&assoc_file, views.len(), model.splats.len())?;

@@ -20,6 +20,15 @@ pub fn parse<S: Settings>(text: &str, origin: &Path) -> Result<S> {
     toml::from_str(text).map_err(|e| Error::invalid(origin, e.message().trim()))
 }
 
+/// Settings read from the file `path` (e.g. the resolved `settings.toml` an earlier
+/// stage wrote beside its output), then [`Settings::validate`]; errors name the file.
+pub fn read_file<S: Settings>(path: &Path) -> Result<S> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let s: S = parse(&text, path)?;
+    s.validate().map_err(|e| Error::invalid(path, e))?;
+    Ok(s)
+}
+
 /// Settings from a TOML table (a file's keys with `--set key=value` overrides merged
 /// in), then [`Settings::validate`]; errors name `origin`.
 pub fn from_table<S: Settings>(table: toml::Table, origin: &Path) -> Result<S> {
@@ -158,5 +167,22 @@ mod tests {
         assert!(e.to_string().starts_with("d.toml: ") && e.to_string().contains("stepz"));
         let e = from_table::<Demo>("steps = 0".parse().unwrap(), origin).unwrap_err();
         assert_eq!(e.to_string(), "d.toml: steps must be at least 1");
+    }
+
+    #[test]
+    fn read_file_validates_and_names_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("settings.toml");
+        std::fs::write(&p, "steps = 5\nrate = 0.5\n").unwrap();
+        let s: Demo = read_file(&p).unwrap();
+        assert_eq!((s.steps, s.rate), (5, 0.5));
+        std::fs::write(&p, "steps = 0\n").unwrap();
+        let e = read_file::<Demo>(&p).unwrap_err().to_string();
+        assert_eq!(e, format!("{}: steps must be at least 1", p.display()));
+        std::fs::write(&p, "steps = \"x\"\n").unwrap();
+        let e = read_file::<Demo>(&p).unwrap_err().to_string();
+        assert!(e.starts_with(&p.display().to_string()), "{e}");
+        let e = read_file::<Demo>(&dir.path().join("none.toml")).unwrap_err();
+        assert!(e.to_string().contains("none.toml"), "{e}");
     }
 }
