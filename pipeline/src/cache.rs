@@ -282,6 +282,14 @@ pub fn verify(dir: &Path, full: bool) -> Verdict {
         return Verdict::Unsealed;
     };
     for f in &m.files {
+        // A manifest lists files inside its entry: a path that leaves it (absolute, `..`)
+        // is never opened.
+        let inside = Path::new(&f.path)
+            .components()
+            .all(|c| matches!(c, std::path::Component::Normal(_)));
+        if !inside || f.path.is_empty() {
+            return Verdict::Tampered(format!("{:?} is not a path inside the entry", f.path));
+        }
         let p = dir.join(&f.path);
         let Ok(meta) = fs::metadata(&p) else {
             return Verdict::Tampered(format!("{} is missing", f.path));
@@ -365,6 +373,32 @@ mod tests {
         fs::remove_file(d.path().join("sub/b.txt")).unwrap();
         fs::write(&p, b"hello").unwrap();
         assert!(matches!(verify(d.path(), false), Verdict::Tampered(m) if m.contains("missing")));
+    }
+
+    /// A manifest naming files outside its entry (a hostile or mangled cache) is refused
+    /// before anything is opened: the outside file exists and has the listed size.
+    #[test]
+    fn manifest_paths_outside_the_entry_are_tampering() {
+        let root = tempfile::tempdir().unwrap();
+        let entry = root.path().join("entry");
+        fs::create_dir_all(&entry).unwrap();
+        fs::write(entry.join("a.bin"), b"hello").unwrap();
+        fs::write(root.path().join("secret"), b"hello").unwrap();
+        seal(&entry, "s", "k", 1.0, None).unwrap();
+        let good = fs::read_to_string(entry.join(MANIFEST)).unwrap();
+        let outside = root.path().join("secret").display().to_string();
+        for bad in ["../secret", outside.as_str(), "", "./a.bin/../../secret"] {
+            let text = good.replace("\"a.bin\"", &serde_json::to_string(bad).unwrap());
+            assert_ne!(text, good);
+            fs::write(entry.join(MANIFEST), &text).unwrap();
+            for full in [false, true] {
+                let v = verify(&entry, full);
+                assert!(
+                    matches!(&v, Verdict::Tampered(m) if m.contains("not a path inside")),
+                    "{bad:?}: {v:?}"
+                );
+            }
+        }
     }
 
     #[test]
