@@ -32,8 +32,8 @@
 //! [`planar_linear`] convert frames stored as 8-bit sRGB before the model is applied.
 
 use crate::event_counts::IntervalCounts;
-use crate::real::Real;
 use rayon::prelude::*;
+use scene::real::Real;
 use scene::{EventSlice, Image};
 use serde::{Deserialize, Serialize};
 

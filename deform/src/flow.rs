@@ -31,8 +31,8 @@
 //! Sums over points (the camera gradients) are added per fixed chunk in order, so the
 //! results do not depend on the number of threads.
 
-use crate::real::Real;
 use rayon::prelude::*;
+use scene::real::Real;
 use scene::{Intrinsics, Pose};
 
 /// Points per rayon task (the kernels are a few dozen flops per point).

@@ -5,7 +5,7 @@
 //!
 //! **What is here now: the math kernels**, each with a hand-written backward checked
 //! against central finite differences in `f64` (the kernels are generic over
-//! [`real::Real`], i.e. `f32` for training and `f64` for the checks):
+//! [`scene::real::Real`], i.e. `f32` for training and `f64` for the checks):
 //!
 //! | module | computes |
 //! |---|---|
@@ -50,7 +50,6 @@ pub mod lie;
 pub mod motion_loss;
 pub mod neighbours;
 pub mod posenet;
-pub mod real;
 pub mod schedule;
 pub mod settings;
 pub mod stage;

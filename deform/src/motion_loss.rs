@@ -31,8 +31,8 @@
 //! `flow::ego_flow_backward` and `flow::gaussian_flow_backward`. The flow network is
 //! frozen in this stage, so no gradient goes to `f_k`.
 
-use crate::real::Real;
 use rayon::prelude::*;
+use scene::real::Real;
 use serde::{Deserialize, Serialize};
 
 const CHUNK: usize = 2048;

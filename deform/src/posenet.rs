@@ -22,9 +22,9 @@
 //! comes from `camera_path::velocity_between_backward`.
 
 use crate::lie::{exp_so3, join, right_jacobian, split};
-use crate::real::Real;
 use glam::DVec3;
 use scene::Pose;
+use scene::real::Real;
 use serde::{Deserialize, Serialize};
 
 /// Settings of the PoseNet (serde, every field optional in files).

@@ -18,6 +18,7 @@ pub mod image_io;
 pub mod manifest;
 pub mod metrics;
 pub mod optim;
+pub mod real;
 pub mod report;
 pub mod testdata;
 pub mod testing;

@@ -4,51 +4,13 @@
 //! ("same" size, as the 3DGS/Deform-GS code). Training losses (L1, D-SSIM = 1 − SSIM)
 //! work on floats and return exact gradients.
 
+use crate::real::Real;
 use rayon::prelude::*;
-use std::ops::{Add, AddAssign, Div, Mul, Neg, Sub};
 
 pub const SSIM_WINDOW: usize = 11;
 pub const SSIM_SIGMA: f64 = 1.5;
 const C1: f64 = 0.01 * 0.01;
 const C2: f64 = 0.03 * 0.03;
-
-/// The float types SSIM and its gradient are computed in (f32 for training losses, f64
-/// for evaluation and gradient checks).
-pub trait Float:
-    Copy
-    + Send
-    + Sync
-    + Add<Output = Self>
-    + Sub<Output = Self>
-    + Mul<Output = Self>
-    + Div<Output = Self>
-    + Neg<Output = Self>
-    + AddAssign
-{
-    const ZERO: Self;
-    fn from_f64(v: f64) -> Self;
-    fn to_f64(self) -> f64;
-}
-
-impl Float for f32 {
-    const ZERO: Self = 0.0;
-    fn from_f64(v: f64) -> Self {
-        v as f32
-    }
-    fn to_f64(self) -> f64 {
-        self as f64
-    }
-}
-
-impl Float for f64 {
-    const ZERO: Self = 0.0;
-    fn from_f64(v: f64) -> Self {
-        v
-    }
-    fn to_f64(self) -> f64 {
-        self
-    }
-}
 
 /// Round to the 8-bit value a PNG would store, back in [0, 1].
 pub fn quantize_u8(v: f32) -> f32 {
@@ -97,7 +59,7 @@ pub fn ssim_u8(a: &[f32], b: &[f32], width: usize, height: usize) -> f64 {
 }
 
 /// Normalised 1-D Gaussian window.
-fn window<T: Float>() -> [T; SSIM_WINDOW] {
+fn window<T: Real>() -> [T; SSIM_WINDOW] {
     let c = (SSIM_WINDOW / 2) as f64;
     let raw: [f64; SSIM_WINDOW] =
         std::array::from_fn(|i| (-(i as f64 - c).powi(2) / (2.0 * SSIM_SIGMA * SSIM_SIGMA)).exp());
@@ -106,7 +68,7 @@ fn window<T: Float>() -> [T; SSIM_WINDOW] {
 }
 
 /// Separable zero-padded Gaussian blur of each `width × height` plane (self-adjoint).
-fn blur<T: Float>(src: &[T], width: usize, height: usize) -> Vec<T> {
+fn blur<T: Real>(src: &[T], width: usize, height: usize) -> Vec<T> {
     let k = window::<T>();
     let r = SSIM_WINDOW as isize / 2;
     let plane = width * height;
@@ -145,7 +107,7 @@ fn blur<T: Float>(src: &[T], width: usize, height: usize) -> Vec<T> {
 }
 
 /// Mean SSIM over all planes and pixels and, if asked, its gradient w.r.t. `x`.
-pub fn ssim_and_grad<T: Float>(
+pub fn ssim_and_grad<T: Real>(
     x: &[T],
     y: &[T],
     width: usize,
@@ -201,7 +163,7 @@ pub fn ssim_and_grad<T: Float>(
 }
 
 /// D-SSIM loss `1 − SSIM(render, target)` and its gradient w.r.t. the render.
-pub fn dssim_loss<T: Float>(
+pub fn dssim_loss<T: Real>(
     render: &[T],
     target: &[T],
     width: usize,

@@ -1,58 +1,8 @@
 //! Scalar trait and a strided GEMM wrapper over the `gemm` crate (f32 for training,
 //! f64 for the finite-difference tests).
 
-use std::ops::{Add, AddAssign, Div, Mul, Neg, Sub};
-
-/// Floating-point scalar the MLP is generic over.
-pub trait Real:
-    Copy
-    + Send
-    + Sync
-    + Default
-    + PartialOrd
-    + std::fmt::Debug
-    + 'static
-    + Add<Output = Self>
-    + Sub<Output = Self>
-    + Mul<Output = Self>
-    + Div<Output = Self>
-    + Neg<Output = Self>
-    + AddAssign
-{
-    const ZERO: Self;
-    const ONE: Self;
-    fn from_f64(v: f64) -> Self;
-    fn to_f64(self) -> f64;
-    fn sin(self) -> Self;
-    fn cos(self) -> Self;
-    fn sin_cos(self) -> (Self, Self);
-}
-
-macro_rules! impl_real {
-    ($t:ty) => {
-        impl Real for $t {
-            const ZERO: Self = 0.0;
-            const ONE: Self = 1.0;
-            fn from_f64(v: f64) -> Self {
-                v as $t
-            }
-            fn to_f64(self) -> f64 {
-                self as f64
-            }
-            fn sin(self) -> Self {
-                <$t>::sin(self)
-            }
-            fn cos(self) -> Self {
-                <$t>::cos(self)
-            }
-            fn sin_cos(self) -> (Self, Self) {
-                <$t>::sin_cos(self)
-            }
-        }
-    };
-}
-impl_real!(f32);
-impl_real!(f64);
+/// The scalar the MLP is generic over: the workspace's float trait.
+pub use scene::real::Real;
 
 /// A row-major matrix view: `rows × cols`, element (r, c) at `r * stride + c`, or the
 /// transpose of one when `transposed`.

@@ -1,11 +1,12 @@
-//! A small float trait so every kernel runs in `f32` (training) and `f64` (the
-//! finite-difference checks of the tests) from one source.
+//! The one float trait of the workspace, so every kernel (rasterizer losses, SSIM, the
+//! deformation MLP, the joint training's losses and PoseNet) runs in `f32` (training)
+//! and `f64` (evaluation and the finite-difference checks of the tests) from one source.
 
 use std::fmt::Debug;
 use std::iter::Sum;
 use std::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign, Neg, Sub, SubAssign};
 
-/// The float operations the kernels of this crate use; implemented for `f32` and `f64`.
+/// The float operations the kernels use; implemented for `f32` and `f64`.
 pub trait Real:
     Copy
     + Debug
@@ -36,6 +37,9 @@ pub trait Real:
     fn abs(self) -> Self;
     fn sin(self) -> Self;
     fn cos(self) -> Self;
+    fn sin_cos(self) -> (Self, Self) {
+        (self.sin(), self.cos())
+    }
     fn is_finite(self) -> bool;
     /// `+1`, `−1`, or `0` at zero (the subgradient of `|x|` the losses use).
     fn sign0(self) -> Self {
@@ -95,6 +99,10 @@ macro_rules! impl_real {
             #[inline(always)]
             fn cos(self) -> Self {
                 <$t>::cos(self)
+            }
+            #[inline(always)]
+            fn sin_cos(self) -> (Self, Self) {
+                <$t>::sin_cos(self)
             }
             #[inline(always)]
             fn is_finite(self) -> bool {
