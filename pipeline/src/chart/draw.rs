@@ -325,7 +325,11 @@ pub(crate) fn linear_tick(v: f64, span: f64) -> String {
 }
 
 /// Padded range of `values` (a unit either side when they are all equal).
-pub(crate) fn range(values: impl Iterator<Item = f64>, pad: f64, clamp_at_zero: bool) -> (f64, f64) {
+pub(crate) fn range(
+    values: impl Iterator<Item = f64>,
+    pad: f64,
+    clamp_at_zero: bool,
+) -> (f64, f64) {
     let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
         (a.min(v), b.max(v))
     });

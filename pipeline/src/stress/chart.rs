@@ -3,7 +3,7 @@
 //! spacing in increasing order (they span decades and include 0), ticked with their
 //! values; the clean scene is the stress's neutral level.
 
-use super::report::StressRecord;
+use super::report::{StressRecord, StressResult};
 use super::variants::StressKind;
 use crate::chart::Method;
 use crate::chart::draw::{
@@ -14,6 +14,9 @@ use anyhow::Result;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
+
+/// A figure of a result (None where it has none).
+type Figure = dyn Fn(&StressResult) -> Option<f64>;
 
 /// One line: its legend label, style and `(level index, PSNR)` points.
 struct Line {
@@ -52,15 +55,15 @@ fn build(r: &StressRecord, kind: StressKind) -> Option<StressChart> {
         return None;
     }
     let at = |l: f64| levels.iter().position(|x| *x == l).unwrap_or(0) as f64;
-    let curve = |c: &[(f64, &super::report::StressResult)], f: &dyn Fn(&super::report::StressResult) -> Option<f64>| {
+    let curve = |c: &[(f64, &StressResult)], f: &Figure| {
         c.iter()
             .filter_map(|(l, x)| f(x).filter(|v| v.is_finite()).map(|v| (at(*l), v)))
             .collect::<Vec<_>>()
     };
     let mut lines = Vec::new();
     for (method, c, m) in [
-        ("DEGS (events)", &degs, Method::Degs),
         ("RGB-only (γ1 = γ2 = 0)", &rgb, Method::RgbJoint),
+        ("DEGS (events)", &degs, Method::Degs),
     ] {
         let (color, marker) = method_style(m);
         lines.push(Line {
@@ -71,7 +74,7 @@ fn build(r: &StressRecord, kind: StressKind) -> Option<StressChart> {
             points: curve(c, &|x| x.psnr),
         });
     }
-    let baselines: [(&str, &dyn Fn(&super::report::StressResult) -> Option<f64>); 3] = [
+    let baselines: [(&str, &Figure); 3] = [
         ("nearest frame", &|x| x.nearest_psnr),
         ("linear blend", &|x| x.blend_psnr),
         ("event pseudo image", &|x| x.events_psnr),

@@ -48,12 +48,18 @@ pub fn transformed_scene(
         toml::Value::Table(tb) => crate::canon::canonical_table(&tb),
         _ => toml::Table::new(),
     };
-    let key = crate::graph::key_of(STAGE, &code_fingerprint(), &settings, &[("--scene", base_key)]);
+    let key = crate::graph::key_of(
+        STAGE,
+        &code_fingerprint(),
+        &settings,
+        &[("--scene", base_key)],
+    );
     let entry = ctx.cache.entry(STAGE, &key);
     let summary_of = |dir: &Path| -> Result<transform::TransformSummary> {
         let p = dir.join("stress.json");
         let bytes = std::fs::read(&p).with_context(|| format!("{}: cannot read", p.display()))?;
-        serde_json::from_slice(&bytes).with_context(|| format!("{}: not a transform summary", p.display()))
+        serde_json::from_slice(&bytes)
+            .with_context(|| format!("{}: not a transform summary", p.display()))
     };
     if crate::cache::read_manifest(&entry).is_some() {
         return Ok((entry.clone(), summary_of(&entry)?));
@@ -61,16 +67,28 @@ pub fn transformed_scene(
     let started = std::time::Instant::now();
     let dir = scene::atomic::AtomicDir::new(&entry)?;
     let summary = transform::apply(base, dir.path(), t)?;
-    crate::cache::seal(dir.path(), STAGE, &key, started.elapsed().as_secs_f64(), None)?;
+    crate::cache::seal(
+        dir.path(),
+        STAGE,
+        &key,
+        started.elapsed().as_secs_f64(),
+        None,
+    )?;
     dir.commit()?;
     Ok((entry, summary))
 }
 
 /// Run the stress file; the record is also written to `runs/<name>/stress.json`.
-pub fn run(file: &StressFile, ctx: &Context, opts: &RunOptions, progress: &Progress) -> Result<StressRecord> {
+pub fn run(
+    file: &StressFile,
+    ctx: &Context,
+    opts: &RunOptions,
+    progress: &Progress,
+) -> Result<StressRecord> {
     let variants = file.variants()?;
     let out_dir = ctx.cache.run_dir(&file.name);
-    std::fs::create_dir_all(&out_dir).with_context(|| format!("{}: cannot create", out_dir.display()))?;
+    std::fs::create_dir_all(&out_dir)
+        .with_context(|| format!("{}: cannot create", out_dir.display()))?;
 
     // the clean scene first: every transform starts from it
     let clean = &variants[0];
@@ -82,7 +100,8 @@ pub fn run(file: &StressFile, ctx: &Context, opts: &RunOptions, progress: &Progr
     };
     let rec = runner::run(&clean_exps[0], ctx, &scene_only, progress)?;
     let scene_stage = &rec.stages[0];
-    let (Some(base_dir), Some(base_key)) = (scene_stage.entry.clone(), scene_stage.key.clone()) else {
+    let (Some(base_dir), Some(base_key)) = (scene_stage.entry.clone(), scene_stage.key.clone())
+    else {
         bail!("{}: the clean scene could not be made", file.file.display());
     };
     if !scene_stage.action.has_output() {
@@ -134,14 +153,23 @@ pub fn run(file: &StressFile, ctx: &Context, opts: &RunOptions, progress: &Progr
     let points: Vec<crate::sweep::Point> = exps
         .into_iter()
         .map(|(experiment, values)| crate::sweep::Point {
-            values: values.into_iter().map(|(k, v)| (k, toml::Value::String(v.as_str().unwrap_or("").into()))).collect(),
+            values: values
+                .into_iter()
+                .map(|(k, v)| (k, toml::Value::String(v.as_str().unwrap_or("").into())))
+                .collect(),
             experiment,
         })
         .collect();
     let written = crate::sweep_run::write_points(&file.name, points, ctx)?;
     let axes = vec![
-        ("variant".to_string(), variants.iter().map(|v| serde_json::json!(v.name)).collect()),
-        ("method".to_string(), METHODS.iter().map(|(m, _)| serde_json::json!(m)).collect()),
+        (
+            "variant".to_string(),
+            variants.iter().map(|v| serde_json::json!(v.name)).collect(),
+        ),
+        (
+            "method".to_string(),
+            METHODS.iter().map(|(m, _)| serde_json::json!(m)).collect(),
+        ),
     ];
     crate::sweep_run::run_experiments(&file.sweep, axes, &written, ctx, opts, progress)?;
 
@@ -186,7 +214,10 @@ pub fn run(file: &StressFile, ctx: &Context, opts: &RunOptions, progress: &Progr
         results,
     };
     scene::atomic::write_json_atomic(&out_dir.join("stress.json"), &record)?;
-    scene::atomic::write_bytes_atomic(&out_dir.join("report.md"), report::markdown(&record).as_bytes())?;
+    scene::atomic::write_bytes_atomic(
+        &out_dir.join("report.md"),
+        report::markdown(&record).as_bytes(),
+    )?;
     chart::write_charts(&record, &out_dir)?;
     Ok(record)
 }
@@ -223,7 +254,11 @@ fn result_of(
     };
     r.status = record.status.clone();
     if let Some(s) = record.stages.iter().find(|s| s.action == Action::Failed) {
-        r.error = Some(format!("{}: {}", s.stage, s.error.clone().unwrap_or_default()));
+        r.error = Some(format!(
+            "{}: {}",
+            s.stage,
+            s.error.clone().unwrap_or_default()
+        ));
         return r;
     }
     r.deform_s = record
@@ -247,14 +282,19 @@ fn result_of(
             let b = m.baselines.as_ref();
             r.nearest_psnr = keep("nearest_psnr", b.map(|b| b.nearest.psnr_mean));
             r.blend_psnr = keep("blend_psnr", b.map(|b| b.blend.psnr_mean));
-            r.events_psnr = keep("events_psnr", b.and_then(|b| b.events.as_ref()).map(|e| e.psnr_mean));
+            r.events_psnr = keep(
+                "events_psnr",
+                b.and_then(|b| b.events.as_ref()).map(|e| e.psnr_mean),
+            );
             r.total_s = keep("total_s", Some(m.total_stage_s));
             if r.train_frames.is_none() {
                 r.train_frames = record
                     .stages
                     .first()
                     .and_then(|s| s.entry.as_ref())
-                    .and_then(|d| scene::manifest::Manifest::read(d.join(scene::manifest::TRAIN_FILE)).ok())
+                    .and_then(|d| {
+                        scene::manifest::Manifest::read(d.join(scene::manifest::TRAIN_FILE)).ok()
+                    })
                     .map(|m| m.frames.len());
             }
         }

@@ -85,6 +85,13 @@ impl StressRecord {
                 _ => None,
             })
             .collect();
+        // a level equal to the clean scene's is the clean scene (one point)
+        let stressed: Vec<f64> = out
+            .iter()
+            .filter(|(_, r)| r.stress.is_some())
+            .map(|x| x.0)
+            .collect();
+        out.retain(|(l, r)| r.stress.is_some() || !stressed.contains(l));
         out.sort_by(|a, b| a.0.total_cmp(&b.0));
         out
     }
@@ -126,7 +133,10 @@ pub fn markdown(r: &StressRecord) -> String {
     s += &if bad.is_empty() {
         "**NaN check:** no figure is NaN or infinite.\n\n".to_string()
     } else {
-        format!("**NaN check: NON-FINITE figures in** {}\n\n", bad.join("; "))
+        format!(
+            "**NaN check: NON-FINITE figures in** {}\n\n",
+            bad.join("; ")
+        )
     };
     for kind in r.stresses() {
         s += &format!("## {} — {}\n\n", kind.key(), kind.axis_label());
@@ -139,9 +149,17 @@ pub fn markdown(r: &StressRecord) -> String {
               |---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
         let degs = r.curve(kind, "degs");
         let rgb = r.curve(kind, "rgb");
+        let neutral = r
+            .neutral_levels
+            .iter()
+            .find(|(k, _)| *k == kind)
+            .map(|x| x.1);
         let mut below = Vec::new();
         for (level, d) in &degs {
-            let g = rgb.iter().find(|(_, g)| g.variant == d.variant).map(|(_, g)| *g);
+            let g = rgb
+                .iter()
+                .find(|(_, g)| g.variant == d.variant)
+                .map(|(_, g)| *g);
             let gp = g.and_then(|g| g.psnr);
             if let (Some(dp), Some(gp)) = (d.psnr, gp)
                 && dp < gp
@@ -153,7 +171,7 @@ pub fn markdown(r: &StressRecord) -> String {
                 .flatten()
                 .filter_map(|x| x.error.as_ref().map(|e| format!("{}: {e}", x.method)))
                 .collect();
-            if d.stress.is_none() {
+            if d.stress.is_none() || Some(*level) == neutral {
                 note.insert(0, "clean".into());
             }
             s += &format!(
@@ -176,7 +194,10 @@ pub fn markdown(r: &StressRecord) -> String {
         s += &if below.is_empty() {
             "\nDEGS is not below RGB-only at any level.\n\n".to_string()
         } else {
-            format!("\n**DEGS falls below RGB-only at:** {}.\n\n", below.join(", "))
+            format!(
+                "\n**DEGS falls below RGB-only at:** {}.\n\n",
+                below.join(", ")
+            )
         };
     }
     s
@@ -186,7 +207,11 @@ fn corrupt_table(r: &StressRecord) -> String {
     let mut s = "| corruption | damaged file | method | status | test PSNR | what happened |\n\
                  |---|---|---|---|---|---|\n"
         .to_string();
-    for x in r.results.iter().filter(|x| x.stress == Some(StressKind::Corrupt)) {
+    for x in r
+        .results
+        .iter()
+        .filter(|x| x.stress == Some(StressKind::Corrupt))
+    {
         let file = r
             .scenes
             .iter()

@@ -26,7 +26,9 @@ fn base_scene() -> &'static Path {
     .1
 }
 
-fn transformed(t: SceneTransform) -> (tempfile::TempDir, Scene, super::transform::TransformSummary) {
+fn transformed(
+    t: SceneTransform,
+) -> (tempfile::TempDir, Scene, super::transform::TransformSummary) {
     let d = tempfile::tempdir().unwrap();
     let out = d.path().join("out");
     let s = apply(base_scene(), &out, &t).unwrap();
@@ -48,7 +50,10 @@ fn dropping_train_frames_keeps_the_test_frames_and_the_events() {
         assert_eq!(sum.train_frames, want);
         assert_eq!(s.test.frames, base.test.frames, "test frames fixed");
         assert_eq!(s.load_events().unwrap().len(), base_events);
-        assert!(!s.root.join("gt/train").exists(), "gt/train is numbered by frame");
+        assert!(
+            !s.root.join("gt/train").exists(),
+            "gt/train is numbered by frame"
+        );
     }
 }
 
@@ -60,7 +65,10 @@ fn a_gap_holds_no_event_and_a_burst_its_count_in_its_window() {
         ..Default::default()
     });
     let [g0, g1] = sum.gap.unwrap();
-    assert!((g0 - 0.075).abs() < 1e-9 && (g1 - 0.175).abs() < 1e-9, "{g0} {g1}");
+    assert!(
+        (g0 - 0.075).abs() < 1e-9 && (g1 - 0.175).abs() < 1e-9,
+        "{g0} {g1}"
+    );
     let ev = s.load_events().unwrap();
     assert_eq!(ev.window_range(g0, g1).len(), 0);
     let inside = base.window_range(g0, g1).len();
@@ -96,7 +104,10 @@ fn added_noise_has_the_requested_rate_over_the_sensor() {
         assert_eq!(added, sum.noise_events);
         // the count is rounded: within half an event of the rate, and 2 % of it
         let rate = added as f64 / (pixels * span);
-        assert!((rate - hz).abs() <= (0.5 / (pixels * span)).max(0.02 * hz), "{hz}: {rate}");
+        assert!(
+            (rate - hz).abs() <= (0.5 / (pixels * span)).max(0.02 * hz),
+            "{hz}: {rate}"
+        );
     }
     let (_d, s, sum) = transformed(SceneTransform {
         hot_pixel_fraction: 0.01,
@@ -146,7 +157,10 @@ fn each_corruption_is_an_error_naming_its_file() {
     assert!(err.contains("events.evs"), "{err}");
     let (_d, file, err) = corrupt(Corruption::MissingFrame);
     assert_eq!(file, "images/train_0005.png");
-    assert!(err.contains("train_0005.png") && err.contains("does not exist"), "{err}");
+    assert!(
+        err.contains("train_0005.png") && err.contains("does not exist"),
+        "{err}"
+    );
     let (_d, file, err) = corrupt(Corruption::NanPose);
     assert_eq!(file, "transforms_train.json");
     assert!(err.contains("transforms_train.json"), "{err}");
@@ -174,12 +188,21 @@ fn variants_are_named_by_level_and_share_what_they_should() {
     let names: Vec<&str> = v.iter().map(|v| v.name.as_str()).collect();
     assert_eq!(
         names,
-        ["clean", "fps-20", "fps-5", "gap-fraction-0.25", "burst-events-10000000", "corrupt-nan-pose"]
+        [
+            "clean",
+            "fps-20",
+            "fps-5",
+            "gap-fraction-0.25",
+            "burst-events-10000000",
+            "corrupt-nan-pose"
+        ]
     );
     assert_eq!(f.neutral_level(StressKind::Fps), Some(20.0));
     // 10 M on 1280×720 is as many per pixel as 4167 on 24×16
     assert_eq!(f.scaled_burst(1e7), 4167);
-    let Recipe::Transform(t) = &v[4].recipe else { panic!("{:?}", v[4]) };
+    let Recipe::Transform(t) = &v[4].recipe else {
+        panic!("{:?}", v[4])
+    };
     assert_eq!((t.burst_events, t.burst_s), (4167, 0.01));
 
     let dir = tempfile::tempdir().unwrap();
@@ -226,10 +249,19 @@ fn a_transformed_scene_is_a_cache_entry_keyed_by_its_settings() {
         ..Default::default()
     };
     let (a, _) = super::transformed_scene(&ctx, base_scene(), "k1", &t(0.2)).unwrap();
-    let stamp = std::fs::metadata(a.join("events.evs")).unwrap().modified().unwrap();
+    let stamp = std::fs::metadata(a.join("events.evs"))
+        .unwrap()
+        .modified()
+        .unwrap();
     let (again, s) = super::transformed_scene(&ctx, base_scene(), "k1", &t(0.2)).unwrap();
     assert_eq!(a, again);
-    assert_eq!(std::fs::metadata(a.join("events.evs")).unwrap().modified().unwrap(), stamp);
+    assert_eq!(
+        std::fs::metadata(a.join("events.evs"))
+            .unwrap()
+            .modified()
+            .unwrap(),
+        stamp
+    );
     assert_eq!(s.settings, t(0.2));
     let (b, _) = super::transformed_scene(&ctx, base_scene(), "k1", &t(0.3)).unwrap();
     let (c, _) = super::transformed_scene(&ctx, base_scene(), "k2", &t(0.2)).unwrap();
@@ -244,8 +276,14 @@ fn bad_stress_files_name_the_file_and_the_key() {
     for (body, want) in [
         (format!("{SYNTH_BASE}[stresses]\nfpz = [1]\n"), "fpz"),
         (format!("{SYNTH_BASE}[stresses]\nfps = []\n"), "fps"),
-        (format!("{SYNTH_BASE}[stresses]\ncorrupt = [\"eaten\"]\n"), "eaten"),
-        (format!("{SYNTH_BASE}[stresses]\ngap_fraction = [1.5]\n"), "gap_fraction"),
+        (
+            format!("{SYNTH_BASE}[stresses]\ncorrupt = [\"eaten\"]\n"),
+            "eaten",
+        ),
+        (
+            format!("{SYNTH_BASE}[stresses]\ngap_fraction = [1.5]\n"),
+            "gap_fraction",
+        ),
         (format!("{SYNTH_BASE}[settings]\nseeed = 1\n"), "seeed"),
         (format!("{SYNTH_BASE}extra = 1\n"), "extra"),
         (
@@ -255,7 +293,10 @@ fn bad_stress_files_name_the_file_and_the_key() {
     ] {
         std::fs::write(&p, &body).unwrap();
         let msg = format!("{:#}", StressFile::load(&p).unwrap_err());
-        assert!(msg.contains(&p.display().to_string()) && msg.contains(want), "{want}: {msg}");
+        assert!(
+            msg.contains(&p.display().to_string()) && msg.contains(want),
+            "{want}: {msg}"
+        );
     }
 }
 
@@ -275,6 +316,8 @@ fn blur_needs_a_synthetic_base() {
     let f = StressFile::load(&p).unwrap();
     assert!((f.base_fps - 40.0).abs() < 1e-6, "{}", f.base_fps);
     let v = f.variants().unwrap();
-    let Recipe::Transform(t) = &v[1].recipe else { panic!("{:?}", v[1]) };
+    let Recipe::Transform(t) = &v[1].recipe else {
+        panic!("{:?}", v[1])
+    };
     assert_eq!(t.train_fps, Some(10.0));
 }

@@ -223,10 +223,13 @@ impl StressFile {
                 .iter()
                 .map(|&k| (k, k.default_levels()))
                 .collect(),
-            Some(Value::Table(t)) => parse_stresses(t).map_err(|e| at(format!("[stresses]: {e}")))?,
+            Some(Value::Table(t)) => {
+                parse_stresses(t).map_err(|e| at(format!("[stresses]: {e}")))?
+            }
             Some(_) => return Err(at("[stresses] must be a table of stress = [levels]".into())),
         };
-        let (sensor, base_fps) = base_sensor(&base).map_err(|e| at(format!("base scene: {e:#}")))?;
+        let (sensor, base_fps) =
+            base_sensor(&base).map_err(|e| at(format!("base scene: {e:#}")))?;
         let file = StressFile {
             name,
             file: path.to_path_buf(),
@@ -256,11 +259,14 @@ impl StressFile {
         match kind {
             StressKind::Fps => Some(self.base_fps),
             StressKind::NoiseHz => Some(self.synthetic().map_or(0.0, |c| c.events.shot_noise_hz)),
-            StressKind::HotPixels => {
-                Some(self.synthetic().map_or(0.0, |c| c.events.hot_pixel_fraction))
-            }
+            StressKind::HotPixels => Some(
+                self.synthetic()
+                    .map_or(0.0, |c| c.events.hot_pixel_fraction),
+            ),
             StressKind::ContrastRatio => Some(1.0),
-            StressKind::BlurSubframes => Some(self.synthetic().map_or(1.0, |c| c.blur_subframes as f64)),
+            StressKind::BlurSubframes => {
+                Some(self.synthetic().map_or(1.0, |c| c.blur_subframes as f64))
+            }
             StressKind::GapFraction | StressKind::BurstEvents => Some(0.0),
             StressKind::Corrupt => None,
         }
@@ -293,7 +299,9 @@ impl StressFile {
                         let c = Corruption::ALL
                             .into_iter()
                             .find(|c| Some(c.name()) == v.as_str())
-                            .ok_or_else(|| bad("not one of truncated-events, missing-frame, nan-pose"))?;
+                            .ok_or_else(|| {
+                                bad("not one of truncated-events, missing-frame, nan-pose")
+                            })?;
                         Recipe::Transform(SceneTransform {
                             corrupt: Some(c),
                             seed,
@@ -403,7 +411,11 @@ impl StressFile {
             .iter()
             .map(|(method, values)| {
                 scene_values.truncate(n);
-                scene_values.extend(values.iter().map(|(k, x)| (k.to_string(), Value::Float(*x))));
+                scene_values.extend(
+                    values
+                        .iter()
+                        .map(|(k, x)| (k.to_string(), Value::Float(*x))),
+                );
                 let name = self.experiment_name(v, method);
                 self.sweep
                     .experiment(&name, &scene_values)
@@ -422,7 +434,13 @@ fn level_text(v: &Value) -> String {
         other => other.to_string(),
     };
     text.chars()
-        .map(|c| if c.is_ascii_alphanumeric() || matches!(c, '.' | '-') { c } else { '-' })
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || matches!(c, '.' | '-') {
+                c
+            } else {
+                '-'
+            }
+        })
         .collect()
 }
 
