@@ -113,4 +113,12 @@ fn a_tiny_stress_run_writes_its_record_report_and_charts_without_nan() {
     );
     let rec2: Value = serde_json::from_slice(&fs::read(dir.join("stress.json")).unwrap()).unwrap();
     assert_eq!(rec2["results"].as_array().unwrap().len(), 14);
+
+    // `degs gc` keeps the transformed scenes the runs read (gap and two corruptions)
+    let gc = f.degs(&["gc"]);
+    assert!(gc.status.success(), "{}", stderr(&gc));
+    let kept = fs::read_dir(f.cache.join("cache").join("stress-scene"))
+        .unwrap()
+        .count();
+    assert_eq!(kept, 3);
 }
