@@ -321,3 +321,16 @@ fn blur_needs_a_synthetic_base() {
     };
     assert_eq!(t.train_fps, Some(10.0));
 }
+
+#[test]
+fn the_example_stress_file_expands() {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/stress/nonrigid.toml");
+    let f = StressFile::load(&p).unwrap();
+    assert_eq!((f.sensor, f.base_fps), ((64, 64), 10.0));
+    let v = f.variants().unwrap();
+    // clean + 4 + 3 + 2 + 2 + 3 + 1 + 1 + 3
+    assert_eq!(v.len(), 20);
+    assert_eq!(f.scaled_burst(1e7), 44_444);
+    let synth_made = v.iter().filter(|v| matches!(v.recipe, Recipe::Synth(_))).count();
+    assert_eq!(synth_made, 12, "fps, noise, hot pixels and blur are synth settings");
+}
