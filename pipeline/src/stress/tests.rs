@@ -331,6 +331,12 @@ fn the_example_stress_file_expands() {
     // clean + 4 + 3 + 2 + 2 + 3 + 1 + 1 + 3
     assert_eq!(v.len(), 20);
     assert_eq!(f.scaled_burst(1e7), 44_444);
-    let synth_made = v.iter().filter(|v| matches!(v.recipe, Recipe::Synth(_))).count();
-    assert_eq!(synth_made, 12, "fps, noise, hot pixels and blur are synth settings");
+    let synth_made = v
+        .iter()
+        .filter(|v| matches!(v.recipe, Recipe::Synth(_)))
+        .count();
+    assert_eq!(
+        synth_made, 12,
+        "fps, noise, hot pixels and blur are synth settings"
+    );
 }
