@@ -166,6 +166,32 @@ pub enum Command {
         #[arg(short, long)]
         quiet: bool,
     },
+    /// Test stability where methods fail: build stressed variants of a base experiment's
+    /// scene (train frame rate, event noise, hot pixels, a wrong claimed contrast
+    /// threshold, motion blur, a gap without events, a burst of events, corrupt files),
+    /// run DEGS and RGB-only (deform with schedule.gamma1 = gamma2_max = 0) on each
+    /// through the cache, and write runs/<name>/stress.json, report.md and a chart of
+    /// test PSNR against each stress's level (stress-<stress>.png/.svg). A variant that
+    /// fails is recorded with its error, not fatal. Re-running resumes.
+    Stress {
+        /// Stress file (TOML): name; base = "experiment.toml" or [base]; [stresses] with
+        /// fps, noise_hz, hot_pixels, contrast_ratio, blur_subframes, gap_fraction,
+        /// burst_events = [levels] and corrupt = ["truncated-events", "missing-frame",
+        /// "nan-pose"] (absent: all, at the levels of issue #18); [settings] with
+        /// hot_pixel_hz, burst_s, burst_reference_sensor, seed. See examples/stress/.
+        stress: PathBuf,
+        #[command(flatten)]
+        place: Where,
+        /// Stages run at the same time within an experiment
+        #[arg(short = 'j', long, default_value_t = 1)]
+        jobs: usize,
+        /// Re-hash every cached file (default: only files whose size or mtime changed)
+        #[arg(long)]
+        verify: bool,
+        /// No progress lines
+        #[arg(short, long)]
+        quiet: bool,
+    },
     /// Print the shell commands of the stages in order, each stage once; also write
     /// runs/<name>/Snakefile (Snakemake rules) and runs/<name>/slurm.sh (Slurm array
     /// jobs, one per level of the graph, in dependency order). Takes an experiment or a

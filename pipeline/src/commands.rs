@@ -71,6 +71,20 @@ pub fn execute(command: Command) -> Result<()> {
             };
             run_sweep(&sweep, &place, &opts, quiet)
         }
+        Command::Stress {
+            stress,
+            place,
+            jobs,
+            verify,
+            quiet,
+        } => {
+            let opts = RunOptions {
+                jobs,
+                verify_full: verify,
+                ..RunOptions::default()
+            };
+            run_stress(&stress, &place, &opts, quiet)
+        }
         Command::Plan {
             experiment,
             place,
@@ -188,6 +202,24 @@ fn run(experiment: &Path, place: &Where, opts: &RunOptions, quiet: bool) -> Resu
         )),
         None => Ok(()),
     }
+}
+
+/// `degs stress`: failed variants are the point of it, so only a broken stress file or
+/// an unmakeable clean scene is an error.
+fn run_stress(file: &Path, place: &Where, opts: &RunOptions, quiet: bool) -> Result<()> {
+    let stress = crate::stress::variants::StressFile::load(file)?;
+    let ctx = place.context()?;
+    let record = crate::stress::run(&stress, &ctx, opts, &Progress::new(quiet))?;
+    let dir = ctx.cache.run_dir(&stress.name);
+    let failed = record.results.iter().filter(|r| r.error.is_some()).count();
+    println!(
+        "{} runs ({} with an error), report: {}",
+        record.results.len(),
+        failed,
+        dir.join("report.md").display()
+    );
+    eprintln!("[degs] wrote {}", dir.join("stress.json").display());
+    Ok(())
 }
 
 /// `degs sweep`: an error naming the experiments with a failed stage.

@@ -54,7 +54,12 @@ pub struct Node {
     pub unavailable: Option<String>,
 }
 
-fn key_of(stage: &str, binary_hash: &str, settings: &Table, inputs: &[(&str, &str)]) -> String {
+pub(crate) fn key_of(
+    stage: &str,
+    binary_hash: &str,
+    settings: &Table,
+    inputs: &[(&str, &str)],
+) -> String {
     let mut h = blake3::Hasher::new();
     for part in [
         "degs-key-v1",

@@ -28,6 +28,7 @@ pub mod runner;
 pub mod settings;
 pub mod stages;
 pub mod status;
+pub mod stress;
 pub mod sweep;
 pub mod sweep_run;
 pub mod synth;

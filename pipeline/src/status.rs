@@ -159,6 +159,7 @@ pub fn gc(cache: &cache::Cache, dry_run: bool) -> Result<GcReport> {
         cache.remove_stale_temps()?;
     }
     let mut used = BTreeSet::new();
+    let mut used_dirs = BTreeSet::new();
     if let Ok(runs) = fs::read_dir(cache.root.join("runs")) {
         for r in runs.flatten() {
             let path = r.path().join("run.json");
@@ -168,6 +169,10 @@ pub fn gc(cache: &cache::Cache, dry_run: bool) -> Result<GcReport> {
             // An unreadable record keeps everything: better too much than a lost run.
             let record = RunRecord::read(&path)?;
             for s in record.stages {
+                // a scene directory inside the cache (a `degs stress` scene) is used by path
+                if let Some(entry) = &s.entry {
+                    used_dirs.insert(entry.clone());
+                }
                 if let Some(k) = s.key {
                     used.insert((s.stage, k));
                 }
@@ -176,7 +181,7 @@ pub fn gc(cache: &cache::Cache, dry_run: bool) -> Result<GcReport> {
     }
     let mut report = GcReport::default();
     for (stage, key, path) in cache.entries() {
-        if used.contains(&(stage.clone(), key.clone())) {
+        if used.contains(&(stage.clone(), key.clone())) || used_dirs.contains(&path) {
             report.kept += 1;
             continue;
         }

@@ -79,29 +79,7 @@ impl Sweep {
                 .map(|s| s.to_string_lossy().to_string())
                 .unwrap_or_default(),
         };
-        let (base, base_file) = match top.remove("base") {
-            Some(Value::String(file)) => {
-                let dir = path.parent().unwrap_or(Path::new(""));
-                let file = dir.join(file);
-                let text = std::fs::read_to_string(&file).map_err(|e| {
-                    at(format!(
-                        "base experiment {}: cannot read: {e}",
-                        file.display()
-                    ))
-                })?;
-                let t: Table = text.parse().map_err(|e: toml::de::Error| {
-                    anyhow!("{}: {}", file.display(), e.message().trim())
-                })?;
-                (t, file)
-            }
-            Some(Value::Table(t)) => (t, path.to_path_buf()),
-            Some(_) => return Err(at("`base` must be a file name or a [base] table".into())),
-            None => {
-                return Err(at(
-                    "needs `base = \"experiment.toml\"` or a [base] table".into()
-                ));
-            }
-        };
+        let (base, base_file) = take_base(&mut top, path)?;
         let axes = match top.remove("axes") {
             None => Vec::new(),
             Some(Value::Table(t)) => t
@@ -124,6 +102,18 @@ impl Sweep {
         };
         sweep.check_axes()?;
         Ok(sweep)
+    }
+
+    /// A sweep of no axes over `base` (read from `base_file`): the experiments of a
+    /// file that expands its own way (`degs stress`) made with [`Sweep::experiment`].
+    pub fn over_base(name: &str, file: &Path, base: Table, base_file: PathBuf) -> Sweep {
+        Sweep {
+            name: name.into(),
+            file: file.to_path_buf(),
+            base,
+            base_file,
+            axes: Vec::new(),
+        }
     }
 
     /// Every axis key names a setting of the scene or of a stage, and each of its
@@ -160,8 +150,8 @@ impl Sweep {
         Ok(())
     }
 
-    /// The base with `values` set, named `name`, parsed and checked.
-    fn experiment(&self, name: &str, values: &[(String, Value)]) -> Result<Experiment> {
+    /// The base with `values` (dotted keys) set, named `name`, parsed and checked.
+    pub fn experiment(&self, name: &str, values: &[(String, Value)]) -> Result<Experiment> {
         let mut t = self.base.clone();
         t.insert("name".into(), Value::String(name.into()));
         for (key, v) in values {
@@ -215,6 +205,34 @@ impl Sweep {
             points.push(Point { values, experiment });
         }
         Ok(points)
+    }
+}
+
+/// Remove `base` from a sweep-like file's top table and read it: an experiment file
+/// relative to `path`, or an inline table. The base's TOML and the file that anchors
+/// its relative scene `dir`.
+pub fn take_base(top: &mut Table, path: &Path) -> Result<(Table, PathBuf)> {
+    let at = |e: String| anyhow!("{}: {e}", path.display());
+    match top.remove("base") {
+        Some(Value::String(file)) => {
+            let dir = path.parent().unwrap_or(Path::new(""));
+            let file = dir.join(file);
+            let text = std::fs::read_to_string(&file).map_err(|e| {
+                at(format!(
+                    "base experiment {}: cannot read: {e}",
+                    file.display()
+                ))
+            })?;
+            let t: Table = text.parse().map_err(|e: toml::de::Error| {
+                anyhow!("{}: {}", file.display(), e.message().trim())
+            })?;
+            Ok((t, file))
+        }
+        Some(Value::Table(t)) => Ok((t, path.to_path_buf())),
+        Some(_) => Err(at("`base` must be a file name or a [base] table".into())),
+        None => Err(at(
+            "needs `base = \"experiment.toml\"` or a [base] table".into()
+        )),
     }
 }
 

@@ -64,10 +64,20 @@ pub fn write_experiments(
     sweep: &Sweep,
     ctx: &Context,
 ) -> Result<Vec<(Experiment, BTreeMap<String, serde_json::Value>)>> {
-    let dir = ctx.cache.run_dir(&sweep.name);
+    write_points(&sweep.name, sweep.expand()?, ctx)
+}
+
+/// Write each point's experiment to `runs/<name>/<experiment>.toml`; return them with
+/// their axis values.
+pub fn write_points(
+    name: &str,
+    points: Vec<crate::sweep::Point>,
+    ctx: &Context,
+) -> Result<Vec<(Experiment, BTreeMap<String, serde_json::Value>)>> {
+    let dir = ctx.cache.run_dir(name);
     std::fs::create_dir_all(&dir).with_context(|| format!("{}: cannot create", dir.display()))?;
     let mut out = Vec::new();
-    for p in sweep.expand()? {
+    for p in points {
         let file = dir.join(format!("{}.toml", p.experiment.name));
         let mut exp = p.experiment;
         scene::atomic::write_bytes_atomic(&file, exp.to_toml().as_bytes())?;
@@ -91,22 +101,37 @@ pub fn run(
     progress: &Progress,
 ) -> Result<SweepRecord> {
     let exps = write_experiments(sweep, ctx)?;
+    let axes = sweep
+        .axes
+        .iter()
+        .map(|a| {
+            let vals = a
+                .values
+                .iter()
+                .map(|v| serde_json::to_value(v).unwrap_or_default());
+            (a.key.clone(), vals.collect())
+        })
+        .collect();
+    run_experiments(sweep, axes, &exps, ctx, opts, progress)
+}
+
+/// Run `exps` (written under `runs/<sweep>/`, each with its axis values) one after the
+/// other and keep `runs/<sweep>/sweep.json` current: [`run`]'s loop, also used by
+/// `degs stress` for its variants.
+pub fn run_experiments(
+    sweep: &Sweep,
+    axes: Vec<(String, Vec<serde_json::Value>)>,
+    exps: &[(Experiment, BTreeMap<String, serde_json::Value>)],
+    ctx: &Context,
+    opts: &RunOptions,
+    progress: &Progress,
+) -> Result<SweepRecord> {
     let dir = ctx.cache.run_dir(&sweep.name);
     let mut record = SweepRecord {
         sweep: sweep.name.clone(),
         sweep_file: sweep.file.clone(),
         status: "running".into(),
-        axes: sweep
-            .axes
-            .iter()
-            .map(|a| {
-                let vals = a
-                    .values
-                    .iter()
-                    .map(|v| serde_json::to_value(v).unwrap_or_default());
-                (a.key.clone(), vals.collect())
-            })
-            .collect(),
+        axes,
         experiments: exps
             .iter()
             .map(|(e, values)| SweepExperiment {

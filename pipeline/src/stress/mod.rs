@@ -1,0 +1,307 @@
+//! `degs stress STRESS.toml`: stability where methods fail. Builds variants of the base
+//! experiment's scene (lower frame rate, event noise, hot pixels, a wrong claimed
+//! contrast threshold, motion blur, a gap without events, a burst, corrupt files:
+//! [`variants`]), runs DEGS and RGB-only on each through the runner (the sweep loop:
+//! shared stages run once, a re-run resumes), evaluates them and writes
+//! `runs/<name>/stress.json`, `report.md` and one chart per stress.
+//!
+//! A transformed scene is a cache entry `cache/stress-scene/<key>/`, its key blake3 of
+//! the transform's settings, the clean scene's key and the transform's code
+//! ([`transform`]); the runs read it as a scene directory.
+
+pub mod chart;
+pub mod report;
+pub mod transform;
+pub mod variants;
+
+use crate::context::Context;
+use crate::experiment::Experiment;
+use crate::progress::Progress;
+use crate::record::{Action, RunRecord};
+use crate::runner::{self, RunOptions};
+use anyhow::{Context as _, Result, bail};
+use report::{StressRecord, StressResult, VariantScene};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use transform::SceneTransform;
+use variants::{METHODS, Recipe, StressFile, StressKind, Variant};
+
+/// The cache stage name of transformed scenes.
+pub const STAGE: &str = "stress-scene";
+
+/// A fingerprint of the transform's code (its source and the scene crate's, through
+/// the synth fingerprint): rebuilding the runner keeps transformed scenes cached.
+fn code_fingerprint() -> String {
+    let src = blake3::hash(include_str!("transform.rs").as_bytes()).to_hex();
+    format!("{}-{}", env!("DEGS_SYNTH_CODE"), &src[..16])
+}
+
+/// The cache entry of `t` applied to the scene `base` (keyed `base_key`), made when
+/// missing.
+pub fn transformed_scene(
+    ctx: &Context,
+    base: &Path,
+    base_key: &str,
+    t: &SceneTransform,
+) -> Result<(PathBuf, transform::TransformSummary)> {
+    let settings = match toml::Value::try_from(t)? {
+        toml::Value::Table(tb) => crate::canon::canonical_table(&tb),
+        _ => toml::Table::new(),
+    };
+    let key = crate::graph::key_of(
+        STAGE,
+        &code_fingerprint(),
+        &settings,
+        &[("--scene", base_key)],
+    );
+    let entry = ctx.cache.entry(STAGE, &key);
+    let summary_of = |dir: &Path| -> Result<transform::TransformSummary> {
+        let p = dir.join("stress.json");
+        let bytes = std::fs::read(&p).with_context(|| format!("{}: cannot read", p.display()))?;
+        serde_json::from_slice(&bytes)
+            .with_context(|| format!("{}: not a transform summary", p.display()))
+    };
+    if crate::cache::read_manifest(&entry).is_some() {
+        return Ok((entry.clone(), summary_of(&entry)?));
+    }
+    let started = std::time::Instant::now();
+    let dir = scene::atomic::AtomicDir::new(&entry)?;
+    let summary = transform::apply(base, dir.path(), t)?;
+    crate::cache::seal(
+        dir.path(),
+        STAGE,
+        &key,
+        started.elapsed().as_secs_f64(),
+        None,
+    )?;
+    dir.commit()?;
+    Ok((entry, summary))
+}
+
+/// Run the stress file; the record is also written to `runs/<name>/stress.json`.
+pub fn run(
+    file: &StressFile,
+    ctx: &Context,
+    opts: &RunOptions,
+    progress: &Progress,
+) -> Result<StressRecord> {
+    let variants = file.variants()?;
+    let out_dir = ctx.cache.run_dir(&file.name);
+    std::fs::create_dir_all(&out_dir)
+        .with_context(|| format!("{}: cannot create", out_dir.display()))?;
+
+    // the clean scene first: every transform starts from it
+    let clean = &variants[0];
+    let clean_exps = file.experiments(clean, Path::new("/"))?;
+    progress.note(&format!("stress {}: the clean scene", file.name));
+    let scene_only = RunOptions {
+        until: Some(0),
+        ..opts.clone()
+    };
+    let rec = runner::run(&clean_exps[0], ctx, &scene_only, progress)?;
+    let scene_stage = &rec.stages[0];
+    let (Some(base_dir), Some(base_key)) = (scene_stage.entry.clone(), scene_stage.key.clone())
+    else {
+        bail!("{}: the clean scene could not be made", file.file.display());
+    };
+    if !scene_stage.action.has_output() {
+        bail!(
+            "{}: the clean scene could not be made: {}",
+            file.file.display(),
+            scene_stage.error.clone().unwrap_or_default()
+        );
+    }
+
+    let mut scenes = Vec::new();
+    let mut exps: Vec<(Experiment, BTreeMap<String, serde_json::Value>)> = Vec::new();
+    let mut owner: Vec<(usize, &str)> = Vec::new();
+    for (vi, v) in variants.iter().enumerate() {
+        let mut vs = VariantScene {
+            variant: v.name.clone(),
+            ..Default::default()
+        };
+        let dir = match &v.recipe {
+            Recipe::Transform(t) => {
+                progress.note(&format!("stress {}: scene {}", file.name, v.name));
+                match transformed_scene(ctx, &base_dir, &base_key, t) {
+                    Ok((d, s)) => {
+                        vs.transform = Some(s);
+                        Some(d)
+                    }
+                    Err(e) => {
+                        vs.error = Some(format!("{e:#}"));
+                        None
+                    }
+                }
+            }
+            _ => Some(PathBuf::from("/")),
+        };
+        if let Some(d) = &dir {
+            if matches!(v.recipe, Recipe::Transform(_)) {
+                vs.scene = Some(d.clone());
+            }
+            for (exp, (method, _)) in file.experiments(v, d)?.into_iter().zip(METHODS) {
+                let mut values = BTreeMap::new();
+                values.insert("variant".into(), serde_json::json!(v.name));
+                values.insert("method".into(), serde_json::json!(method));
+                exps.push((exp, values));
+                owner.push((vi, method));
+            }
+        }
+        scenes.push(vs);
+    }
+    let points: Vec<crate::sweep::Point> = exps
+        .into_iter()
+        .map(|(experiment, values)| crate::sweep::Point {
+            values: values
+                .into_iter()
+                .map(|(k, v)| (k, toml::Value::String(v.as_str().unwrap_or("").into())))
+                .collect(),
+            experiment,
+        })
+        .collect();
+    let written = crate::sweep_run::write_points(&file.name, points, ctx)?;
+    let axes = vec![
+        (
+            "variant".to_string(),
+            variants.iter().map(|v| serde_json::json!(v.name)).collect(),
+        ),
+        (
+            "method".to_string(),
+            METHODS.iter().map(|(m, _)| serde_json::json!(m)).collect(),
+        ),
+    ];
+    crate::sweep_run::run_experiments(&file.sweep, axes, &written, ctx, opts, progress)?;
+
+    let mut results = Vec::new();
+    for (v, vs) in variants.iter().zip(&scenes) {
+        for (method, _) in METHODS {
+            let ran = owner
+                .iter()
+                .position(|&(vi, m)| variants[vi].name == v.name && m == method)
+                .map(|i| &written[i].0);
+            results.push(result_of(ctx, file, v, vs, method, ran));
+        }
+    }
+    let record = StressRecord {
+        stress: file.name.clone(),
+        stress_file: file.file.clone(),
+        base: match &file.base.scene {
+            crate::experiment::SceneSource::Synth(c) => format!("synthetic `{}`", c.preset),
+            crate::experiment::SceneSource::Dir(d) => d.display().to_string(),
+        },
+        sensor: file.sensor,
+        neutral_levels: StressKind::ALL
+            .iter()
+            .filter_map(|&k| file.neutral_level(k).map(|l| (k, l)))
+            .collect(),
+        burst_note: file
+            .stresses
+            .iter()
+            .find(|(k, _)| *k == StressKind::BurstEvents)
+            .map(|_| {
+                let [w, h] = file.settings.burst_reference_sensor;
+                format!(
+                    "a level counts events on a {w}×{h} sensor within {} s; on this {}×{} \
+                     sensor the burst has as many events per pixel (10 M → {}).",
+                    file.settings.burst_s,
+                    file.sensor.0,
+                    file.sensor.1,
+                    file.scaled_burst(1e7)
+                )
+            }),
+        scenes,
+        results,
+    };
+    scene::atomic::write_json_atomic(&out_dir.join("stress.json"), &record)?;
+    scene::atomic::write_bytes_atomic(
+        &out_dir.join("report.md"),
+        report::markdown(&record).as_bytes(),
+    )?;
+    chart::write_charts(&record, &out_dir)?;
+    Ok(record)
+}
+
+/// The figures (or the error) of one variant run with one method.
+fn result_of(
+    ctx: &Context,
+    file: &StressFile,
+    v: &Variant,
+    vs: &VariantScene,
+    method: &str,
+    exp: Option<&Experiment>,
+) -> StressResult {
+    let mut r = StressResult {
+        variant: v.name.clone(),
+        stress: v.kind,
+        level: v.level,
+        label: v.label.clone(),
+        method: method.into(),
+        experiment: file.experiment_name(v, method),
+        status: "not run".into(),
+        train_frames: vs.transform.as_ref().map(|t| t.train_frames),
+        error: vs.error.clone(),
+        ..Default::default()
+    };
+    let Some(exp) = exp else { return r };
+    let run_dir = ctx.cache.run_dir(&exp.name);
+    let record = match RunRecord::read(&run_dir.join("run.json")) {
+        Ok(rec) => rec,
+        Err(e) => {
+            r.error = Some(format!("{e:#}"));
+            return r;
+        }
+    };
+    r.status = record.status.clone();
+    if let Some(s) = record.stages.iter().find(|s| s.action == Action::Failed) {
+        r.error = Some(format!(
+            "{}: {}",
+            s.stage,
+            s.error.clone().unwrap_or_default()
+        ));
+        return r;
+    }
+    r.deform_s = record
+        .stage("deform")
+        .filter(|s| s.action.has_output())
+        .map(|s| s.built_wall_s.unwrap_or(s.wall_s));
+    match crate::eval::eval_run_with(&run_dir, crate::eval_lpips::LpipsUse::Off) {
+        Ok(m) => {
+            let mut keep = |name: &str, v: Option<f64>| -> Option<f64> {
+                let v = v?;
+                if v.is_finite() {
+                    Some(v)
+                } else {
+                    r.non_finite.push(name.into());
+                    None
+                }
+            };
+            r.psnr = keep("psnr", m.psnr_mean);
+            r.ssim = keep("ssim", m.ssim_mean);
+            r.novel_psnr = keep("novel_psnr", m.novel_psnr_mean);
+            let b = m.baselines.as_ref();
+            r.nearest_psnr = keep("nearest_psnr", b.map(|b| b.nearest.psnr_mean));
+            r.blend_psnr = keep("blend_psnr", b.map(|b| b.blend.psnr_mean));
+            r.events_psnr = keep(
+                "events_psnr",
+                b.and_then(|b| b.events.as_ref()).map(|e| e.psnr_mean),
+            );
+            r.total_s = keep("total_s", Some(m.total_stage_s));
+            if r.train_frames.is_none() {
+                r.train_frames = record
+                    .stages
+                    .first()
+                    .and_then(|s| s.entry.as_ref())
+                    .and_then(|d| {
+                        scene::manifest::Manifest::read(d.join(scene::manifest::TRAIN_FILE)).ok()
+                    })
+                    .map(|m| m.frames.len());
+            }
+        }
+        Err(e) => r.error = Some(format!("eval: {e:#}")),
+    }
+    r
+}
+
+#[cfg(test)]
+mod tests;
