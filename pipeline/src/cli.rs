@@ -177,7 +177,7 @@ pub enum Command {
         /// Stress file (TOML): name; base = "experiment.toml" or [base]; [stresses] with
         /// fps, noise_hz, hot_pixels, contrast_ratio, blur_subframes, gap_fraction,
         /// burst_events = [levels] and corrupt = ["truncated-events", "missing-frame",
-        /// "nan-pose"] (absent: all, at the levels of issue #18); [settings] with
+        /// "nan-pose"] (absent: all, at their default levels); [settings] with
         /// hot_pixel_hz, burst_s, burst_reference_sensor, seed. See examples/stress/.
         stress: PathBuf,
         #[command(flatten)]
