@@ -10,6 +10,7 @@ static ALLOC: scene::testing::TrackingAlloc = scene::testing::TrackingAlloc;
 
 mod common;
 
+use common::aedat4_file::{aedat4, frame_packet};
 use scene::events::EventStream;
 use scene::formats::{self, RawEncoding, ReadOptions, read_es, read_raw};
 use scene::testing::{Plan, fuzz};
@@ -140,6 +141,39 @@ fn es_atis_reader() {
     plan.length_fields = vec![(16, 4)];
     fuzz_file(dir.path(), "atis.es", &bytes, &plan, |p| {
         read_es(p, &ReadOptions::default())
+    });
+}
+
+/// A hand-made uncompressed AEDAT4 file of three frames (8×6 grey, 6×4 BGR, 4×3
+/// BGRA): the damage lands in the frame FlatBuffers themselves, which the real
+/// recording (below) keeps LZ4-compressed.
+#[test]
+fn aedat4_frame_reader_on_uncompressed_frames() {
+    let _alone = scene::testing::alloc::exclusive();
+    let dir = tempfile::tempdir().unwrap();
+    let xml = r#"<node name="1" path="/o/1/"><attr key="typeIdentifier" type="string">FRME</attr></node>"#;
+    let px = |n: usize| (0..n).map(|k| (k * 37 % 256) as u8).collect::<Vec<u8>>();
+    let packets = [
+        (1, frame_packet(1_000_000, 0, (8, 6), &px(8 * 6))),
+        (1, frame_packet(1_040_000, 16, (6, 4), &px(6 * 4 * 3))),
+        (1, frame_packet(1_080_000, 24, (4, 3), &px(4 * 3 * 4))),
+    ];
+    let bytes = aedat4(0, xml, &packets);
+    let p = dir.path().join("check.aedat4");
+    fs::write(&p, &bytes).unwrap();
+    let frames = formats::read_aedat4_frames(&p).unwrap();
+    let shapes: Vec<_> = frames
+        .iter()
+        .map(|f| (f.width, f.height, f.channels))
+        .collect();
+    assert_eq!(shapes, [(8, 6, 1), (6, 4, 3), (4, 3, 3)]);
+    assert_eq!(frames[2].exposure, (1.07975, 1.08025));
+    // BGR(A) → RGB: the first pixel's bytes 0, 37, 74 (BGR) become 74, 37, 0
+    assert_eq!(frames[1].pixels[..3], [74, 37, 0]);
+    let mut plan = Plan::new(26);
+    plan.length_fields = vec![(14, 4)];
+    fuzz_file(dir.path(), "frames.aedat4", &bytes, &plan, |p| {
+        formats::read_aedat4_frames(p)
     });
 }
 
