@@ -17,7 +17,7 @@ pub const SIZE: (u32, u32) = (960, 640);
 /// The same with the channel count, as the PNG reads back.
 pub const SIZE_RGB: (u32, u32, u32) = (SIZE.0, SIZE.1, 3);
 
-fn register_font() -> Result<()> {
+pub(crate) fn register_font() -> Result<()> {
     static DONE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
     let ok = *DONE.get_or_init(|| {
         plotters::style::register_font("sans-serif", FontStyle::Normal, FONT).is_ok()
@@ -27,7 +27,7 @@ fn register_font() -> Result<()> {
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
-enum Marker {
+pub(crate) enum Marker {
     Circle,
     Triangle,
     Cross,
@@ -55,13 +55,15 @@ struct Spec {
     lower_is_better: bool,
 }
 
-const LINE_COLOURS: [RGBColor; 3] = [
+/// Colours of the 2D baselines' dashed lines.
+pub(crate) const LINE_COLOURS: [RGBColor; 3] = [
     RGBColor(120, 120, 120),
     RGBColor(44, 160, 44),
     RGBColor(148, 103, 189),
 ];
 
-fn method_style(m: Method) -> (RGBColor, Marker) {
+/// The colour and marker of a method's points.
+pub(crate) fn method_style(m: Method) -> (RGBColor, Marker) {
     match m {
         Method::Degs => (RGBColor(214, 39, 40), Marker::Circle),
         Method::RgbJoint => (RGBColor(255, 127, 14), Marker::Cross),
@@ -250,15 +252,33 @@ fn spread(series: &[Series]) -> f64 {
     if lo > 0.0 { hi / lo } else { 1.0 }
 }
 
+/// A chart that can draw itself on any plotters backend.
+pub(crate) trait Drawing {
+    fn draw_on<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String>;
+}
+
+impl Drawing for Spec {
+    fn draw_on<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+        draw(root, self)
+    }
+}
+
 /// `<stem>.png` and `<stem>.svg`.
 fn write_both(spec: &Spec, stem: &Path) -> Result<Vec<PathBuf>> {
+    write_png_and_svg(spec, stem)
+}
+
+/// Draw `chart` to `<stem>.png` ([`SIZE`], the bundled font) and `<stem>.svg`.
+pub(crate) fn write_png_and_svg(chart: &impl Drawing, stem: &Path) -> Result<Vec<PathBuf>> {
     register_font()?;
     let png = stem.with_extension("png");
     let (w, h) = SIZE;
     let mut buf = vec![255u8; w as usize * h as usize * 3];
     {
         let root = BitMapBackend::with_buffer(&mut buf, SIZE).into_drawing_area();
-        draw(&root, spec).map_err(|e| anyhow!("{}: {e}", png.display()))?;
+        chart
+            .draw_on(&root)
+            .map_err(|e| anyhow!("{}: {e}", png.display()))?;
         root.present()
             .map_err(|e| anyhow!("{}: {e:?}", png.display()))?;
     }
@@ -273,7 +293,9 @@ fn write_both(spec: &Spec, stem: &Path) -> Result<Vec<PathBuf>> {
     let mut text = String::new();
     {
         let root = SVGBackend::with_string(&mut text, SIZE).into_drawing_area();
-        draw(&root, spec).map_err(|e| anyhow!("{}: {e}", svg.display()))?;
+        chart
+            .draw_on(&root)
+            .map_err(|e| anyhow!("{}: {e}", svg.display()))?;
         root.present()
             .map_err(|e| anyhow!("{}: {e:?}", svg.display()))?;
     }
@@ -297,13 +319,17 @@ fn tick(v: f64) -> String {
 
 /// A tick value on a linear axis spanning `span`: enough decimals to tell the
 /// ticks (about ten of them) apart.
-fn linear_tick(v: f64, span: f64) -> String {
+pub(crate) fn linear_tick(v: f64, span: f64) -> String {
     let decimals = (1.0 - span.max(1e-12).log10()).ceil().clamp(0.0, 6.0) as usize;
     format!("{v:.decimals$}")
 }
 
 /// Padded range of `values` (a unit either side when they are all equal).
-fn range(values: impl Iterator<Item = f64>, pad: f64, clamp_at_zero: bool) -> (f64, f64) {
+pub(crate) fn range(
+    values: impl Iterator<Item = f64>,
+    pad: f64,
+    clamp_at_zero: bool,
+) -> (f64, f64) {
     let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
         (a.min(v), b.max(v))
     });
@@ -474,7 +500,7 @@ pub fn legend_corner(points: &[(i32, i32)], area: (i32, i32, i32, i32)) -> usize
     (0..4).min_by_key(|&k| inside(&origins[k])).unwrap_or(0)
 }
 
-fn legend_position(corner: usize) -> SeriesLabelPosition {
+pub(crate) fn legend_position(corner: usize) -> SeriesLabelPosition {
     match corner {
         1 => SeriesLabelPosition::UpperRight,
         2 => SeriesLabelPosition::LowerLeft,
