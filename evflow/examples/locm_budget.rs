@@ -1,20 +1,24 @@
 //! EPE against LoCM steps and time in one fine-tuning run: the flow is scored after
-//! every step (scoring time not counted), so one run with the stopping rule's
-//! `max_steps` shows what the rule gives wherever it stops (the schedules depend only
-//! on `min_steps` and `max_steps`, not on where training stops).
+//! every step (scoring time not counted). The run always goes on to the stopping
+//! rule's `max_steps` (the schedules depend only on `min_steps` and `max_steps`, not
+//! on where training stops), and the rule of the settings is replayed on its pass
+//! losses as it goes: the step where it stops is marked, so one curve shows what the
+//! rule gives there and what more steps would have given.
 //!
 //! ```text
 //! cargo run -p degs-evflow --example locm_budget -- ecd DIR [SETTINGS.toml] > curve.jsonl
 //! cargo run -p degs-evflow --example locm_budget -- scene DIR [SETTINGS.toml] > curve.jsonl
+//! degs chart curve.jsonl … --out DIR      # EPE ÷ zero-flow EPE against LoCM time
 //! ```
 //! `ecd DIR`: `events.txt`, `calib.txt`, `flow.npy` of a 240×180 ECD slice (one
 //! window); `scene DIR`: a synthetic scene with `gt/`. Settings: `[evflow]` keys
 //! (`stop.*`, `lr_*`, `mode`...); `epochs` is ignored (the rule decides). One JSON
-//! line per step: step, LoCM seconds so far, CM loss, mean EPE (px per window),
-//! zero-flow EPE, their ratio, and whether the rule stopped there.
+//! line per step: `step`, `locm_s` (LoCM seconds so far), `loss` (CM loss of the
+//! step), `epe_px` (mean EPE, px per window), `zero_px` (zero-flow EPE), `ratio`,
+//! `stopped` (true on the step where the rule stops) and there `stop_reason`.
 
 use burn::tensor::{DType, Device};
-use evflow::finetune::{FlowSettings, finetune_observed, for_inference};
+use evflow::finetune::{FlowSettings, coarse_level, finetune_observed, for_inference};
 use evflow::predict::{dense_flow, event_flow};
 use evflow::source::{Source, WindowSpec};
 use evflow::stage::{Input, score_window};
@@ -69,22 +73,49 @@ fn main() -> anyhow::Result<()> {
     };
     let (e0, z0) = score(&net)?;
     println!(
-        "{{\"step\":0,\"locm_s\":0.0,\"loss\":null,\"epe_px\":{e0:.4},\"zero_px\":{z0:.4},\"ratio\":{:.4}}}",
-        e0 / z0
+        "{}",
+        serde_json::json!({"step": 0, "locm_s": 0.0, "loss": null, "epe_px": e0,
+            "zero_px": z0, "ratio": e0 / z0, "stopped": false})
     );
+    // Run to max_steps (a window longer than any run never converges), replaying the
+    // settings' own rule on the pass losses: `fine_from` as finetune computes it.
+    let rule = s.budget();
+    let steps_per_pass = src.windows.iter().filter(|w| !w.is_empty()).count();
+    let plan = rule.schedule(steps_per_pass);
+    let fine_from = (0..plan.max_passes)
+        .find(|&e| coarse_level(&s, e, plan.coarse_passes) == 0)
+        .unwrap_or(0);
+    let mut run = s.clone();
+    run.stop.window = usize::MAX;
+    let (mut pass_loss, mut pass_sum) = (Vec::new(), 0.0);
+    let mut stopped = None;
     let mut train_s = 0.0;
     let mut last = Instant::now();
     let mut step = 0;
     let mut failed = None;
-    let report = finetune_observed(&mut net, &src, &s, |st, net| {
+    finetune_observed(&mut net, &src, &run, |st, net| {
         train_s += last.elapsed().as_secs_f64();
         step += 1;
+        pass_sum += st.loss;
+        let mut reason = None;
+        if st.step + 1 == st.steps {
+            pass_loss.push(pass_sum / st.steps as f64);
+            pass_sum = 0.0;
+            if stopped.is_none() {
+                reason = rule.stop_after(&pass_loss, fine_from, step, steps_per_pass);
+                stopped = reason.map(|r| (step, r));
+            }
+        }
         match score(net) {
-            Ok((e, z)) => println!(
-                "{{\"step\":{step},\"locm_s\":{train_s:.3},\"loss\":{:.6},\"epe_px\":{e:.4},\"zero_px\":{z:.4},\"ratio\":{:.4}}}",
-                st.loss,
-                e / z
-            ),
+            Ok((e, z)) => {
+                let mut line = serde_json::json!({"step": step, "locm_s": train_s,
+                    "loss": st.loss, "epe_px": e, "zero_px": z, "ratio": e / z,
+                    "stopped": reason.is_some()});
+                if let Some(r) = reason {
+                    line["stop_reason"] = serde_json::to_value(r).unwrap_or_default();
+                }
+                println!("{line}");
+            }
             Err(e) => failed = Some(e),
         }
         last = Instant::now();
@@ -92,9 +123,9 @@ fn main() -> anyhow::Result<()> {
     if let Some(e) = failed {
         return Err(e);
     }
-    eprintln!(
-        "stopped after {} steps ({:?}); {:.2} s per step",
-        report.steps, report.stop_reason, report.step_s
-    );
+    match stopped {
+        Some((n, r)) => eprintln!("ran {step} steps; the rule stops after {n} ({r:?})"),
+        None => eprintln!("ran {step} steps; the rule did not stop"),
+    }
     Ok(())
 }

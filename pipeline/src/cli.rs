@@ -280,8 +280,14 @@ pub enum Command {
     /// against model size on disk and against Gaussian count, flow EPE against LoCM
     /// time; Pareto front drawn, 2D baselines as horizontal lines, RGB-only and DEGS
     /// told apart. The numbers go to chart.json and chart.csv beside them.
+    ///
+    /// Files ending in .jsonl are LoCM budget curves (one JSON line per fine-tuning
+    /// step, as `cargo run -p degs-evflow --example locm_budget -- ecd|scene DIR` prints):
+    /// they are drawn together as flow EPE ÷ zero-flow EPE against LoCM time, one line
+    /// per file, the step where the stopping rule stopped ringed, a dashed line at the
+    /// zero-flow level; locm-curves.png/.svg/.json/.csv.
     Chart {
-        /// Run directories, experiment names or sweep names
+        /// Run directories, experiment names, sweep names, or LoCM curve files (.jsonl)
         #[arg(required = true)]
         runs: Vec<String>,
         #[command(flatten)]

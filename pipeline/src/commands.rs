@@ -91,18 +91,29 @@ pub fn execute(command: Command) -> Result<()> {
             all,
         } => plan(&experiment, &place, all),
         Command::Chart { runs, place, out } => {
+            let (curves, runs): (Vec<String>, Vec<String>) = runs
+                .into_iter()
+                .partition(|r| chart::curve::is_curve_file(r));
             let records = chart_runs(&runs, &place)?;
             let out = match out {
                 Some(o) => o,
                 None => place.context()?.cache.root.join("charts"),
             };
-            let files = chart::write_charts(&records, &out)?;
+            let mut files = Vec::new();
+            if !records.is_empty() {
+                files.extend(chart::write_charts(&records, &out)?);
+            }
+            if !curves.is_empty() {
+                let paths: Vec<PathBuf> = curves.iter().map(PathBuf::from).collect();
+                files.extend(chart::curve::write_curve_charts(&paths, &out)?);
+            }
             for f in &files {
                 println!("{}", f.display());
             }
             eprintln!(
-                "[degs] chart: {} runs, {} files in {}",
+                "[degs] chart: {} runs, {} curves, {} files in {}",
                 records.len(),
+                curves.len(),
                 files.len(),
                 out.display()
             );

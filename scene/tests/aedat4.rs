@@ -1,10 +1,12 @@
 //! AEDAT4: the real DAVIS346 sample, synthetic files in every compression, and
 //! truncated / corrupt / hostile input.
 
+use common::aedat4_file::{XML, aedat4, event_packet};
 use scene::events::EventStream;
 use scene::formats::{ReadOptions, read_events};
-use std::io::Write;
 use std::path::Path;
+
+mod common;
 
 fn sample() -> std::path::PathBuf {
     scene::testdata::shared_data("aedat4_sample/sample.aedat4")
@@ -39,96 +41,6 @@ fn reads_the_real_davis346_sample() {
     };
     let e = err_text(read_events(sample(), &o));
     assert!(e.contains("sample.aedat4") && e.contains("346x260"), "{e}");
-}
-
-// ---- a minimal AEDAT4 writer for tests -------------------------------------------
-
-fn io_header(compression: i32, data_table: i64, xml: &str) -> Vec<u8> {
-    // [root u32][IOHE][vtable: 10 bytes + 2 pad][table at 20: soffset, compression,
-    //  data_table i64, string offset][string]
-    let mut b = Vec::new();
-    b.extend(20u32.to_le_bytes()); // root table at 20
-    b.extend(b"IOHE");
-    b.extend(10u16.to_le_bytes()); // vtable at 8
-    b.extend(24u16.to_le_bytes());
-    b.extend(4u16.to_le_bytes()); // compression at table+4
-    b.extend(8u16.to_le_bytes()); // data table at table+8
-    b.extend(16u16.to_le_bytes()); // string offset at table+16
-    b.extend([0u8; 2]);
-    assert_eq!(b.len(), 20);
-    b.extend(12i32.to_le_bytes()); // table − vtable
-    b.extend(compression.to_le_bytes());
-    b.extend(data_table.to_le_bytes());
-    b.extend(4u32.to_le_bytes()); // string right after this field (at 40)
-    b.extend((xml.len() as u32).to_le_bytes());
-    b.extend(xml.as_bytes());
-    b.push(0);
-    b
-}
-
-/// A size-prefixed packet FlatBuffer with identifier `id` and a vector of 16-byte
-/// event structs.
-fn event_packet(id: &[u8; 4], events: &[(i64, i16, i16, bool)]) -> Vec<u8> {
-    let mut fb = Vec::new();
-    fb.extend(16u32.to_le_bytes());
-    fb.extend(id);
-    fb.extend(6u16.to_le_bytes()); // vtable at 8
-    fb.extend(8u16.to_le_bytes());
-    fb.extend(4u16.to_le_bytes());
-    fb.extend([0u8; 2]);
-    fb.extend(8i32.to_le_bytes()); // table at 16
-    fb.extend(8u32.to_le_bytes()); // vector at 28
-    fb.extend([0u8; 4]);
-    fb.extend((events.len() as u32).to_le_bytes());
-    for &(t, x, y, on) in events {
-        fb.extend(t.to_le_bytes());
-        fb.extend(x.to_le_bytes());
-        fb.extend(y.to_le_bytes());
-        fb.push(on as u8);
-        fb.extend([0u8; 3]);
-    }
-    let mut b = (fb.len() as u32).to_le_bytes().to_vec();
-    b.extend(fb);
-    b
-}
-
-fn compress(kind: i32, raw: &[u8]) -> Vec<u8> {
-    match kind {
-        0 => raw.to_vec(),
-        1 | 2 => {
-            let mut enc = lz4_flex::frame::FrameEncoder::new(Vec::new());
-            enc.write_all(raw).unwrap();
-            enc.finish().unwrap()
-        }
-        _ => ruzstd::encoding::compress_to_vec(raw, ruzstd::encoding::CompressionLevel::Fastest),
-    }
-}
-
-const XML: &str = r#"<dv version="2.0"><node name="outInfo" path="/r/outInfo/">
-<node name="0" path="/r/outInfo/0/"><attr key="typeIdentifier" type="string">EVTS</attr>
-<node name="info" path="/r/outInfo/0/info/"><attr key="sizeX" type="int">64</attr>
-<attr key="sizeY" type="int">48</attr></node></node>
-<node name="1" path="/r/outInfo/1/"><attr key="typeIdentifier" type="string">IMUS</attr>
-</node></node></dv>"#;
-
-/// A file of `packets` (stream id, uncompressed body); with a trailing fake data table.
-fn aedat4(compression: i32, xml: &str, packets: &[(i32, Vec<u8>)]) -> Vec<u8> {
-    let mut body = Vec::new();
-    for (id, raw) in packets {
-        let c = compress(compression, raw);
-        body.extend(id.to_le_bytes());
-        body.extend((c.len() as i32).to_le_bytes());
-        body.extend(c);
-    }
-    let probe = io_header(compression, 0, xml);
-    let table_at = 14 + 4 + probe.len() + body.len();
-    let header = io_header(compression, table_at as i64, xml);
-    let mut f = b"#!AER-DAT4.0\r\n".to_vec();
-    f.extend((header.len() as i32).to_le_bytes());
-    f.extend(header);
-    f.extend(body);
-    f.extend(b"data table: not a packet");
-    f
 }
 
 fn events(n: usize, t0: i64, seed: u64) -> Vec<(i64, i16, i16, bool)> {

@@ -13,7 +13,13 @@
 //! scene (figures of different scenes do not compare); per scene the Pareto front is
 //! drawn and the 2D baselines are horizontal lines. [`draw`] makes the images; the
 //! numbers go to `chart.json` and `chart.csv` beside them.
+//!
+//! [`curve`]: LoCM budget curves (JSON lines from `evflow`'s `locm_budget` example, for
+//! recordings that are not scenes of a run, such as the real ECD slice), drawn by
+//! [`curve_draw`] as EPE ÷ zero-flow EPE against LoCM time.
 
+pub mod curve;
+pub mod curve_draw;
 pub mod draw;
 mod labels;
 
@@ -362,5 +368,7 @@ pub fn write_charts(runs: &[RunRecord], out: &Path) -> Result<Vec<PathBuf>> {
     Ok(written)
 }
 
+#[cfg(test)]
+mod curve_tests;
 #[cfg(test)]
 mod tests;

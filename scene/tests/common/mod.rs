@@ -4,6 +4,8 @@
 use scene::events::EventStream;
 use scene::formats::ReadOptions;
 
+pub mod aedat4_file;
+
 /// The real ECD `shapes_rotation` slice shared by the tests.
 pub fn ecd() -> std::path::PathBuf {
     scene::testdata::shared_data("ecd_shapes_rotation/events.txt")
