@@ -273,7 +273,8 @@ pub struct EvalWindow {
 pub struct EvalReport {
     pub flows: PathBuf,
     pub windows: Vec<EvalWindow>,
-    /// Mean per-event EPE over windows with ground truth, px over the window.
+    /// Mean per-event EPE over the events with ground truth (windows pooled), px over
+    /// the window.
     pub mean_epe_px: Option<f64>,
     pub mean_outliers_pct: Option<f64>,
     pub mean_flow_warp_ratio: f64,
@@ -338,8 +339,11 @@ pub fn eval_flows(
         .filter_map(|w| w.metrics)
         .filter(|m| m.count > 0)
         .collect();
+    // Per-event means, windows pooled (each weighted by its scored events), as the
+    // stage report and `degs eval` compute them.
+    let n: usize = scored.iter().map(|m| m.count).sum();
     let mean = |f: &dyn Fn(&crate::eval::FlowMetrics) -> f64| {
-        (!scored.is_empty()).then(|| scored.iter().map(f).sum::<f64>() / scored.len() as f64)
+        (n > 0).then(|| scored.iter().map(|m| f(m) * m.count as f64).sum::<f64>() / n as f64)
     };
     Ok(EvalReport {
         flows: flows_dir.to_path_buf(),
