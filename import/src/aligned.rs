@@ -2,11 +2,19 @@
 //! beside an event file: finding that file, reading it for the frames' sensor, and
 //! placing the frames on the events' clock (`timestamp = offset + time · duration`).
 
-use crate::recording::EventsAlignment;
 use scene::error::{Error, Result};
 use scene::events::EventStream;
 use scene::formats::{ReadOptions, read_events};
 use std::path::{Path, PathBuf};
+
+/// Layouts whose frames carry only a normalised time (blender, nerfies): where the
+/// events are and how normalised times map to seconds.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct EventsAlignment {
+    pub events: Option<PathBuf>,
+    pub time_offset: Option<f64>,
+    pub duration: Option<f64>,
+}
 
 /// Event file names looked for beside a layout's files, in this order.
 pub const EVENT_NAMES: [&str; 6] = [

@@ -15,8 +15,8 @@
 //! `transforms_val.json` is ignored. Blender PNGs are sRGB with alpha (composited over
 //! white when read), so the scene says `frame_encoding: srgb` unless the manifest says.
 
-use crate::aligned::{TimeMap, event_file, read_for_sensor};
-use crate::recording::{EventsAlignment, FrameImage, Recording, SourceFrame};
+use crate::aligned::{EventsAlignment, TimeMap, event_file, read_for_sensor};
+use crate::recording::{FrameImage, Recording, SourceFrame};
 use scene::Scene;
 use scene::atomic::{AtomicDir, write_bytes_atomic, write_json_atomic};
 use scene::error::{Error, Result};

@@ -17,9 +17,10 @@ pub mod nerfies;
 pub mod recording;
 mod table;
 
+pub use aligned::EventsAlignment;
 pub use recording::{
-    EventsAlignment, FrameImage, ImportOptions, ImportSummary, Recording, SourceFrame, Split,
-    split_by, split_frames, write_scene,
+    FrameImage, ImportOptions, ImportSummary, Recording, SourceFrame, Split, split_by,
+    split_frames, write_scene,
 };
 
 use scene::error::Result;

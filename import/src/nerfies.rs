@@ -22,9 +22,9 @@
 //! has the layout's normalised scale. Skewed pixels are refused; all frames must share
 //! one camera (a multi-camera capture is refused, naming the camera that differs).
 
-use crate::aligned::{TimeMap, event_file, read_for_sensor};
+use crate::aligned::{EventsAlignment, TimeMap, event_file, read_for_sensor};
 use crate::convention::{opencv_to_opengl, opengl_to_opencv};
-use crate::recording::{EventsAlignment, FrameImage, Recording, SourceFrame};
+use crate::recording::{FrameImage, Recording, SourceFrame};
 use glam::{DMat3, DQuat, DVec3};
 use scene::atomic::{AtomicDir, write_bytes_atomic, write_json_atomic};
 use scene::error::{Error, IoContext, Result};

@@ -2,6 +2,7 @@
 //! events) and the one writer that turns it into a degs scene directory
 //! ([`write_scene`]), choosing the train and test frames ([`split_frames`]).
 
+use crate::aligned::EventsAlignment;
 use scene::atomic::{AtomicDir, write_json_atomic};
 use scene::error::{Error, IoContext, Result};
 use scene::events::EventStream;
@@ -75,15 +76,6 @@ pub struct ImportOptions {
     pub alignment: EventsAlignment,
     /// Nerfies: read the frames of `rgb/{N}x/` (default: 1, else the smallest there).
     pub downscale: Option<u32>,
-}
-
-/// Layouts whose frames carry only a normalised time (blender, nerfies): where the
-/// events are and how normalised times map to seconds (see [`crate::aligned`]).
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct EventsAlignment {
-    pub events: Option<PathBuf>,
-    pub time_offset: Option<f64>,
-    pub duration: Option<f64>,
 }
 
 impl Default for ImportOptions {

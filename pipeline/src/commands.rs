@@ -105,7 +105,7 @@ pub fn execute(command: Command) -> Result<()> {
             }
             if !curves.is_empty() {
                 let paths: Vec<PathBuf> = curves.iter().map(PathBuf::from).collect();
-                files.extend(chart::curve::write_curve_charts(&paths, &out)?);
+                files.extend(chart::curve_draw::write_curve_charts(&paths, &out)?);
             }
             for f in &files {
                 println!("{}", f.display());

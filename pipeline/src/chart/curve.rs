@@ -1,7 +1,7 @@
 //! LoCM budget curves: the JSON lines `evflow`'s `locm_budget` example writes, one per
 //! fine-tuning step (`cargo run -p degs-evflow --example locm_budget -- ecd|scene DIR >
 //! NAME.jsonl`). `degs chart` takes these files beside run names and draws every curve
-//! as flow error ÷ zero-flow error against LoCM time ([`super::curve_draw`]).
+//! as flow error ÷ zero-flow error against LoCM time (drawn by the `curve_draw` module).
 //!
 //! A line: `{"step": 3, "locm_s": 8.1, "loss": 0.19, "epe_px": 2.9, "zero_px": 12.6,
 //! "ratio": 0.23, "stopped": false}`; the line where the stopping rule stops has
@@ -172,28 +172,4 @@ pub fn to_csv(curves: &[Curve]) -> String {
         }
     }
     s
-}
-
-/// Read the curve files, draw their chart and write `locm-curves.json` / `.csv` into
-/// `out`; the paths written.
-pub fn write_curve_charts(paths: &[PathBuf], out: &Path) -> Result<Vec<PathBuf>> {
-    let mut curves = paths
-        .iter()
-        .map(|p| read_curve(p))
-        .collect::<Result<Vec<_>>>()?;
-    // two files of one name (in different folders) are told apart by their paths
-    let names: Vec<String> = curves.iter().map(|c| c.name.clone()).collect();
-    for c in curves.iter_mut() {
-        if names.iter().filter(|n| **n == c.name).count() > 1 {
-            c.name = c.path.display().to_string();
-        }
-    }
-    std::fs::create_dir_all(out).map_err(|e| anyhow!("{}: cannot create: {e}", out.display()))?;
-    let mut written = super::curve_draw::draw_curves(&curves, &out.join("locm-curves"))?;
-    let json = out.join("locm-curves.json");
-    scene::atomic::write_json_atomic(&json, &curves)?;
-    let csv = out.join("locm-curves.csv");
-    scene::atomic::write_bytes_atomic(&csv, to_csv(&curves).as_bytes())?;
-    written.extend([json, csv]);
-    Ok(written)
 }

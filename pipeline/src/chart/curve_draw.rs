@@ -2,11 +2,11 @@
 //! LoCM fine-tuning time, the step where the stopping rule stopped ringed and labelled,
 //! a dashed line at ratio 1 (the error of predicting no motion).
 
-use super::curve::Curve;
+use super::curve::{Curve, read_curve, to_csv};
 use super::draw::{
     Drawing, LINE_COLOURS, legend_corner, legend_position, linear_tick, range, write_png_and_svg,
 };
-use anyhow::Result;
+use anyhow::{Result, anyhow};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
@@ -152,4 +152,28 @@ impl Drawing for CurveChart<'_> {
             .map_err(|e| err(&e))?;
         Ok(())
     }
+}
+
+/// Read the curve files, draw their chart and write `locm-curves.json` / `.csv` into
+/// `out`; the paths written.
+pub fn write_curve_charts(paths: &[PathBuf], out: &Path) -> Result<Vec<PathBuf>> {
+    let mut curves = paths
+        .iter()
+        .map(|p| read_curve(p))
+        .collect::<Result<Vec<_>>>()?;
+    // two files of one name (in different folders) are told apart by their paths
+    let names: Vec<String> = curves.iter().map(|c| c.name.clone()).collect();
+    for c in curves.iter_mut() {
+        if names.iter().filter(|n| **n == c.name).count() > 1 {
+            c.name = c.path.display().to_string();
+        }
+    }
+    std::fs::create_dir_all(out).map_err(|e| anyhow!("{}: cannot create: {e}", out.display()))?;
+    let mut written = draw_curves(&curves, &out.join("locm-curves"))?;
+    let json = out.join("locm-curves.json");
+    scene::atomic::write_json_atomic(&json, &curves)?;
+    let csv = out.join("locm-curves.csv");
+    scene::atomic::write_bytes_atomic(&csv, to_csv(&curves).as_bytes())?;
+    written.extend([json, csv]);
+    Ok(written)
 }

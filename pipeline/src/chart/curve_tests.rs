@@ -1,5 +1,6 @@
-use super::curve::{Curve, is_curve_file, parse_steps, read_curve, to_csv, write_curve_charts};
+use super::curve::{Curve, is_curve_file, parse_steps, read_curve, to_csv};
 use super::curve_draw::stop_label;
+use super::curve_draw::write_curve_charts;
 use super::draw;
 use serde_json::Value;
 use std::path::Path;
