@@ -52,6 +52,35 @@ pub struct Point {
 
 const SWEEP_KEYS: [&str; 3] = ["name", "base", "axes"];
 
+/// A sweep-like file's top-level table and its `name` (default: the file's stem), after
+/// checking it has only `keys` (`what` names the file's kind in the error).
+pub fn parse_named_table(
+    text: &str,
+    path: &Path,
+    keys: &[&str],
+    what: &str,
+) -> Result<(Table, String)> {
+    let at = |e: String| anyhow!("{}: {e}", path.display());
+    let mut top: Table = text
+        .parse()
+        .map_err(|e: toml::de::Error| at(e.message().trim().to_string()))?;
+    if let Some(k) = top.keys().find(|k| !keys.contains(&k.as_str())) {
+        return Err(at(format!(
+            "unknown key `{k}` ({what} has {})",
+            keys.join(", ")
+        )));
+    }
+    let name = match top.remove("name") {
+        Some(Value::String(s)) => s,
+        Some(_) => return Err(at("`name` must be a string".into())),
+        None => path
+            .file_stem()
+            .map(|s| s.to_string_lossy().to_string())
+            .unwrap_or_default(),
+    };
+    Ok((top, name))
+}
+
 impl Sweep {
     pub fn load(path: &Path) -> Result<Sweep> {
         let text = std::fs::read_to_string(path)
@@ -62,23 +91,7 @@ impl Sweep {
     /// Parse sweep text; `path` names it in errors and anchors a relative `base`.
     pub fn parse(text: &str, path: &Path) -> Result<Sweep> {
         let at = |e: String| anyhow!("{}: {e}", path.display());
-        let mut top: Table = text
-            .parse()
-            .map_err(|e: toml::de::Error| at(e.message().trim().to_string()))?;
-        if let Some(k) = top.keys().find(|k| !SWEEP_KEYS.contains(&k.as_str())) {
-            return Err(at(format!(
-                "unknown key `{k}` (a sweep file has {})",
-                SWEEP_KEYS.join(", ")
-            )));
-        }
-        let name = match top.remove("name") {
-            Some(Value::String(s)) => s,
-            Some(_) => return Err(at("`name` must be a string".into())),
-            None => path
-                .file_stem()
-                .map(|s| s.to_string_lossy().to_string())
-                .unwrap_or_default(),
-        };
+        let (mut top, name) = parse_named_table(text, path, &SWEEP_KEYS, "a sweep file")?;
         let (base, base_file) = take_base(&mut top, path)?;
         let axes = match top.remove("axes") {
             None => Vec::new(),

@@ -117,3 +117,31 @@ pub fn read_json(path: &Path) -> serde_json::Value {
 pub fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
+
+/// Stage settings of the tiny end-to-end experiments (one LoCM epoch, 200 warm-up and
+/// 30 joint iterations: a few seconds per run on two cores).
+pub const TINY_STAGES: &str = r#"
+[evflow]
+epochs = 1
+previews = false
+
+[gaussians]
+iterations = 200
+static_iterations = 100
+init_points = 500
+sh_degree = 0
+
+[gaussians.field]
+width = 16
+depth = 2
+
+[gaussians.densify]
+from_iter = 50
+interval = 50
+until_iter = 150
+
+[deform]
+iterations = 30
+rebind_every = 10
+log_every = 5
+"#;

@@ -4,9 +4,9 @@
 //! runs nothing, the warm-up beats the mean-colour baseline on the test frames, and
 //! both the warm-up and the joint training score the novel views (15° off the path).
 
-use degs_tests::{Workspace, entry, read_json, stage_record, stderr};
+use degs_tests::{TINY_STAGES, Workspace, entry, read_json, stage_record, stderr};
 
-const EXPERIMENT: &str = r#"
+const SCENE: &str = r#"
 name = "tiny"
 
 [scene]
@@ -19,30 +19,6 @@ duration = 0.25
 render_rate_hz = 200
 test_frames = 2
 supersample = 1
-
-[evflow]
-epochs = 1
-previews = false
-
-[gaussians]
-iterations = 200
-static_iterations = 100
-init_points = 500
-sh_degree = 0
-
-[gaussians.field]
-width = 16
-depth = 2
-
-[gaussians.densify]
-from_iter = 50
-interval = 50
-until_iter = 150
-
-[deform]
-iterations = 30
-rebind_every = 10
-log_every = 5
 "#;
 
 const BUILT: [&str; 5] = ["synth", "evflow", "gaussians", "assoc", "deform"];
@@ -50,7 +26,7 @@ const BUILT: [&str; 5] = ["synth", "evflow", "gaussians", "assoc", "deform"];
 #[test]
 fn degs_run_builds_every_stage_once_and_beats_the_mean_colour() {
     let w = Workspace::new();
-    let exp = w.experiment("tiny", EXPERIMENT);
+    let exp = w.experiment("tiny", &format!("{SCENE}\n{TINY_STAGES}"));
     let exp = exp.to_str().unwrap();
 
     let out = w.degs(&["run", exp, "-j", "2", "--quiet"]);

@@ -3,37 +3,10 @@
 //! exported into the layout, imported by the `degs` binary, and every stage runs on it
 //! end to end; the warm-up and the joint training beat the mean-colour baseline.
 
-use degs_tests::{Workspace, binary, entry, read_json, stage_record, stderr};
+use degs_tests::{TINY_STAGES, Workspace, binary, entry, read_json, stage_record, stderr};
 use import::nerfies::{NerfiesExport, export_nerfies};
 use scene::Scene;
 use std::path::Path;
-
-/// Stage settings of `degs_run.rs`'s tiny experiment (a few seconds per run).
-const STAGES: &str = r#"
-[evflow]
-epochs = 1
-previews = false
-
-[gaussians]
-iterations = 200
-static_iterations = 100
-init_points = 500
-sh_degree = 0
-
-[gaussians.field]
-width = 16
-depth = 2
-
-[gaussians.densify]
-from_iter = 50
-interval = 50
-until_iter = 150
-
-[deform]
-iterations = 30
-rebind_every = 10
-log_every = 5
-"#;
 
 const BUILT: [&str; 4] = ["evflow", "gaussians", "assoc", "deform"];
 
@@ -76,7 +49,7 @@ fn import_and_run(w: &Workspace, name: &str, args: &[&str]) {
     assert!(summary["events"].as_u64().unwrap() > 100, "{summary}");
 
     let text = format!(
-        "name = \"{name}\"\n\n[scene]\ndir = \"{}\"\n{STAGES}",
+        "name = \"{name}\"\n\n[scene]\ndir = \"{}\"\n{TINY_STAGES}",
         out_dir.display()
     );
     let exp = w.experiment(name, &text);

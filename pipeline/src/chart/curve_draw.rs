@@ -3,9 +3,7 @@
 //! a dashed line at ratio 1 (the error of predicting no motion).
 
 use super::curve::{Curve, read_curve, to_csv};
-use super::draw::{
-    Drawing, LINE_COLOURS, legend_corner, legend_position, linear_tick, range, write_png_and_svg,
-};
+use super::draw::{Drawing, LINE_COLOURS, draw_legend, linear_tick, range, write_png_and_svg};
 use anyhow::{Result, anyhow};
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -142,15 +140,7 @@ impl Drawing for CurveChart<'_> {
         let every: Vec<(i32, i32)> = steps()
             .map(|s| chart.backend_coord(&(s.locm_s, s.ratio)))
             .collect();
-        chart
-            .configure_series_labels()
-            .position(legend_position(legend_corner(&every, area)))
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 14))
-            .draw()
-            .map_err(|e| err(&e))?;
-        Ok(())
+        draw_legend(&mut chart, &every)
     }
 }
 

@@ -467,18 +467,25 @@ fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, spec: &Spec) -> Resul
             EmptyElement::at((pts[i].0, pts[i].1)) + Text::new(pts[i].2.to_string(), off, font(i))
         }))
         .map_err(|e| err(&e))?;
+    draw_legend(&mut chart, &anchors)
+}
+
+/// The legend on a translucent white box, in the plot corner with the fewest of
+/// `anchors` (pixel positions of what was drawn).
+pub(crate) fn draw_legend<'a, DB: DrawingBackend + 'a, CT: plotters::coord::CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    anchors: &[(i32, i32)],
+) -> Result<(), String> {
+    let (xs, ys) = chart.plotting_area().get_pixel_range();
+    let area = (xs.start, ys.start, xs.end, ys.end);
     chart
         .configure_series_labels()
-        .position(legend_position(legend_corner(
-            &anchors,
-            (xs.start, ys.start, xs.end, ys.end),
-        )))
+        .position(legend_position(legend_corner(anchors, area)))
         .background_style(WHITE.mix(0.85))
         .border_style(BLACK)
         .label_font(("sans-serif", 14))
         .draw()
-        .map_err(|e| err(&e))?;
-    Ok(())
+        .map_err(|e| format!("{e:?}"))
 }
 
 /// The corners a legend may take, in order of preference on ties.

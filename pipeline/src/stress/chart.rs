@@ -7,8 +7,7 @@ use super::report::{StressRecord, StressResult};
 use super::variants::StressKind;
 use crate::chart::Method;
 use crate::chart::draw::{
-    Drawing, LINE_COLOURS, Marker, legend_corner, legend_position, linear_tick, method_style,
-    range, write_png_and_svg,
+    Drawing, LINE_COLOURS, Marker, draw_legend, linear_tick, method_style, range, write_png_and_svg,
 };
 use anyhow::Result;
 use plotters::coord::Shift;
@@ -167,19 +166,7 @@ impl Drawing for StressChart {
                 None => {}
             }
         }
-        let (xs, ys) = chart.plotting_area().get_pixel_range();
-        chart
-            .configure_series_labels()
-            .position(legend_position(legend_corner(
-                &anchors,
-                (xs.start, ys.start, xs.end, ys.end),
-            )))
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 14))
-            .draw()
-            .map_err(|e| err(&e))?;
-        Ok(())
+        draw_legend(&mut chart, &anchors)
     }
 }
 

@@ -192,23 +192,7 @@ impl StressFile {
 
     pub fn parse(text: &str, path: &Path) -> Result<StressFile> {
         let at = |e: String| anyhow!("{}: {e}", path.display());
-        let mut top: Table = text
-            .parse()
-            .map_err(|e: toml::de::Error| at(e.message().trim().to_string()))?;
-        if let Some(k) = top.keys().find(|k| !KEYS.contains(&k.as_str())) {
-            return Err(at(format!(
-                "unknown key `{k}` (a stress file has {})",
-                KEYS.join(", ")
-            )));
-        }
-        let name = match top.remove("name") {
-            Some(Value::String(s)) => s,
-            Some(_) => return Err(at("`name` must be a string".into())),
-            None => path
-                .file_stem()
-                .map(|s| s.to_string_lossy().to_string())
-                .unwrap_or_default(),
-        };
+        let (mut top, name) = sweep::parse_named_table(text, path, &KEYS, "a stress file")?;
         let (base_table, base_file) = sweep::take_base(&mut top, path)?;
         let sweep = Sweep::over_base(&name, path, base_table, base_file);
         let base = sweep.experiment(&name, &[])?;
