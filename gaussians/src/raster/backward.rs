@@ -149,6 +149,8 @@ fn tile_backward_lanes<V: Lanes>(
 pub(crate) struct BackScratch {
     /// Screen gradient per (Gaussian, tile) pair.
     pairs: Vec<ScreenGrad>,
+    /// Per projected Gaussian: the sum of its pairs.
+    screen: Vec<ScreenGrad>,
     /// Per input Gaussian: its index into the projected ones (`u32::MAX`: culled).
     slot: Vec<u32>,
 }
@@ -198,7 +200,11 @@ pub(crate) fn backward_into(
         d_alpha,
     };
     let mut guard = st.back.lock().unwrap_or_else(|e| e.into_inner());
-    let BackScratch { pairs, slot } = &mut *guard;
+    let BackScratch {
+        pairs,
+        screen,
+        slot,
+    } = &mut *guard;
     // Screen gradients per (Gaussian, tile) pair; each tile owns its slice (every entry
     // is written).
     pairs.resize(st.tiles.list.len(), [0.0; 10]);
@@ -215,6 +221,8 @@ pub(crate) fn backward_into(
         .into_par_iter()
         .for_each(|(t, out)| tile_backward(st, t, &pg, out));
     let pairs = &pairs[..st.tiles.list.len()];
+    sum_pairs(pairs, &st.tiles.list, st.proj.id.len(), screen);
+    let screen = &screen[..];
     slot.clear();
     slot.resize(s.len(), u32::MAX);
     for (k, &id) in st.proj.id.iter().enumerate() {
@@ -224,7 +232,6 @@ pub(crate) fn backward_into(
     let n = s.len();
     g.resize(n);
     g.radius.copy_from_slice(&st.radius);
-    let (pairs_of, pair_ranges) = (&st.tiles.pairs_of, &st.tiles.pair_ranges);
     let cam32 = &st.cam;
     let (half_w, half_h) = (0.5 * w as f32, 0.5 * h as f32);
     let cam_grad = (
@@ -246,16 +253,7 @@ pub(crate) fn backward_into(
                 *rest = [0.0; 45];
                 return [0.0f64; 15];
             }
-            // The Gaussian's screen gradient: its pairs summed in list order.
-            let mut sg = [0.0f32; 10];
-            let k = k as usize;
-            for &q in &pairs_of[pair_ranges[k] as usize..pair_ranges[k + 1] as usize] {
-                let p = &pairs[q as usize];
-                for c in 0..10 {
-                    sg[c] += p[c];
-                }
-            }
-            let sg = &sg;
+            let sg = &screen[k as usize];
             let geo = project(s, i, cam32, st.sh_degree).expect("visible in the forward pass");
             let gg = project_backward(s, i, &geo, cam32, st.sh_degree, sg);
             *m = gg.mean;
@@ -290,6 +288,30 @@ pub(crate) fn backward_into(
             },
         );
     pose_twist_grad(cam, &cam_grad)
+}
+
+/// `screen[k] = Σ pairs[j]` over the pairs j of projected Gaussian k (`list[j] = k`),
+/// added in list order as one serial pass would. Each thread owns a range of k and
+/// reads the whole list (sequential reads; the pairs it skips cost nothing).
+fn sum_pairs(pairs: &[ScreenGrad], list: &[u32], nv: usize, screen: &mut Vec<ScreenGrad>) {
+    screen.clear();
+    screen.resize(nv, [0.0; 10]);
+    let chunk = nv.div_ceil(rayon::current_num_threads().max(1)).max(1);
+    screen
+        .par_chunks_mut(chunk)
+        .enumerate()
+        .for_each(|(c, out)| {
+            let lo = (c * chunk) as u32;
+            let hi = lo + out.len() as u32;
+            for (g, &k) in pairs.iter().zip(list) {
+                if (lo..hi).contains(&k) {
+                    let acc = &mut out[(k - lo) as usize];
+                    for c in 0..10 {
+                        acc[c] += g[c];
+                    }
+                }
+            }
+        });
 }
 
 /// `∂L/∂(W, t_w, C)` → `∂L/∂δ` for the left twist of the module docs. With

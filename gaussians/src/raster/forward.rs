@@ -147,11 +147,6 @@ pub(crate) struct Tiles {
     pub ranges: Vec<u32>,
     /// Indices into [`Projected`], depth-ordered within each tile.
     pub list: Vec<u32>,
-    /// `pairs_of[pair_ranges[k]..pair_ranges[k + 1]]`: the indices into `list` of
-    /// projected Gaussian k's pairs, in ascending order (so the backward can sum each
-    /// Gaussian's pairs in parallel, in the order of a serial pass over `list`).
-    pub pairs_of: Vec<u32>,
-    pub pair_ranges: Vec<u32>,
 }
 
 impl Tiles {
@@ -265,17 +260,11 @@ fn bin(p: &Projected, width: usize, height: usize, fill: &mut Vec<u32>, tiles: &
     let list = &mut tiles.list;
     list.clear();
     list.resize(counts[nx * ny] as usize, 0);
-    let (pairs_of, pair_ranges) = (&mut tiles.pairs_of, &mut tiles.pair_ranges);
-    pairs_of.clear();
-    pair_ranges.clear();
-    pair_ranges.push(0);
     for (k, b) in p.bbox.iter().enumerate() {
         for t in tiles_of(b) {
             list[fill[t] as usize] = k as u32;
-            pairs_of.push(fill[t]);
             fill[t] += 1;
         }
-        pair_ranges.push(pairs_of.len() as u32);
     }
 }
 
