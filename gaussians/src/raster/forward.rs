@@ -88,7 +88,8 @@ pub struct Projected {
 }
 
 impl Projected {
-    fn clear(&mut self) {
+    /// Empty, with room for `n` (allocations kept).
+    fn clear_for(&mut self, n: usize) {
         self.id.clear();
         self.xy.clear();
         self.conic.clear();
@@ -97,6 +98,14 @@ impl Projected {
         self.depth.clear();
         self.bbox.clear();
         self.cut.clear();
+        self.id.reserve(n);
+        self.xy.reserve(n);
+        self.conic.reserve(n);
+        self.opacity.reserve(n);
+        self.color.reserve(n);
+        self.depth.reserve(n);
+        self.bbox.reserve(n);
+        self.cut.reserve(n);
     }
 }
 
@@ -129,7 +138,6 @@ pub(crate) fn row_span(
 pub(crate) type Plane<T> = [[T; TILE]; TILE];
 
 /// One tile's composited output, before it is scattered into the frame.
-#[derive(Clone, Copy)]
 struct TileOut {
     rgb: [Plane<f32>; 3],
     depth: Plane<f32>,
@@ -219,7 +227,7 @@ fn project_all(
     );
     // Depth > 0, so the IEEE bit pattern orders like the value; ties by index.
     order.par_sort_unstable();
-    p.clear();
+    p.clear_for(order.len());
     for &(_, i) in order.iter() {
         let g = splats[i as usize].1.as_ref().expect("visible");
         p.id.push(i);
@@ -403,14 +411,10 @@ pub(crate) fn render_into(
     bin(&st.proj, w, h, &mut sc.fill, &mut st.tiles);
     let (proj, tiles) = (&st.proj, &st.tiles);
     let ntiles = tiles.nx * tiles.ny;
-    if sc.outs.len() != ntiles {
-        sc.outs.clear();
-        sc.outs.resize(ntiles, TileOut::blank());
-    }
-    sc.outs
-        .par_iter_mut()
-        .enumerate()
-        .for_each(|(t, o)| *o = tile_forward(proj, tiles.of(t), tiles.rect(t, w, h)));
+    (0..ntiles)
+        .into_par_iter()
+        .map(|t| tile_forward(proj, tiles.of(t), tiles.rect(t, w, h)))
+        .collect_into_vec(&mut sc.outs);
     let np = w * h;
     f.width = w;
     f.height = h;
