@@ -5,7 +5,7 @@
 //! projection in parallel. The camera gradient is reduced in f64.
 
 use super::alpha::{ALPHA_MAX, eval_alpha};
-use super::forward::{Plane, RenderState, TILE, lane_bits, row_span};
+use super::forward::{BackScratch, Plane, RenderState, TILE, lane_bits, row_span};
 use super::project::{ScreenGrad, project, project_backward};
 use super::simd::{self, F4, Lanes, Mask};
 use crate::splats::{SplatGrads, Splats};
@@ -142,17 +142,6 @@ fn tile_backward_lanes<V: Lanes>(
         }
         out[k] = std::array::from_fn(|c| acc[c].sum());
     }
-}
-
-/// Reused buffers of [`backward_into`] (kept in the [`RenderState`]).
-#[derive(Default)]
-pub(crate) struct BackScratch {
-    /// Screen gradient per (Gaussian, tile) pair.
-    pairs: Vec<ScreenGrad>,
-    /// Per projected Gaussian: the sum of its pairs.
-    screen: Vec<ScreenGrad>,
-    /// Per input Gaussian: its index into the projected ones (`u32::MAX`: culled).
-    slot: Vec<u32>,
 }
 
 pub(crate) fn backward(

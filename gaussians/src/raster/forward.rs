@@ -3,7 +3,7 @@
 //! order), then composite each tile front to back (DEGS Eq. 1) in parallel.
 
 use super::alpha::{T_MIN, eval_alpha};
-use super::project::{CamSetup, project};
+use super::project::{CamSetup, ScreenGrad, project};
 use super::rasterizer::RenderedImage;
 use super::simd::{self, F4, Lanes, Mask};
 use crate::splats::Splats;
@@ -28,7 +28,18 @@ pub struct RenderState {
     /// Buffers of the forward pass, kept for the next render into this state.
     scratch: ForwardScratch,
     /// Buffers of the backward pass (behind a lock: the backward borrows the state).
-    pub(crate) back: std::sync::Mutex<super::backward::BackScratch>,
+    pub(crate) back: std::sync::Mutex<BackScratch>,
+}
+
+/// Reused buffers of the backward pass (kept in the [`RenderState`]).
+#[derive(Default)]
+pub(crate) struct BackScratch {
+    /// Screen gradient per (Gaussian, tile) pair.
+    pub pairs: Vec<ScreenGrad>,
+    /// Per projected Gaussian: the sum of its pairs.
+    pub screen: Vec<ScreenGrad>,
+    /// Per input Gaussian: its index into the projected ones (`u32::MAX`: culled).
+    pub slot: Vec<u32>,
 }
 
 /// Reused buffers of [`render_into`].
