@@ -3,7 +3,7 @@
 //! Prints a table and writes `target/bench-results/field.json`.
 
 use burn::tensor::{Device, Distribution, Tensor, activation::relu};
-use gaussians::field::{FieldSettings, Mlp};
+use gaussians::field::{FieldSettings, Mlp, MlpCache, MlpScratch};
 use std::time::Instant;
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -28,6 +28,24 @@ fn hand(mlp: &Mlp<f32>, x: &[[f32; 3]], reps: usize) -> (f64, f64) {
 }
 
 /// The same MLP in burn: input encoding precomputed (it is not part of the network).
+/// Forward + backward into buffers reused from call to call, as the training loop does
+/// (`forward_into` / `backward_into`): ms per call, median.
+fn hand_reused(mlp: &Mlp<f32>, x: &[[f32; 3]], reps: usize) -> f64 {
+    let g = vec![1e-3f32; x.len() * 10];
+    let (mut cache, mut scratch) = (MlpCache::default(), MlpScratch::default());
+    let (mut out, mut grads) = (Vec::new(), Vec::new());
+    let mut fb = Vec::new();
+    for _ in 0..reps + 1 {
+        let t0 = Instant::now();
+        mlp.forward_into(x, &[0.5], &mut cache, &mut scratch, &mut out);
+        mlp.backward_into(&cache, &g, &mut scratch, &mut grads);
+        fb.push(t0.elapsed().as_secs_f64() * 1e3);
+        std::hint::black_box((&out, &grads));
+    }
+    fb.remove(0); // the first call allocates
+    median(fb)
+}
+
 fn burn_fb(s: &FieldSettings, enc: &[f32], n: usize, reps: usize) -> f64 {
     let dev = Device::flex().autodiff();
     let layers = Mlp::<f32>::layout(s);
@@ -68,12 +86,27 @@ fn burn_fb(s: &FieldSettings, enc: &[f32], n: usize, reps: usize) -> f64 {
 }
 
 fn main() {
-    let configs = [(8usize, 256usize), (4, 128), (4, 64), (2, 64)];
+    // FIELD_BENCH_ONLY=DxW (e.g. 4x64) runs one network; FIELD_BENCH_NO_BURN=1 skips burn.
+    let only = std::env::var("FIELD_BENCH_ONLY").ok();
+    let no_burn = std::env::var_os("FIELD_BENCH_NO_BURN").is_some();
+    let configs: Vec<(usize, usize)> = [(8usize, 256usize), (4, 128), (4, 64), (2, 64)]
+        .into_iter()
+        .filter(|(d, w)| only.as_ref().is_none_or(|o| *o == format!("{d}x{w}")))
+        .collect();
     let sizes = [10_000usize, 50_000];
     let mut rows = Vec::new();
     println!(
-        "{:>6} {:>7} {:>9} {:>10} {:>10} {:>12} {:>10} {:>12}",
-        "D×W", "n", "encode ms", "fwd ms", "fwd+bwd ms", "GFLOP/s", "burn ms", "burn/hand"
+        "{:>6} {:>7} {:>9} {:>10} {:>10} {:>12} {:>10} {:>9} {:>10} {:>12}",
+        "D×W",
+        "n",
+        "encode ms",
+        "fwd ms",
+        "fwd+bwd ms",
+        "GFLOP/s",
+        "reused ms",
+        "GFLOP/s",
+        "burn ms",
+        "burn/hand"
     );
     for &(d, w) in &configs {
         let s = FieldSettings {
@@ -100,21 +133,30 @@ fn main() {
             let t_enc = Instant::now();
             let enc = mlp.encode(&x, &[0.5]);
             let enc_ms = t_enc.elapsed().as_secs_f64() * 1e3;
-            let b = burn_fb(&s, &enc, n, reps);
+            let re = hand_reused(&mlp, &x, reps);
+            let re_gflops = 6.0 * (macs * n) as f64 / (re * 1e-3) / 1e9;
+            let b = if no_burn {
+                f64::NAN
+            } else {
+                burn_fb(&s, &enc, n, reps)
+            };
             println!(
-                "{:>6} {:>7} {:>9.1} {:>10.1} {:>10.1} {:>12.0} {:>10.1} {:>12.2}",
+                "{:>6} {:>7} {:>9.1} {:>10.1} {:>10.1} {:>12.0} {:>10.1} {:>9.0} {:>10.1} {:>12.2}",
                 format!("{d}×{w}"),
                 n,
                 enc_ms,
                 f,
                 fb,
                 gflops,
+                re,
+                re_gflops,
                 b,
                 b / fb
             );
             rows.push(serde_json::json!({
                 "depth": d, "width": w, "n": n, "params": Mlp::<f32>::param_count(&s),
                 "hand_forward_ms": f, "encode_ms": enc_ms, "hand_forward_backward_ms": fb, "hand_gflops": gflops,
+                "hand_reused_forward_backward_ms": re,
                 "burn_forward_backward_ms": b,
             }));
         }

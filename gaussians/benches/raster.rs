@@ -1,13 +1,14 @@
 //! Tile rasterizer: forward and forward+backward, ms per call, at 128², 256², 512² with
 //! 10k, 50k, 200k Gaussians (SH degree 3). Prints a table and writes
-//! `target/bench-results/raster.json`. `RASTER_BENCH_ONLY=256x50000` runs one configuration.
+//! `target/bench-results/raster.json`. `RASTER_BENCH_ONLY=256x50000` runs one configuration;
+//! `RASTER_BENCH_REUSE=1` reuses the buffers from call to call (the training path).
 //!
 //! Scene: Gaussians uniform in a cube of side 2 at distance 4, random rotations,
 //! scales around 0.5 × the mean spacing (so they tile the volume like a trained
 //! model), opacity ≈ 0.3–0.9.
 
-use gaussians::raster::TileRasterizer;
-use gaussians::{Gaussian, Splats};
+use gaussians::raster::{Rasterizer, TileRasterizer};
+use gaussians::{Gaussian, SplatGrads, Splats};
 use glam::DVec3;
 use scene::{Camera, Intrinsics, Pose};
 use std::time::Instant;
@@ -90,6 +91,9 @@ fn main() {
         Some((a, b)) => (vec![a], vec![b]),
         None => (vec![128, 256, 512], vec![10_000, 50_000, 200_000]),
     };
+    // RASTER_BENCH_REUSE=1: render and back-propagate into the last call's buffers
+    // (`render_reusing`, `backward_view_into`), as the training loops do.
+    let reuse = std::env::var_os("RASTER_BENCH_REUSE").is_some();
     let r = TileRasterizer;
     let mut rows = Vec::new();
     println!(
@@ -115,16 +119,32 @@ fn main() {
             let reps = if n * np > 50_000 * 65_536 { 5 } else { 11 };
             let (mut f, mut fb, mut cf, mut cfb) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
             let mut info = (0, 0);
-            for _ in 0..reps {
+            let (mut spare, mut g) = (None, SplatGrads::default());
+            // One untimed call first when reusing: it allocates the buffers.
+            for rep in 0..reps + usize::from(reuse) {
                 let (c0, t0) = (cpu_ms(), Instant::now());
-                let (frame, st) = r.render_full(&s, &cam, 3, [0.0; 3]);
+                let (frame, st) = if reuse {
+                    r.render_reusing(&s, &cam, 3, [0.0; 3], spare.take())
+                } else {
+                    r.render_full(&s, &cam, 3, [0.0; 3])
+                };
                 let (c1, t1) = (cpu_ms(), Instant::now());
-                let g = r.backward_full(&s, &cam, &st, &d_rgb, Some(&d_depth), None);
+                if reuse {
+                    r.backward_view_into(&s, &cam, &st, &d_rgb, Some(&d_depth), &mut g);
+                } else {
+                    g = r
+                        .backward_full(&s, &cam, &st, &d_rgb, Some(&d_depth), None)
+                        .0;
+                }
                 let (c2, t2) = (cpu_ms(), Instant::now());
+                info = (st.pairs(), evaluations(&st, size as usize));
+                std::hint::black_box(&g);
+                spare = Some((frame, st));
+                if reuse && rep == 0 {
+                    continue;
+                }
                 cf.push(c1 - c0);
                 cfb.push(c2 - c0);
-                info = (st.pairs(), evaluations(&st, size as usize));
-                std::hint::black_box((frame, g));
                 f.push((t1 - t0).as_secs_f64() * 1e3);
                 fb.push((t2 - t0).as_secs_f64() * 1e3);
             }
@@ -149,6 +169,7 @@ fn main() {
                 "backward_ms": fbm - fm, "forward_cpu_ms": cfm, "forward_backward_cpu_ms": cfbm,
                 "pairs": info.0, "box_evaluations": info.1,
                 "forward_box_evals_per_s": info.1 as f64 / (fm * 1e-3), "reps": reps,
+                "reused_buffers": reuse,
             }));
         }
     }

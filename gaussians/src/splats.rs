@@ -6,8 +6,9 @@
 /// rest stored apart as 3DGS `features_dc` / `features_rest`, rest coefficient-major:
 /// `rest[i][(k−1)·3 + c]` for k = 1..16).
 ///
-/// Build one with [`Splats::push`] or by collecting [`Gaussian`]s.
-#[derive(Clone, Debug, Default, PartialEq)]
+/// Build one with [`Splats::push`] or by collecting [`Gaussian`]s. `clone_from` keeps
+/// the destination's allocations (a training loop copies the model every iteration).
+#[derive(Debug, Default, PartialEq)]
 pub struct Splats {
     pub means: Vec<[f32; 3]>,
     pub log_scales: Vec<[f32; 3]>,
@@ -18,6 +19,23 @@ pub struct Splats {
     /// Per Gaussian: deformed by the field (used when `TrainSettings::dynamic_only`).
     /// Empty when the Gaussians carry no flags (every Gaussian counts as dynamic).
     pub dynamic: Vec<bool>,
+}
+
+impl Clone for Splats {
+    fn clone(&self) -> Self {
+        let mut s = Splats::default();
+        s.clone_from(self);
+        s
+    }
+    fn clone_from(&mut self, src: &Self) {
+        self.means.clone_from(&src.means);
+        self.log_scales.clone_from(&src.log_scales);
+        self.rotations.clone_from(&src.rotations);
+        self.opacity_logits.clone_from(&src.opacity_logits);
+        self.sh_dc.clone_from(&src.sh_dc);
+        self.sh_rest.clone_from(&src.sh_rest);
+        self.dynamic.clone_from(&src.dynamic);
+    }
 }
 
 /// One Gaussian's raw parameters (a row of [`Splats`], same conventions).
@@ -145,5 +163,23 @@ impl SplatGrads {
             screen_grad_norm: vec![0.0; n],
             radius: vec![0.0; n],
         }
+    }
+
+    /// Resize every column to `n` keeping the allocations; the values are left for the
+    /// caller to overwrite (new entries are zero).
+    pub fn resize(&mut self, n: usize) {
+        fn fit<T: Copy + Default>(v: &mut Vec<T>, n: usize) {
+            v.truncate(n);
+            v.resize(n, T::default());
+        }
+        fit(&mut self.means, n);
+        fit(&mut self.log_scales, n);
+        fit(&mut self.rotations, n);
+        fit(&mut self.opacity_logits, n);
+        fit(&mut self.sh_dc, n);
+        self.sh_rest.truncate(n);
+        self.sh_rest.resize(n, [0.0; 45]);
+        fit(&mut self.screen_grad_norm, n);
+        fit(&mut self.radius, n);
     }
 }

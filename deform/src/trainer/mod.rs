@@ -309,7 +309,7 @@ impl JointTrainer {
         self.posenet_grad.fill(0.0);
         let mut grads = self.backward_with_motion(r, d, &rv, &grad, &motion);
         self.fallbacks.drop_bindings(no_flow, outliers, disagreeing);
-        drop(rv);
+        self.inner.recycle_view(rv);
         self.timings.rgb += clock.elapsed().as_secs_f64();
 
         let clock = Instant::now();
@@ -324,6 +324,7 @@ impl JointTrainer {
         let clock = Instant::now();
         let before = self.inner.splats.len();
         self.inner.apply_gradients(&grads);
+        self.inner.recycle_grads(grads);
         if let Some(p) = &mut self.posenet {
             self.posenet_adam
                 .step(0, p.params_mut(), &self.posenet_grad);
@@ -405,12 +406,14 @@ impl JointTrainer {
             *gi *= g1 * if d.srgb { srgb_slope(c) } else { 1.0 };
         }
         let ge = self.inner.view_backward(r, &rv, &g, None, None);
+        self.inner.recycle_view(rv);
         // While the PoseNet warms up, L_event moves the camera only (not the scene).
         if self.iteration >= self.settings.posenet_warmup || self.posenet.is_none() {
             add_scaled(grads, &ge, 1.0);
         }
         let g_eps = crate::lie::world_left_grad_to_camera_right(&camera.cam_to_world, ge.camera);
         self.posenet_backward(d, t_e, xi, g_eps);
+        self.inner.recycle_grads(ge);
         el.loss as f64
     }
 

@@ -26,24 +26,56 @@ impl Deltas {
     pub fn is_empty(&self) -> bool {
         self.dx.is_empty()
     }
-    fn from_rows(rows: &[f32]) -> Self {
-        let n = rows.len() / HEAD_OUT;
-        let mut d = Deltas::zeros(n);
-        for (i, r) in rows.chunks(HEAD_OUT).enumerate() {
-            d.dx[i] = [r[0], r[1], r[2]];
-            d.dq[i] = [r[3], r[4], r[5], r[6]];
-            d.ds[i] = [r[7], r[8], r[9]];
+    /// `n` zero deltas in place (allocations kept).
+    pub fn set_zeros(&mut self, n: usize) {
+        for v in [
+            &mut self.dx as &mut dyn ZeroFill,
+            &mut self.dq,
+            &mut self.ds,
+        ] {
+            v.zero_fill(n);
         }
+    }
+    fn from_rows(rows: &[f32]) -> Self {
+        let mut d = Deltas::default();
+        d.set_rows(rows);
         d
     }
+    /// Overwrite with the head's output rows (`n × 10`).
+    pub(crate) fn set_rows(&mut self, rows: &[f32]) {
+        let n = rows.len() / HEAD_OUT;
+        self.set_zeros(n);
+        for (i, r) in rows.chunks(HEAD_OUT).enumerate() {
+            self.dx[i] = [r[0], r[1], r[2]];
+            self.dq[i] = [r[3], r[4], r[5], r[6]];
+            self.ds[i] = [r[7], r[8], r[9]];
+        }
+    }
     fn to_rows(&self) -> Vec<f32> {
-        let mut rows = Vec::with_capacity(self.len() * HEAD_OUT);
+        let mut rows = Vec::new();
+        self.rows_into(&mut rows);
+        rows
+    }
+    /// The deltas as head rows (`n × 10`) into `rows` (cleared first).
+    pub(crate) fn rows_into(&self, rows: &mut Vec<f32>) {
+        rows.clear();
         for i in 0..self.len() {
             rows.extend_from_slice(&self.dx[i]);
             rows.extend_from_slice(&self.dq[i]);
             rows.extend_from_slice(&self.ds[i]);
         }
-        rows
+    }
+}
+
+/// Zero-filled resize of the delta columns.
+trait ZeroFill {
+    fn zero_fill(&mut self, n: usize);
+}
+
+impl<const K: usize> ZeroFill for Vec<[f32; K]> {
+    fn zero_fill(&mut self, n: usize) {
+        self.clear();
+        self.resize(n, [0.0; K]);
     }
 }
 
@@ -99,30 +131,39 @@ pub fn apply_deltas(
     rotations: &[[f32; 4]],
     d: &Deltas,
 ) -> Deformed {
-    let n = means.len();
     let mut out = Deformed {
-        means: Vec::with_capacity(n),
-        log_scales: Vec::with_capacity(n),
-        rotations: Vec::with_capacity(n),
+        means: means.to_vec(),
+        log_scales: log_scales.to_vec(),
+        rotations: rotations.to_vec(),
     };
-    for i in 0..n {
-        let m = means[i];
-        out.means
-            .push([m[0] + d.dx[i][0], m[1] + d.dx[i][1], m[2] + d.dx[i][2]]);
-        let ls = log_scales[i];
-        out.log_scales.push(std::array::from_fn(|k| {
-            (ls[k].exp() + d.ds[i][k]).max(MIN_SCALE).ln()
-        }));
-        let q = rotations[i];
-        let norm = q.iter().map(|v| v * v).sum::<f32>().sqrt().max(1e-12);
-        out.rotations
-            .push(std::array::from_fn(|k| q[k] / norm + d.dq[i][k]));
-    }
+    apply_deltas_in_place(&mut out.means, &mut out.log_scales, &mut out.rotations, d);
     out
+}
+
+/// [`apply_deltas`] on parameters that hold the canonical values on entry and the
+/// deformed ones on return (rayon over Gaussians; the same values bit for bit).
+pub fn apply_deltas_in_place(
+    means: &mut [[f32; 3]],
+    log_scales: &mut [[f32; 3]],
+    rotations: &mut [[f32; 4]],
+    d: &Deltas,
+) {
+    use rayon::prelude::*;
+    (means, log_scales, rotations)
+        .into_par_iter()
+        .enumerate()
+        .with_min_len(1024)
+        .for_each(|(i, (m, ls, q))| {
+            *m = [m[0] + d.dx[i][0], m[1] + d.dx[i][1], m[2] + d.dx[i][2]];
+            *ls = std::array::from_fn(|k| (ls[k].exp() + d.ds[i][k]).max(MIN_SCALE).ln());
+            let norm = q.iter().map(|v| v * v).sum::<f32>().sqrt().max(1e-12);
+            *q = std::array::from_fn(|k| q[k] / norm + d.dq[i][k]);
+        });
 }
 
 /// Gradients of the canonical parameters and of the deltas, from the gradients of the
 /// deformed ones (`g_*`, as returned by the rasterizer's backward).
+#[derive(Clone, Debug, Default)]
 pub struct DeltaGrads {
     pub means: Vec<[f32; 3]>,
     pub log_scales: Vec<[f32; 3]>,
@@ -139,32 +180,65 @@ pub fn apply_deltas_backward(
     g_log_scales: &[[f32; 3]],
     g_rotations: &[[f32; 4]],
 ) -> DeltaGrads {
-    let n = log_scales.len();
-    let mut out = DeltaGrads {
+    let mut g = DeltaGrads {
         means: g_means.to_vec(),
-        log_scales: vec![[0.0; 3]; n],
-        rotations: vec![[0.0; 4]; n],
-        deltas: Deltas::zeros(n),
+        log_scales: g_log_scales.to_vec(),
+        rotations: g_rotations.to_vec(),
+        deltas: Deltas::default(),
     };
-    for i in 0..n {
-        out.deltas.dx[i] = g_means[i];
-        for k in 0..3 {
-            let e = log_scales[i][k].exp();
-            let s = e + d.ds[i][k];
-            if s > MIN_SCALE {
-                // d ln(s)/dδs = 1/s ; d ln(s)/d log s = exp(log s)/s
-                out.deltas.ds[i][k] = g_log_scales[i][k] / s;
-                out.log_scales[i][k] = g_log_scales[i][k] * e / s;
+    apply_deltas_backward_in_place(
+        log_scales,
+        rotations,
+        d,
+        g_means,
+        &mut g.log_scales,
+        &mut g.rotations,
+        &mut g.deltas,
+    );
+    g
+}
+
+/// Backward of [`apply_deltas`] in place: `g_log_scales` and `g_rotations` hold the
+/// deformed parameters' gradients on entry and the canonical ones' on return (the
+/// means' gradient `g_means` passes unchanged: it is δx's); `deltas` receives the deltas' gradients (resized).
+/// Rayon over Gaussians; the same values as [`apply_deltas_backward`].
+pub fn apply_deltas_backward_in_place(
+    log_scales: &[[f32; 3]],
+    rotations: &[[f32; 4]],
+    d: &Deltas,
+    g_means: &[[f32; 3]],
+    g_log_scales: &mut [[f32; 3]],
+    g_rotations: &mut [[f32; 4]],
+    deltas: &mut Deltas,
+) {
+    use rayon::prelude::*;
+    let n = log_scales.len();
+    deltas.set_zeros(n);
+    deltas.dx.copy_from_slice(g_means);
+    let Deltas { dx: _, dq, ds } = deltas;
+    (g_log_scales, g_rotations, ds, dq)
+        .into_par_iter()
+        .enumerate()
+        .with_min_len(1024)
+        .for_each(|(i, (gls, grot, dds, ddq))| {
+            let mut canon = [0.0f32; 3];
+            for k in 0..3 {
+                let e = log_scales[i][k].exp();
+                let s = e + d.ds[i][k];
+                if s > MIN_SCALE {
+                    // d ln(s)/dδs = 1/s ; d ln(s)/d log s = exp(log s)/s
+                    dds[k] = gls[k] / s;
+                    canon[k] = gls[k] * e / s;
+                }
             }
-        }
-        out.deltas.dq[i] = g_rotations[i];
-        // d(q/‖q‖)/dq = (I − n nᵀ)/‖q‖
-        let q = rotations[i];
-        let norm = q.iter().map(|v| v * v).sum::<f32>().sqrt().max(1e-12);
-        let nq: [f32; 4] = std::array::from_fn(|k| q[k] / norm);
-        let g = g_rotations[i];
-        let dot: f32 = (0..4).map(|k| g[k] * nq[k]).sum();
-        out.rotations[i] = std::array::from_fn(|k| (g[k] - dot * nq[k]) / norm);
-    }
-    out
+            *gls = canon;
+            *ddq = *grot;
+            // d(q/‖q‖)/dq = (I − n nᵀ)/‖q‖
+            let q = rotations[i];
+            let norm = q.iter().map(|v| v * v).sum::<f32>().sqrt().max(1e-12);
+            let nq: [f32; 4] = std::array::from_fn(|k| q[k] / norm);
+            let g = *grot;
+            let dot: f32 = (0..4).map(|k| g[k] * nq[k]).sum();
+            *grot = std::array::from_fn(|k| (g[k] - dot * nq[k]) / norm);
+        });
 }

@@ -51,6 +51,7 @@ pub struct Mlp<T: Real> {
 }
 
 /// Activations kept from the forward pass for the backward pass.
+#[derive(Clone, Debug, Default)]
 pub struct MlpCache<T: Real> {
     pub n: usize,
     /// Encoded input `n × in_dim`.
@@ -135,11 +136,18 @@ impl<T: Real> Mlp<T> {
 
     /// Build the encoded input rows `[γ(x), γ(t)]`. `t` has length 1 (broadcast) or n.
     pub fn encode(&self, x: &[[T; 3]], t: &[T]) -> Vec<T> {
+        let mut out = Vec::new();
+        self.encode_into_buf(x, t, &mut out);
+        out
+    }
+
+    /// [`Self::encode`] into `out` (resized; its allocation reused).
+    fn encode_into_buf(&self, x: &[[T; 3]], t: &[T], out: &mut Vec<T>) {
         let s = &self.settings;
         let in_dim = Self::input_dim(s);
         let px = encoded_len(3, s.pos_freqs);
         assert!(t.len() == 1 || t.len() == x.len(), "time batch length");
-        let mut out = vec![T::ZERO; x.len() * in_dim];
+        fit(out, x.len() * in_dim);
         let chunk = 256;
         use rayon::prelude::*;
         out.par_chunks_mut(in_dim * chunk)
@@ -152,112 +160,157 @@ impl<T: Real> Mlp<T> {
                     encode_into(&[ti], s.time_freqs, &mut row[px..]);
                 }
             });
-        out
     }
 
     /// Forward pass: returns `n × 10` head outputs (δx, δq, δs per row) and the cache.
     pub fn forward(&self, x: &[[T; 3]], t: &[T]) -> (Vec<T>, MlpCache<T>) {
+        let (mut out, mut cache) = (Vec::new(), MlpCache::default());
+        self.forward_into(x, t, &mut cache, &mut MlpScratch::default(), &mut out);
+        (out, cache)
+    }
+
+    /// [`Self::forward`] into reused buffers: `cache` and `out` are overwritten (same
+    /// values as `forward`'s, bit for bit); their allocations and the scratch's are kept
+    /// from call to call, so a training loop allocates nothing here once warm.
+    pub fn forward_into(
+        &self,
+        x: &[[T; 3]],
+        t: &[T],
+        cache: &mut MlpCache<T>,
+        scratch: &mut MlpScratch<T>,
+        out: &mut Vec<T>,
+    ) {
         let n = x.len();
         let s = &self.settings;
         let in_dim = Self::input_dim(s);
         let skip = Self::skip_after(s);
-        let input = self.encode(x, t);
-        let mut hidden: Vec<Vec<T>> = Vec::with_capacity(s.depth);
-        let mut cat = Vec::new();
+        cache.n = n;
+        self.encode_into_buf(x, t, &mut cache.input);
+        cache.hidden.resize_with(s.depth, Vec::new);
         for (i, l) in self.layers[..s.depth].iter().enumerate() {
+            let (done, rest) = cache.hidden.split_at_mut(i);
             let a: &[T] = if i == 0 {
-                &input
+                &cache.input
             } else if Some(i - 1) == skip {
-                cat = concat_rows(&input, in_dim, &hidden[i - 1], s.width, n);
-                &cat
+                concat_rows(
+                    &cache.input,
+                    in_dim,
+                    &done[i - 1],
+                    s.width,
+                    n,
+                    &mut scratch.cat,
+                );
+                &scratch.cat
             } else {
-                &hidden[i - 1]
+                &done[i - 1]
             };
-            let mut z = self.linear(a, n, l);
-            relu_inplace(&mut z);
-            hidden.push(z);
+            let z = &mut rest[0];
+            self.linear(a, n, l, z);
+            relu_inplace(z);
         }
-        drop(cat);
-        let head = *self.layers.last().expect("head layer");
-        let last: &[T] = hidden.last().map(|h| h.as_slice()).unwrap_or(&input);
-        let out = self.linear(last, n, &head);
-        (out, MlpCache { n, input, hidden })
-    }
-
-    fn linear(&self, a: &[T], n: usize, l: &LayerLayout) -> Vec<T> {
-        let mut z = vec![T::ZERO; n * l.fan_out];
-        let bias = &self.params[l.bias..l.bias + l.fan_out];
-        for row in z.chunks_mut(l.fan_out) {
-            row.copy_from_slice(bias);
-        }
-        let w = View::new(
-            &self.params[l.weight..l.bias],
-            l.fan_in,
-            l.fan_out,
-            l.fan_out,
-        );
-        matmul(
-            &mut z,
-            l.fan_out,
-            View::new(a, n, l.fan_in, l.fan_in),
-            w,
-            true,
-        );
-        z
-    }
-
-    /// Backward pass: `grad_out` is `n × 10`; returns the gradient of every parameter
-    /// (same layout as `params`). No gradient flows into x or t (the field sees the
-    /// canonical positions detached, as in Deform-GS).
-    pub fn backward(&self, cache: &MlpCache<T>, grad_out: &[T]) -> Vec<T> {
-        let n = cache.n;
-        let s = &self.settings;
-        let in_dim = Self::input_dim(s);
-        let skip = Self::skip_after(s);
-        assert_eq!(grad_out.len(), n * HEAD_OUT);
-        let mut grads = vec![T::ZERO; self.params.len()];
         let head = *self.layers.last().expect("head layer");
         let last: &[T] = cache
             .hidden
             .last()
             .map(|h| h.as_slice())
             .unwrap_or(&cache.input);
-        let mut dz = grad_out.to_vec();
-        let mut da = self.linear_backward(last, &dz, n, &head, &mut grads, s.depth > 0);
+        self.linear(last, n, &head, out);
+    }
+
+    /// `z = a · W + b` into `z` (resized).
+    fn linear(&self, a: &[T], n: usize, l: &LayerLayout, z: &mut Vec<T>) {
+        use rayon::prelude::*;
+        fit(z, n * l.fan_out);
+        let bias = &self.params[l.bias..l.bias + l.fan_out];
+        z.par_chunks_mut(l.fan_out * 1024).for_each(|rows| {
+            for row in rows.chunks_mut(l.fan_out) {
+                row.copy_from_slice(bias);
+            }
+        });
+        let w = View::new(
+            &self.params[l.weight..l.bias],
+            l.fan_in,
+            l.fan_out,
+            l.fan_out,
+        );
+        matmul(z, l.fan_out, View::new(a, n, l.fan_in, l.fan_in), w, true);
+    }
+
+    /// Backward pass: `grad_out` is `n × 10`; returns the gradient of every parameter
+    /// (same layout as `params`). No gradient flows into x or t (the field sees the
+    /// canonical positions detached, as in Deform-GS).
+    pub fn backward(&self, cache: &MlpCache<T>, grad_out: &[T]) -> Vec<T> {
+        let mut grads = Vec::new();
+        self.backward_into(cache, grad_out, &mut MlpScratch::default(), &mut grads);
+        grads
+    }
+
+    /// [`Self::backward`] into `grads` (overwritten, resized to the parameter count),
+    /// with reused scratch buffers; same values as `backward`, bit for bit.
+    pub fn backward_into(
+        &self,
+        cache: &MlpCache<T>,
+        grad_out: &[T],
+        scratch: &mut MlpScratch<T>,
+        grads: &mut Vec<T>,
+    ) {
+        use rayon::prelude::*;
+        let n = cache.n;
+        let s = &self.settings;
+        let in_dim = Self::input_dim(s);
+        let skip = Self::skip_after(s);
+        assert_eq!(grad_out.len(), n * HEAD_OUT);
+        grads.clear();
+        grads.resize(self.params.len(), T::ZERO);
+        let head = *self.layers.last().expect("head layer");
+        let last: &[T] = cache
+            .hidden
+            .last()
+            .map(|h| h.as_slice())
+            .unwrap_or(&cache.input);
+        let MlpScratch { dz, da, cat } = scratch;
+        dz.clear();
+        dz.extend_from_slice(grad_out);
+        self.linear_backward(last, dz, n, &head, grads, s.depth > 0, da);
         for i in (0..s.depth).rev() {
             let l = self.layers[i];
             // dz = da ⊙ [h > 0]
-            dz = da;
-            for (g, &h) in dz.iter_mut().zip(&cache.hidden[i]) {
-                *g = if h > T::ZERO { *g } else { T::ZERO };
-            }
-            let cat;
+            std::mem::swap(dz, da);
+            dz.par_chunks_mut(1 << 14)
+                .zip(cache.hidden[i].par_chunks(1 << 14))
+                .for_each(|(g, h)| {
+                    for (g, &h) in g.iter_mut().zip(h) {
+                        *g = if h > T::ZERO { *g } else { T::ZERO };
+                    }
+                });
             let a: &[T] = if i == 0 {
                 &cache.input
             } else if Some(i - 1) == skip {
-                cat = concat_rows(&cache.input, in_dim, &cache.hidden[i - 1], s.width, n);
-                &cat
+                concat_rows(&cache.input, in_dim, &cache.hidden[i - 1], s.width, n, cat);
+                cat
             } else {
                 &cache.hidden[i - 1]
             };
             let need_da = i > 0;
-            let d = self.linear_backward(a, &dz, n, &l, &mut grads, need_da);
-            da = if i > 0 && Some(i - 1) == skip {
+            self.linear_backward(a, dz, n, &l, grads, need_da, da);
+            if i > 0 && Some(i - 1) == skip {
                 // keep only the hidden part of the concatenated input's gradient
                 let w = l.fan_in;
-                let mut h = vec![T::ZERO; n * s.width];
-                for (dst, src) in h.chunks_mut(s.width).zip(d.chunks(w)) {
-                    dst.copy_from_slice(&src[in_dim..]);
-                }
-                h
-            } else {
-                d
-            };
+                fit(cat, n * s.width);
+                cat.par_chunks_mut(s.width * 256)
+                    .zip(da.par_chunks(w * 256))
+                    .for_each(|(dst, src)| {
+                        for (d, r) in dst.chunks_mut(s.width).zip(src.chunks(w)) {
+                            d.copy_from_slice(&r[in_dim..]);
+                        }
+                    });
+                std::mem::swap(da, cat);
+            }
         }
-        grads
     }
 
-    /// Accumulate dW = aᵀ dz and db = Σ dz into `grads`; return da = dz Wᵀ if asked.
+    /// Accumulate dW = aᵀ dz and db = Σ dz into `grads`; da = dz Wᵀ into `da` if asked.
+    #[allow(clippy::too_many_arguments)]
     fn linear_backward(
         &self,
         a: &[T],
@@ -266,29 +319,54 @@ impl<T: Real> Mlp<T> {
         l: &LayerLayout,
         grads: &mut [T],
         need_da: bool,
-    ) -> Vec<T> {
+        da: &mut Vec<T>,
+    ) {
         let va = View::new(a, n, l.fan_in, l.fan_in);
         let vdz = View::new(dz, n, l.fan_out, l.fan_out);
         matmul(&mut grads[l.weight..l.bias], l.fan_out, va.t(), vdz, true);
-        let gb = &mut grads[l.bias..l.bias + l.fan_out];
-        for row in dz.chunks(l.fan_out) {
-            for (g, &v) in gb.iter_mut().zip(row) {
-                *g += v;
-            }
-        }
+        column_sums(dz, l.fan_out, &mut grads[l.bias..l.bias + l.fan_out]);
         if !need_da {
-            return Vec::new();
+            return;
         }
-        let mut da = vec![T::ZERO; n * l.fan_in];
+        fit(da, n * l.fan_in);
         let w = View::new(
             &self.params[l.weight..l.bias],
             l.fan_in,
             l.fan_out,
             l.fan_out,
         );
-        matmul(&mut da, l.fan_in, vdz, w.t(), false);
-        da
+        matmul(da, l.fan_in, vdz, w.t(), false);
     }
+}
+
+/// Reusable buffers of [`Mlp::forward_into`] and [`Mlp::backward_into`] (their contents
+/// between calls mean nothing).
+#[derive(Clone, Debug, Default)]
+pub struct MlpScratch<T> {
+    dz: Vec<T>,
+    da: Vec<T>,
+    cat: Vec<T>,
+}
+
+/// Resize `v` to `len` keeping its allocation (contents are to be overwritten).
+fn fit<T: Real>(v: &mut Vec<T>, len: usize) {
+    v.truncate(len);
+    v.resize(len, T::ZERO);
+}
+
+/// `acc[c] += Σ_r m[r][c]` over the rows of `m` (`cols` wide), rows in order for every
+/// column (the serial loop's sums exactly), columns split across threads.
+fn column_sums<T: Real>(m: &[T], cols: usize, acc: &mut [T]) {
+    use rayon::prelude::*;
+    const STRIP: usize = 16;
+    acc.par_chunks_mut(STRIP).enumerate().for_each(|(k, acc)| {
+        let c0 = k * STRIP;
+        for row in m.chunks(cols) {
+            for (g, &v) in acc.iter_mut().zip(&row[c0..]) {
+                *g += v;
+            }
+        }
+    });
 }
 
 fn relu_inplace<T: Real>(z: &mut [T]) {
@@ -301,11 +379,16 @@ fn relu_inplace<T: Real>(z: &mut [T]) {
     });
 }
 
-fn concat_rows<T: Real>(a: &[T], wa: usize, b: &[T], wb: usize, n: usize) -> Vec<T> {
-    let mut out = vec![T::ZERO; n * (wa + wb)];
-    for (r, row) in out.chunks_mut(wa + wb).enumerate() {
-        row[..wa].copy_from_slice(&a[r * wa..(r + 1) * wa]);
-        row[wa..].copy_from_slice(&b[r * wb..(r + 1) * wb]);
-    }
-    out
+fn concat_rows<T: Real>(a: &[T], wa: usize, b: &[T], wb: usize, n: usize, out: &mut Vec<T>) {
+    use rayon::prelude::*;
+    fit(out, n * (wa + wb));
+    out.par_chunks_mut((wa + wb) * 256)
+        .enumerate()
+        .for_each(|(c, rows)| {
+            for (k, row) in rows.chunks_mut(wa + wb).enumerate() {
+                let r = c * 256 + k;
+                row[..wa].copy_from_slice(&a[r * wa..(r + 1) * wa]);
+                row[wa..].copy_from_slice(&b[r * wb..(r + 1) * wb]);
+            }
+        });
 }

@@ -16,8 +16,11 @@ pub mod settings;
 
 pub use deltas::{
     DeformMlp, Deformation, Deformed, DeltaGrads, Deltas, MIN_SCALE, apply_deltas,
-    apply_deltas_backward,
+    apply_deltas_backward, apply_deltas_backward_in_place, apply_deltas_in_place,
 };
-pub use mlp::{HEAD_OUT, Mlp, MlpCache};
-pub use on_splats::{deform_splats, evaluated_indices, splat_deltas, splat_deltas_backward};
+pub use mlp::{HEAD_OUT, Mlp, MlpCache, MlpScratch};
+pub use on_splats::{
+    FieldWork, deform_splats, deform_splats_into, evaluated_indices, splat_deltas,
+    splat_deltas_backward, splat_deltas_backward_into, splat_deltas_into,
+};
 pub use settings::FieldSettings;

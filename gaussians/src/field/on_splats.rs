@@ -1,8 +1,9 @@
 //! The deformation field evaluated on [`Splats`]: on every Gaussian, or only on those
 //! flagged dynamic (`dynamic_only`; the others keep their canonical parameters).
 
-use super::deltas::{Deformation, Deltas, apply_deltas};
-use super::mlp::{Mlp, MlpCache};
+use super::deltas::{Deformation, Deltas, apply_deltas, apply_deltas_in_place};
+use super::mlp::HEAD_OUT;
+use super::mlp::{Mlp, MlpCache, MlpScratch};
 use crate::splats::Splats;
 
 /// Indices the field is evaluated on: all (`None`), or the dynamic ones when
@@ -72,4 +73,90 @@ pub fn deform_splats(splats: &Splats, deltas: &Deltas) -> Splats {
         rotations: g.rotations,
         ..splats.clone()
     }
+}
+
+/// Reusable buffers of the field evaluated on [`Splats`] ([`splat_deltas_into`],
+/// [`splat_deltas_backward_into`]); a training loop keeps one, so that once warm an
+/// iteration allocates nothing for the field.
+#[derive(Clone, Debug, Default)]
+pub struct FieldWork {
+    scratch: MlpScratch<f32>,
+    rows: Vec<f32>,
+    sub: Vec<[f32; 3]>,
+    sub_deltas: Deltas,
+}
+
+/// [`splat_deltas`] into `deltas` and `cache` (overwritten; allocations reused).
+pub fn splat_deltas_into(
+    mlp: &Mlp<f32>,
+    splats: &Splats,
+    t: f32,
+    dynamic_only: bool,
+    work: &mut FieldWork,
+    deltas: &mut Deltas,
+    cache: &mut MlpCache<f32>,
+) {
+    let FieldWork {
+        scratch, rows, sub, ..
+    } = work;
+    if !dynamic_only {
+        mlp.forward_into(&splats.means, &[t], cache, scratch, rows);
+        deltas.set_rows(rows);
+        return;
+    }
+    sub.clear();
+    sub.extend(
+        (0..splats.len())
+            .filter(|&i| splats.is_dynamic(i))
+            .map(|i| splats.means[i]),
+    );
+    mlp.forward_into(sub, &[t], cache, scratch, rows);
+    deltas.set_zeros(splats.len());
+    let dynamic = (0..splats.len()).filter(|&i| splats.is_dynamic(i));
+    for (r, i) in rows.chunks(HEAD_OUT).zip(dynamic) {
+        deltas.dx[i] = [r[0], r[1], r[2]];
+        deltas.dq[i] = [r[3], r[4], r[5], r[6]];
+        deltas.ds[i] = [r[7], r[8], r[9]];
+    }
+}
+
+/// [`splat_deltas_backward`] into `grads` (overwritten; allocations reused).
+pub fn splat_deltas_backward_into(
+    mlp: &Mlp<f32>,
+    splats: &Splats,
+    dynamic_only: bool,
+    cache: &MlpCache<f32>,
+    g: &Deltas,
+    work: &mut FieldWork,
+    grads: &mut Vec<f32>,
+) {
+    let FieldWork {
+        scratch,
+        rows,
+        sub_deltas,
+        ..
+    } = work;
+    if dynamic_only {
+        sub_deltas.set_zeros(0);
+        for i in (0..splats.len()).filter(|&i| splats.is_dynamic(i)) {
+            sub_deltas.dx.push(g.dx[i]);
+            sub_deltas.dq.push(g.dq[i]);
+            sub_deltas.ds.push(g.ds[i]);
+        }
+        sub_deltas.rows_into(rows);
+    } else {
+        g.rows_into(rows);
+    }
+    mlp.backward_into(cache, rows, scratch, grads);
+}
+
+/// [`deform_splats`] into `out` (overwritten; allocations reused).
+pub fn deform_splats_into(splats: &Splats, deltas: &Deltas, out: &mut Splats) {
+    out.clone_from(splats);
+    apply_deltas_in_place(
+        &mut out.means,
+        &mut out.log_scales,
+        &mut out.rotations,
+        deltas,
+    );
 }

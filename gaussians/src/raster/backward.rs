@@ -5,7 +5,7 @@
 //! projection in parallel. The camera gradient is reduced in f64.
 
 use super::alpha::{ALPHA_MAX, eval_alpha};
-use super::forward::{Plane, RenderState, TILE, lane_bits, row_span};
+use super::forward::{BackScratch, Plane, RenderState, TILE, lane_bits, row_span};
 use super::project::{ScreenGrad, project, project_backward};
 use super::simd::{self, F4, Lanes, Mask};
 use crate::splats::{SplatGrads, Splats};
@@ -36,7 +36,7 @@ fn tile_backward_avx512(st: &RenderState, t: usize, g: &PixelGrads, out: &mut [S
     tile_backward_lanes::<simd::F16>(st, t, g, out)
 }
 
-/// `out[k]` receives entry k's screen gradient. Per lane branch-free (lanes outside
+/// `out[k]` receives entry k's screen gradient (every entry is written). Per lane branch-free (lanes outside
 /// the ellipse or past the pixel's last contributor get α = 0, which makes every update
 /// a no-op), with per-lane accumulators summed once per Gaussian.
 #[inline(always)]
@@ -77,6 +77,8 @@ fn tile_backward_lanes<V: Lanes>(
             dl[4][ty][tx] = g.d_alpha.map_or(0.0, |d| d[pix]);
         }
     }
+    // Entries behind every pixel's last contributor get no gradient.
+    out[max_last as usize..].fill([0.0; 10]);
     let n = V::N;
     let s = V::splat;
     let xs: [V; 4] = std::array::from_fn(|c| V::iota((r[0] + (c * n) % TILE) as f32));
@@ -150,6 +152,22 @@ pub(crate) fn backward(
     d_depth: Option<&[f32]>,
     d_alpha: Option<&[f32]>,
 ) -> (SplatGrads, [f64; 6]) {
+    let mut g = SplatGrads::default();
+    let twist = backward_into(s, cam, st, d_rgb, d_depth, d_alpha, &mut g);
+    (g, twist)
+}
+
+/// [`backward`] into `g` (overwritten, resized to the Gaussians; its buffers and the
+/// state's scratch reused; the same values bit for bit).
+pub(crate) fn backward_into(
+    s: &Splats,
+    cam: &Camera,
+    st: &RenderState,
+    d_rgb: &[f32],
+    d_depth: Option<&[f32]>,
+    d_alpha: Option<&[f32]>,
+    g: &mut SplatGrads,
+) -> [f64; 6] {
     let (w, h) = (st.cam.width, st.cam.height);
     assert_eq!(
         s.len(),
@@ -170,11 +188,18 @@ pub(crate) fn backward(
         d_depth,
         d_alpha,
     };
-    // Screen gradients per (Gaussian, tile) pair; each tile owns its slice.
-    let mut pairs: Vec<ScreenGrad> = vec![[0.0; 10]; st.tiles.list.len()];
+    let mut guard = st.back.lock().unwrap_or_else(|e| e.into_inner());
+    let BackScratch {
+        pairs,
+        screen,
+        slot,
+    } = &mut *guard;
+    // Screen gradients per (Gaussian, tile) pair; each tile owns its slice (every entry
+    // is written).
+    pairs.resize(st.tiles.list.len(), [0.0; 10]);
     let ntiles = st.tiles.nx * st.tiles.ny;
     let mut slices = Vec::with_capacity(ntiles);
-    let mut rest = pairs.as_mut_slice();
+    let mut rest = &mut pairs[..st.tiles.list.len()];
     for t in 0..ntiles {
         let len = (st.tiles.ranges[t + 1] - st.tiles.ranges[t]) as usize;
         let (a, b) = rest.split_at_mut(len);
@@ -184,24 +209,18 @@ pub(crate) fn backward(
     slices
         .into_par_iter()
         .for_each(|(t, out)| tile_backward(st, t, &pg, out));
-    let nv = st.proj.id.len();
-    let mut screen = vec![[0.0f32; 10]; nv];
-    for (g, &k) in pairs.iter().zip(&st.tiles.list) {
-        let acc = &mut screen[k as usize];
-        for c in 0..10 {
-            acc[c] += g[c];
-        }
-    }
-    let mut slot = vec![u32::MAX; s.len()];
+    let pairs = &pairs[..st.tiles.list.len()];
+    sum_pairs(pairs, &st.tiles.list, st.proj.id.len(), screen);
+    let screen = &screen[..];
+    slot.clear();
+    slot.resize(s.len(), u32::MAX);
     for (k, &id) in st.proj.id.iter().enumerate() {
         slot[id as usize] = k as u32;
     }
 
     let n = s.len();
-    let mut g = SplatGrads {
-        radius: st.radius.clone(),
-        ..SplatGrads::zeros(n)
-    };
+    g.resize(n);
+    g.radius.copy_from_slice(&st.radius);
     let cam32 = &st.cam;
     let (half_w, half_h) = (0.5 * w as f32, 0.5 * h as f32);
     let cam_grad = (
@@ -219,6 +238,8 @@ pub(crate) fn backward(
         .map(|(i, (m, ls, rot, op, dc, rest, sgn))| {
             let k = slot[i];
             if k == u32::MAX {
+                (*m, *ls, *rot, *op, *dc, *sgn) = Default::default();
+                *rest = [0.0; 45];
                 return [0.0f64; 15];
             }
             let sg = &screen[k as usize];
@@ -255,7 +276,31 @@ pub(crate) fn backward(
                 a
             },
         );
-    (g, pose_twist_grad(cam, &cam_grad))
+    pose_twist_grad(cam, &cam_grad)
+}
+
+/// `screen[k] = Σ pairs[j]` over the pairs j of projected Gaussian k (`list[j] = k`),
+/// added in list order as one serial pass would. Each thread owns a range of k and
+/// reads the whole list (sequential reads; the pairs it skips cost nothing).
+fn sum_pairs(pairs: &[ScreenGrad], list: &[u32], nv: usize, screen: &mut Vec<ScreenGrad>) {
+    screen.clear();
+    screen.resize(nv, [0.0; 10]);
+    let chunk = nv.div_ceil(rayon::current_num_threads().max(1)).max(1);
+    screen
+        .par_chunks_mut(chunk)
+        .enumerate()
+        .for_each(|(c, out)| {
+            let lo = (c * chunk) as u32;
+            let hi = lo + out.len() as u32;
+            for (g, &k) in pairs.iter().zip(list) {
+                if (lo..hi).contains(&k) {
+                    let acc = &mut out[(k - lo) as usize];
+                    for c in 0..10 {
+                        acc[c] += g[c];
+                    }
+                }
+            }
+        });
 }
 
 /// `∂L/∂(W, t_w, C)` → `∂L/∂δ` for the left twist of the module docs. With

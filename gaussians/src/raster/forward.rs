@@ -3,7 +3,7 @@
 //! order), then composite each tile front to back (DEGS Eq. 1) in parallel.
 
 use super::alpha::{T_MIN, eval_alpha};
-use super::project::{CamSetup, project};
+use super::project::{CamSetup, ScreenGrad, project};
 use super::rasterizer::RenderedImage;
 use super::simd::{self, F4, Lanes, Mask};
 use crate::splats::Splats;
@@ -25,9 +25,49 @@ pub struct RenderState {
     /// Per pixel: number of entries of its tile list processed up to and including the
     /// last one that contributed.
     pub(crate) last: Vec<u32>,
+    /// Buffers of the forward pass, kept for the next render into this state.
+    scratch: ForwardScratch,
+    /// Buffers of the backward pass (behind a lock: the backward borrows the state).
+    pub(crate) back: std::sync::Mutex<BackScratch>,
+}
+
+/// Reused buffers of the backward pass (kept in the [`RenderState`]).
+#[derive(Default)]
+pub(crate) struct BackScratch {
+    /// Screen gradient per (Gaussian, tile) pair.
+    pub pairs: Vec<ScreenGrad>,
+    /// Per projected Gaussian: the sum of its pairs.
+    pub screen: Vec<ScreenGrad>,
+    /// Per input Gaussian: its index into the projected ones (`u32::MAX`: culled).
+    pub slot: Vec<u32>,
+}
+
+/// Reused buffers of [`render_into`].
+#[derive(Default)]
+struct ForwardScratch {
+    splats: Vec<(f32, Option<Splat2d>)>,
+    order: Vec<(u32, u32)>,
+    fill: Vec<u32>,
+    outs: Vec<TileOut>,
 }
 
 impl RenderState {
+    /// A state with no render in it, whose buffers [`render_into`] fills and reuses.
+    pub(crate) fn empty(cam: &CamSetup) -> Self {
+        RenderState {
+            cam: *cam,
+            sh_degree: 0,
+            background: [0.0; 3],
+            n: 0,
+            proj: Projected::default(),
+            tiles: Tiles::default(),
+            radius: Vec::new(),
+            t_final: Vec::new(),
+            last: Vec::new(),
+            scratch: ForwardScratch::default(),
+            back: Default::default(),
+        }
+    }
     /// The visible Gaussians in depth order.
     pub fn projected(&self) -> &Projected {
         &self.proj
@@ -56,6 +96,28 @@ pub struct Projected {
     pub bbox: Vec<[u32; 4]>,
     /// Largest composited `dᵀΣ⁻¹d` (see [`super::project::reach`]).
     pub cut: Vec<f32>,
+}
+
+impl Projected {
+    /// Empty, with room for `n` (allocations kept).
+    fn clear_for(&mut self, n: usize) {
+        self.id.clear();
+        self.xy.clear();
+        self.conic.clear();
+        self.opacity.clear();
+        self.color.clear();
+        self.depth.clear();
+        self.bbox.clear();
+        self.cut.clear();
+        self.id.reserve(n);
+        self.xy.reserve(n);
+        self.conic.reserve(n);
+        self.opacity.reserve(n);
+        self.color.reserve(n);
+        self.depth.reserve(n);
+        self.bbox.reserve(n);
+        self.cut.reserve(n);
+    }
 }
 
 /// Columns `[lo, hi)` (tile-relative, within `[x0, x1)`) of the row at offset `dy` from
@@ -96,6 +158,7 @@ struct TileOut {
     last: Plane<f32>,
 }
 
+#[derive(Default)]
 pub(crate) struct Tiles {
     pub nx: usize,
     pub ny: usize,
@@ -133,9 +196,17 @@ struct Splat2d {
     cut: f32,
 }
 
-/// Project all Gaussians; returns the visible ones in depth order and every radius.
-pub(crate) fn project_all(s: &Splats, cam: &CamSetup, sh_degree: u32) -> (Projected, Vec<f32>) {
-    let splats: Vec<(f32, Option<Splat2d>)> = (0..s.len())
+/// Project all Gaussians: the visible ones in depth order into `p`, every radius into
+/// `radius` (both overwritten; allocations reused).
+fn project_all(
+    s: &Splats,
+    cam: &CamSetup,
+    sh_degree: u32,
+    sc: &mut ForwardScratch,
+    p: &mut Projected,
+    radius: &mut Vec<f32>,
+) {
+    (0..s.len())
         .into_par_iter()
         .with_min_len(256)
         .map(|i| match project(s, i, cam, sh_degree) {
@@ -153,27 +224,22 @@ pub(crate) fn project_all(s: &Splats, cam: &CamSetup, sh_degree: u32) -> (Projec
                 }),
             ),
         })
-        .collect();
-    let radius = splats.iter().map(|g| g.0).collect();
-    let mut order: Vec<(u32, u32)> = splats
-        .iter()
-        .enumerate()
-        .filter_map(|(i, g)| g.1.as_ref().map(|g| (g.depth.to_bits(), i as u32)))
-        .collect();
+        .collect_into_vec(&mut sc.splats);
+    let splats = &sc.splats;
+    radius.clear();
+    radius.extend(splats.iter().map(|g| g.0));
+    let order = &mut sc.order;
+    order.clear();
+    order.extend(
+        splats
+            .iter()
+            .enumerate()
+            .filter_map(|(i, g)| g.1.as_ref().map(|g| (g.depth.to_bits(), i as u32))),
+    );
     // Depth > 0, so the IEEE bit pattern orders like the value; ties by index.
     order.par_sort_unstable();
-    let n = order.len();
-    let mut p = Projected {
-        id: Vec::with_capacity(n),
-        xy: Vec::with_capacity(n),
-        conic: Vec::with_capacity(n),
-        opacity: Vec::with_capacity(n),
-        color: Vec::with_capacity(n),
-        depth: Vec::with_capacity(n),
-        bbox: Vec::with_capacity(n),
-        cut: Vec::with_capacity(n),
-    };
-    for &(_, i) in &order {
+    p.clear_for(order.len());
+    for &(_, i) in order.iter() {
         let g = splats[i as usize].1.as_ref().expect("visible");
         p.id.push(i);
         p.xy.push(g.xy);
@@ -184,14 +250,18 @@ pub(crate) fn project_all(s: &Splats, cam: &CamSetup, sh_degree: u32) -> (Projec
         p.bbox.push(g.bbox);
         p.cut.push(g.cut);
     }
-    (p, radius)
 }
 
-/// Counting sort of (Gaussian, tile) pairs by tile, stable in depth order.
-pub(crate) fn bin(p: &Projected, width: usize, height: usize) -> Tiles {
+/// Counting sort of (Gaussian, tile) pairs by tile, stable in depth order, into `tiles`
+/// (overwritten; allocations reused).
+fn bin(p: &Projected, width: usize, height: usize, fill: &mut Vec<u32>, tiles: &mut Tiles) {
     let nx = width.div_ceil(TILE);
     let ny = height.div_ceil(TILE);
-    let mut counts = vec![0u32; nx * ny + 1];
+    tiles.nx = nx;
+    tiles.ny = ny;
+    let counts = &mut tiles.ranges;
+    counts.clear();
+    counts.resize(nx * ny + 1, 0);
     let tiles_of = |b: &[u32; 4]| {
         let (tx0, tx1) = (b[0] as usize / TILE, b[1] as usize / TILE);
         let (ty0, ty1) = (b[2] as usize / TILE, b[3] as usize / TILE);
@@ -205,19 +275,15 @@ pub(crate) fn bin(p: &Projected, width: usize, height: usize) -> Tiles {
     for t in 0..nx * ny {
         counts[t + 1] += counts[t];
     }
-    let mut fill = counts.clone();
-    let mut list = vec![0u32; counts[nx * ny] as usize];
+    fill.clone_from(counts);
+    let list = &mut tiles.list;
+    list.clear();
+    list.resize(counts[nx * ny] as usize, 0);
     for (k, b) in p.bbox.iter().enumerate() {
         for t in tiles_of(b) {
             list[fill[t] as usize] = k as u32;
             fill[t] += 1;
         }
-    }
-    Tiles {
-        nx,
-        ny,
-        ranges: counts,
-        list,
     }
 }
 
@@ -243,17 +309,23 @@ fn tile_forward_avx512(p: &Projected, list: &[u32], r: [usize; 4]) -> TileOut {
     tile_forward_lanes::<simd::F16>(p, list, r)
 }
 
+impl TileOut {
+    fn blank() -> Self {
+        TileOut {
+            rgb: [[[0.0; TILE]; TILE]; 3],
+            depth: [[0.0; TILE]; TILE],
+            t: [[1.0; TILE]; TILE],
+            last: [[0.0; TILE]; TILE],
+        }
+    }
+}
+
 /// Gaussian-outer, then for each row of the Gaussian's box the lane chunks that meet
 /// its ellipse; per lane branch-free (masked lanes get α = 0).
 // Eq. 1: C = Σᵢ cᵢ αᵢ Πⱼ₍ⱼ<ᵢ₎ (1 − αⱼ), front to back (depth and alpha alike).
 #[inline(always)]
 fn tile_forward_lanes<V: Lanes>(p: &Projected, list: &[u32], r: [usize; 4]) -> TileOut {
-    let mut o = TileOut {
-        rgb: [[[0.0; TILE]; TILE]; 3],
-        depth: [[0.0; TILE]; TILE],
-        t: [[1.0; TILE]; TILE],
-        last: [[0.0; TILE]; TILE],
-    };
+    let mut o = TileOut::blank();
     let n = V::N;
     let chunk_bits = lane_bits(0, n);
     // Bit per pixel of each row: set while the pixel still composites.
@@ -324,50 +396,85 @@ pub(crate) fn render(
     sh_degree: u32,
     background: [f32; 3],
 ) -> (RenderedImage, RenderState) {
+    let mut f = RenderedImage::default();
+    let mut st = RenderState::empty(cam);
+    render_into(s, cam, sh_degree, background, &mut f, &mut st);
+    (f, st)
+}
+
+/// [`render`] into an image and a state from an earlier render (both overwritten, the
+/// same values bit for bit; their buffers reused).
+pub(crate) fn render_into(
+    s: &Splats,
+    cam: &CamSetup,
+    sh_degree: u32,
+    background: [f32; 3],
+    f: &mut RenderedImage,
+    st: &mut RenderState,
+) {
     let (w, h) = (cam.width, cam.height);
-    let (proj, radius) = project_all(s, cam, sh_degree);
-    let tiles = bin(&proj, w, h);
-    let outs: Vec<TileOut> = (0..tiles.nx * tiles.ny)
+    st.cam = *cam;
+    st.sh_degree = sh_degree;
+    st.background = background;
+    st.n = s.len();
+    let sc = &mut st.scratch;
+    project_all(s, cam, sh_degree, sc, &mut st.proj, &mut st.radius);
+    bin(&st.proj, w, h, &mut sc.fill, &mut st.tiles);
+    let (proj, tiles) = (&st.proj, &st.tiles);
+    let ntiles = tiles.nx * tiles.ny;
+    (0..ntiles)
         .into_par_iter()
-        .map(|t| tile_forward(&proj, tiles.of(t), tiles.rect(t, w, h)))
-        .collect();
+        .map(|t| tile_forward(proj, tiles.of(t), tiles.rect(t, w, h)))
+        .collect_into_vec(&mut sc.outs);
     let np = w * h;
-    let mut f = RenderedImage {
-        width: w,
-        height: h,
-        rgb: vec![0.0; 3 * np],
-        depth: vec![0.0; np],
-        alpha: vec![0.0; np],
-    };
-    let mut t_final = vec![1.0f32; np];
-    let mut last = vec![0u32; np];
-    for (t, o) in outs.iter().enumerate() {
-        let r = tiles.rect(t, w, h);
-        for y in r[2]..r[3] {
-            for x in r[0]..r[1] {
-                let (ty, tx) = (y - r[2], x - r[0]);
-                let pix = y * w + x;
-                let tt = o.t[ty][tx];
-                for c in 0..3 {
-                    f.rgb[c * np + pix] = o.rgb[c][ty][tx] + tt * background[c];
-                }
-                f.depth[pix] = o.depth[ty][tx];
-                f.alpha[pix] = 1.0 - tt;
-                t_final[pix] = tt;
-                last[pix] = o.last[ty][tx] as u32;
-            }
-        }
+    f.width = w;
+    f.height = h;
+    for (v, len) in [
+        (&mut f.rgb, 3 * np),
+        (&mut f.depth, np),
+        (&mut f.alpha, np),
+        (&mut st.t_final, np),
+    ] {
+        v.resize(len, 0.0);
     }
-    let state = RenderState {
-        cam: *cam,
-        sh_degree,
-        background,
-        n: s.len(),
-        proj,
-        tiles,
-        radius,
-        t_final,
-        last,
-    };
-    (f, state)
+    st.last.resize(np, 0);
+    // Scatter the tiles into the frame, rayon over rows of tiles (each a band of
+    // `TILE` image rows in every plane).
+    let band = TILE * w;
+    let (r, rest) = f.rgb.split_at_mut(np);
+    let (g, b) = rest.split_at_mut(np);
+    let outs = &sc.outs;
+    (
+        r.par_chunks_mut(band),
+        g.par_chunks_mut(band),
+        b.par_chunks_mut(band),
+        f.depth.par_chunks_mut(band),
+        f.alpha.par_chunks_mut(band),
+        st.t_final.par_chunks_mut(band),
+        st.last.par_chunks_mut(band),
+    )
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(ty, (r, g, b, depth, alpha, t_final, last))| {
+            let rgb = [r, g, b];
+            for tx in 0..tiles.nx {
+                let t = ty * tiles.nx + tx;
+                let o = &outs[t];
+                let rc = tiles.rect(t, w, h);
+                for y in rc[2]..rc[3] {
+                    for x in rc[0]..rc[1] {
+                        let (oy, ox) = (y - rc[2], x - rc[0]);
+                        let pix = oy * w + x;
+                        let tt = o.t[oy][ox];
+                        for c in 0..3 {
+                            rgb[c][pix] = o.rgb[c][oy][ox] + tt * background[c];
+                        }
+                        depth[pix] = o.depth[oy][ox];
+                        alpha[pix] = 1.0 - tt;
+                        t_final[pix] = tt;
+                        last[pix] = o.last[oy][ox] as u32;
+                    }
+                }
+            }
+        });
 }

@@ -110,4 +110,31 @@ impl Rasterizer for TileRasterizer {
     ) -> (SplatGrads, [f64; 6]) {
         self.backward_full(s, cam, state, d_rgb, d_depth, None)
     }
+
+    fn render_reusing(
+        &self,
+        s: &Splats,
+        cam: &Camera,
+        sh_degree: u32,
+        background: [f32; 3],
+        reuse: Option<(RenderedImage, RenderState)>,
+    ) -> (RenderedImage, RenderState) {
+        let cs = CamSetup::new(cam);
+        let (mut image, mut state) =
+            reuse.unwrap_or_else(|| (RenderedImage::default(), RenderState::empty(&cs)));
+        forward::render_into(s, &cs, sh_degree.min(3), background, &mut image, &mut state);
+        (image, state)
+    }
+
+    fn backward_view_into(
+        &self,
+        s: &Splats,
+        cam: &Camera,
+        state: &RenderState,
+        d_rgb: &[f32],
+        d_depth: Option<&[f32]>,
+        grads: &mut SplatGrads,
+    ) -> [f64; 6] {
+        backward::backward_into(s, cam, state, d_rgb, d_depth, None, grads)
+    }
 }

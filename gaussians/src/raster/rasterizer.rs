@@ -67,6 +67,33 @@ pub trait Rasterizer: Sync {
         d_rgb: &[f32],
         d_depth: Option<&[f32]>,
     ) -> (SplatGrads, [f64; 6]);
+    /// [`Self::render`] reusing the buffers of an earlier image and state (a training
+    /// loop passes back the last iteration's; the result does not depend on them).
+    fn render_reusing(
+        &self,
+        s: &Splats,
+        cam: &Camera,
+        sh_degree: u32,
+        background: [f32; 3],
+        reuse: Option<(RenderedImage, Self::State)>,
+    ) -> (RenderedImage, Self::State) {
+        drop(reuse);
+        self.render(s, cam, sh_degree, background)
+    }
+    /// [`Self::backward_view`] into `grads` (overwritten and resized; its buffers reused).
+    fn backward_view_into(
+        &self,
+        s: &Splats,
+        cam: &Camera,
+        state: &Self::State,
+        d_rgb: &[f32],
+        d_depth: Option<&[f32]>,
+        grads: &mut SplatGrads,
+    ) -> [f64; 6] {
+        let (g, twist) = self.backward_view(s, cam, state, d_rgb, d_depth);
+        *grads = g;
+        twist
+    }
     /// Backward from the gradient of the loss w.r.t. the planar RGB image.
     fn backward(&self, s: &Splats, cam: &Camera, state: &Self::State, d_rgb: &[f32]) -> SplatGrads {
         self.backward_view(s, cam, state, d_rgb, None).0

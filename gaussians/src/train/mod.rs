@@ -18,6 +18,8 @@ use crate::splats::{SplatGrads, Splats};
 use scene::Camera;
 use scene::metrics;
 pub use settings::TrainSettings;
+use std::any::Any;
+use std::sync::{Mutex, MutexGuard};
 
 /// A training view: camera, normalised time, planar RGB target.
 #[derive(Clone, Debug)]
@@ -71,7 +73,25 @@ pub struct Trainer {
     pub split: Option<static_split::SplitSummary>,
     order: Vec<usize>,
     rng: rand_chacha::ChaCha8Rng,
+    /// Buffers given back by [`Self::recycle_view`] / [`Self::recycle_grads`].
+    spare: Mutex<Spare>,
 }
+
+/// What a training loop reuses from one iteration to the next: the last rendered view
+/// (deformed Gaussians, image, rasterizer state, field activations), the last gradients
+/// and the field's scratch. Once warm, an iteration allocates no per-Gaussian or
+/// per-pixel buffer of these (the figures: BENCHMARKS.md, "A cheaper iteration").
+#[derive(Default)]
+struct Spare {
+    /// `ViewRender<R::State>`s of the rasterizer in use (at most [`SPARE_MAX`]).
+    views: Vec<Box<dyn Any + Send>>,
+    grads: Vec<ModelGrads>,
+    field: field::FieldWork,
+    delta_grads: field::Deltas,
+}
+
+/// Views and gradients kept for reuse (the joint training renders two views a step).
+const SPARE_MAX: usize = 2;
 
 const GROUPS: [&str; 6] = [
     "means",
@@ -118,6 +138,30 @@ impl Trainer {
             iteration: 0,
             split: None,
             order: Vec::new(),
+            spare: Mutex::default(),
+        }
+    }
+
+    fn spare(&self) -> MutexGuard<'_, Spare> {
+        self.spare.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Give back a view when done with it (after [`Self::view_backward`]): a later
+    /// [`Self::render_view`] with the same rasterizer reuses its buffers. Optional; a
+    /// view not given back is simply dropped.
+    pub fn recycle_view<S: Send + 'static>(&self, v: ViewRender<S>) {
+        let mut spare = self.spare();
+        if spare.views.len() < SPARE_MAX {
+            spare.views.push(Box::new(v));
+        }
+    }
+
+    /// Give back gradients when done with them (after [`Self::apply_gradients`]): a
+    /// later [`Self::view_backward`] reuses their buffers. Optional.
+    pub fn recycle_grads(&self, g: ModelGrads) {
+        let mut spare = self.spare();
+        if spare.grads.len() < SPARE_MAX {
+            spare.grads.push(g);
         }
     }
 
@@ -144,12 +188,6 @@ impl Trainer {
         field::splat_deltas(&self.field, &self.splats, t, self.settings.dynamic_only)
     }
 
-    /// Field parameter gradients from the gradients of all Gaussians' deltas.
-    fn field_backward(&self, cache: &field::MlpCache<f32>, g: &field::Deltas) -> Vec<f32> {
-        let dynamic_only = self.settings.dynamic_only;
-        field::splat_deltas_backward(&self.field, &self.splats, dynamic_only, cache, g)
-    }
-
     /// Render the model at a camera and time.
     pub fn render<R: Rasterizer>(&self, r: &R, cam: &Camera, t: f32) -> RenderedImage {
         let (s, _) = self.deformed(t);
@@ -158,19 +196,41 @@ impl Trainer {
     }
 
     /// Render the current model (deformed to `t` when the field is on) at `camera`,
-    /// keeping what [`Self::view_backward`] needs.
-    pub fn render_view<R: Rasterizer>(
-        &self,
-        r: &R,
-        camera: &Camera,
-        t: f32,
-    ) -> ViewRender<R::State> {
-        let (deformed, deltas) = self.deformed(t);
-        let (image, state) = r.render(
+    /// keeping what [`Self::view_backward`] needs (in the buffers of the last view given
+    /// to [`Self::recycle_view`], if any).
+    pub fn render_view<R: Rasterizer>(&self, r: &R, camera: &Camera, t: f32) -> ViewRender<R::State>
+    where
+        R::State: Send + 'static,
+    {
+        let old = self.spare().views.pop();
+        let old = old.and_then(|v| v.downcast::<ViewRender<R::State>>().ok());
+        let (mut deformed, old_deltas, reuse) = match old {
+            Some(v) => (v.deformed, v.deltas, Some((v.image, v.state))),
+            None => (Splats::default(), None, None),
+        };
+        let deltas = if self.field_on() {
+            let (mut d, mut cache) = old_deltas.unwrap_or_default();
+            field::splat_deltas_into(
+                &self.field,
+                &self.splats,
+                t,
+                self.settings.dynamic_only,
+                &mut self.spare().field,
+                &mut d,
+                &mut cache,
+            );
+            field::deform_splats_into(&self.splats, &d, &mut deformed);
+            Some((d, cache))
+        } else {
+            deformed.clone_from(&self.splats);
+            None
+        };
+        let (image, state) = r.render_reusing(
             &deformed,
             camera,
             self.sh_degree(),
             self.settings.background,
+            reuse,
         );
         ViewRender {
             image,
@@ -184,7 +244,8 @@ impl Trainer {
     /// Gradients of a loss on a rendered view, from `∂L/∂rgb` (planar), optionally
     /// `∂L/∂depth` and `∂L/∂(rendered centres)` (from a loss on the deformed centres
     /// themselves, one per Gaussian), taken back through the rasterizer and the field to the
-    /// canonical Gaussians, the field's parameters and the camera.
+    /// canonical Gaussians, the field's parameters and the camera (in the buffers of the
+    /// last gradients given to [`Self::recycle_grads`], if any).
     pub fn view_backward<R: Rasterizer>(
         &self,
         r: &R,
@@ -193,33 +254,45 @@ impl Trainer {
         d_depth: Option<&[f32]>,
         d_means: Option<&[[f32; 3]]>,
     ) -> ModelGrads {
-        let (mut g, camera) = r.backward_view(&v.deformed, &v.camera, &v.state, d_rgb, d_depth);
+        let mut out = self.spare().grads.pop().unwrap_or_default();
+        let g = &mut out.splats;
+        out.camera = r.backward_view_into(&v.deformed, &v.camera, &v.state, d_rgb, d_depth, g);
         if let Some(dm) = d_means {
             assert_eq!(dm.len(), g.means.len(), "view_backward: d_means size");
             for (a, b) in g.means.iter_mut().zip(dm) {
                 (0..3).for_each(|c| a[c] += b[c]);
             }
         }
-        let mut field_grads = Vec::new();
+        out.field.clear();
         if let Some((d, cache)) = &v.deltas {
-            let dg = field::apply_deltas_backward(
+            let mut spare = self.spare();
+            let Spare {
+                field: work,
+                delta_grads,
+                ..
+            } = &mut *spare;
+            // The means' gradient passes through unchanged (it is also δx's).
+            field::apply_deltas_backward_in_place(
                 &self.splats.log_scales,
                 &self.splats.rotations,
                 d,
                 &g.means,
-                &g.log_scales,
-                &g.rotations,
+                &mut g.log_scales,
+                &mut g.rotations,
+                delta_grads,
             );
-            field_grads = self.field_backward(cache, &dg.deltas);
-            g.means = dg.means;
-            g.log_scales = dg.log_scales;
-            g.rotations = dg.rotations;
+            let dynamic_only = self.settings.dynamic_only;
+            field::splat_deltas_backward_into(
+                &self.field,
+                &self.splats,
+                dynamic_only,
+                cache,
+                delta_grads,
+                work,
+                &mut out.field,
+            );
         }
-        ModelGrads {
-            splats: g,
-            field: field_grads,
-            camera,
-        }
+        out
     }
 
     /// One Adam step of the canonical Gaussians (and of the field when `g.field` is not
@@ -276,7 +349,10 @@ impl Trainer {
     }
 
     /// One optimisation step on a random view (each view once per epoch).
-    pub fn step<R: Rasterizer>(&mut self, r: &R, views: &[View]) -> StepInfo {
+    pub fn step<R: Rasterizer>(&mut self, r: &R, views: &[View]) -> StepInfo
+    where
+        R::State: Send + 'static,
+    {
         let view = &views[self.next_view(views.len())];
         self.resolve_cap(view.rgb.len() / 3);
         let field_on = self.field_on();
@@ -284,8 +360,9 @@ impl Trainer {
         let (loss, grad) = self.rgb_loss(&rendered.image, &view.rgb);
         let psnr = metrics::psnr_u8(&rendered.image.rgb, &view.rgb);
         let g = self.view_backward(r, &rendered, &grad, None, None);
-        drop(rendered);
+        self.recycle_view(rendered);
         self.apply_gradients(&g);
+        self.recycle_grads(g);
         self.split_static_if_due(views);
         StepInfo {
             iteration: self.iteration,
@@ -432,7 +509,10 @@ impl Trainer {
         views: &[View],
         stop: &std::sync::atomic::AtomicBool,
         mut on_step: impl FnMut(&StepInfo),
-    ) -> RunSummary {
+    ) -> RunSummary
+    where
+        R::State: Send + 'static,
+    {
         let mut sum = RunSummary::default();
         while self.iteration < self.settings.iterations {
             if stop.load(std::sync::atomic::Ordering::Relaxed) {
