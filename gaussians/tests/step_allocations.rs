@@ -11,39 +11,8 @@ use gaussians::raster::TileRasterizer;
 use gaussians::train::{TrainSettings, Trainer, View};
 use glam::DVec3;
 use raster_common::*;
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
-
-/// The system allocator, counting the bytes it hands out.
-struct Counting;
-
-static ALLOCATED: AtomicUsize = AtomicUsize::new(0);
-
-// SAFETY: every call is forwarded to `System` unchanged; the counter only observes.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATED.fetch_add(layout.size(), Ordering::Relaxed);
-        // SAFETY: the caller's contract is passed on unchanged.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        ALLOCATED.fetch_add(layout.size(), Ordering::Relaxed);
-        // SAFETY: as `alloc`.
-        unsafe { System.alloc_zeroed(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: as `alloc`.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATED.fetch_add(new_size, Ordering::Relaxed);
-        // SAFETY: as `alloc`.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
 #[global_allocator]
-static ALLOC: Counting = Counting;
+static ALLOC: scene::testing::TrackingAlloc = scene::testing::TrackingAlloc;
 
 const W: u32 = 64;
 const H: u32 = 48;
@@ -98,15 +67,18 @@ fn bytes_per_step(n: usize) -> usize {
     for _ in 0..6 {
         t.step(&r, &views);
     }
-    let before = ALLOCATED.load(Ordering::Relaxed);
-    for _ in 0..6 {
-        t.step(&r, &views);
-    }
-    (ALLOCATED.load(Ordering::Relaxed) - before) / 6
+    let ((), bytes) = scene::testing::alloc::allocated_during(|| {
+        for _ in 0..6 {
+            t.step(&r, &views);
+        }
+    });
+    bytes / 6
 }
 
 #[test]
 fn a_warm_step_allocates_little_per_gaussian() {
+    let _alone = scene::testing::alloc::exclusive();
+    assert!(scene::testing::alloc::installed());
     let small = bytes_per_step(2_000);
     let large = bytes_per_step(8_000);
     let image = (W * H) as usize * 3 * 4;

@@ -18,6 +18,8 @@ use std::sync::{Mutex, MutexGuard};
 
 static LIVE: AtomicUsize = AtomicUsize::new(0);
 static PEAK: AtomicUsize = AtomicUsize::new(0);
+/// Bytes handed out since the start (grown reallocations count their new size).
+static TOTAL: AtomicUsize = AtomicUsize::new(0);
 static INSTALLED: AtomicBool = AtomicBool::new(false);
 
 /// The system allocator, counting live bytes and their peak.
@@ -38,6 +40,7 @@ unsafe impl GlobalAlloc for TrackingAlloc {
         let p = unsafe { System.alloc(layout) };
         if !p.is_null() {
             Self::grew(layout.size());
+            TOTAL.fetch_add(layout.size(), Ordering::Relaxed);
         }
         p
     }
@@ -48,6 +51,7 @@ unsafe impl GlobalAlloc for TrackingAlloc {
         let p = unsafe { System.alloc_zeroed(layout) };
         if !p.is_null() {
             Self::grew(layout.size());
+            TOTAL.fetch_add(layout.size(), Ordering::Relaxed);
         }
         p
     }
@@ -62,6 +66,7 @@ unsafe impl GlobalAlloc for TrackingAlloc {
         // SAFETY: as `alloc`.
         let p = unsafe { System.realloc(ptr, layout, new_size) };
         if !p.is_null() {
+            TOTAL.fetch_add(new_size, Ordering::Relaxed);
             if new_size >= layout.size() {
                 Self::grew(new_size - layout.size());
             } else {
@@ -128,4 +133,14 @@ pub(crate) fn peak_while_exclusive<R>(f: impl FnOnce() -> R) -> (R, usize) {
     let r = f();
     let peak = PEAK.load(Ordering::Relaxed);
     (r, peak.saturating_sub(base))
+}
+
+/// Run `f` and return its result with the bytes allocated while it ran (every
+/// allocation counted, freed or not; a reallocation counts its new size); 0 when the
+/// tracking allocator is not installed. Waits for any other measurement to end.
+pub fn allocated_during<R>(f: impl FnOnce() -> R) -> (R, usize) {
+    let _guard = exclusive();
+    let before = TOTAL.load(Ordering::Relaxed);
+    let r = f();
+    (r, TOTAL.load(Ordering::Relaxed) - before)
 }
