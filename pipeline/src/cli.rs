@@ -5,6 +5,7 @@
 
 use crate::cache::Cache;
 use crate::context::Context;
+use crate::runner::RunOptions;
 use anyhow::{Result, anyhow};
 use clap::{Args, Parser, Subcommand};
 use std::path::PathBuf;
@@ -43,6 +44,32 @@ fn full_help() -> String {
         evflow::finetune::FlowSettings::default().stop.min_steps,
         evflow::finetune::FlowSettings::default().stop.max_steps
     )
+}
+
+/// How `run`, `sweep` and `stress` run their stages.
+#[derive(Args, Clone, Copy)]
+pub struct RunFlags {
+    /// Stages to run at the same time within an experiment (evflow and gaussians are
+    /// independent)
+    #[arg(short = 'j', long, default_value_t = 1)]
+    pub jobs: usize,
+    /// Re-hash every cached file (default: only files whose size or mtime changed)
+    #[arg(long)]
+    pub verify: bool,
+    /// No progress lines
+    #[arg(short, long)]
+    pub quiet: bool,
+}
+
+impl RunFlags {
+    /// The runner's options for these flags (nothing forced, no `--until`).
+    pub fn options(&self) -> RunOptions {
+        RunOptions {
+            jobs: self.jobs,
+            verify_full: self.verify,
+            ..RunOptions::default()
+        }
+    }
 }
 
 #[derive(Args, Clone)]
@@ -103,15 +130,8 @@ pub enum Command {
         /// Re-run this stage and everything after it even when cached (repeatable)
         #[arg(long, value_name = "STAGE")]
         force: Vec<String>,
-        /// Stages to run at the same time (evflow and gaussians are independent)
-        #[arg(short = 'j', long, default_value_t = 1)]
-        jobs: usize,
-        /// Re-hash every cached file (default: only files whose size or mtime changed)
-        #[arg(long)]
-        verify: bool,
-        /// No progress lines
-        #[arg(short, long)]
-        quiet: bool,
+        #[command(flatten)]
+        flags: RunFlags,
     },
     /// Experiment files.
     Config {
@@ -156,15 +176,8 @@ pub enum Command {
         sweep: PathBuf,
         #[command(flatten)]
         place: Where,
-        /// Stages run at the same time within an experiment
-        #[arg(short = 'j', long, default_value_t = 1)]
-        jobs: usize,
-        /// Re-hash every cached file (default: only files whose size or mtime changed)
-        #[arg(long)]
-        verify: bool,
-        /// No progress lines
-        #[arg(short, long)]
-        quiet: bool,
+        #[command(flatten)]
+        flags: RunFlags,
     },
     /// Test stability where methods fail: build stressed variants of a base experiment's
     /// scene (train frame rate, event noise, hot pixels, a wrong claimed contrast
@@ -182,15 +195,8 @@ pub enum Command {
         stress: PathBuf,
         #[command(flatten)]
         place: Where,
-        /// Stages run at the same time within an experiment
-        #[arg(short = 'j', long, default_value_t = 1)]
-        jobs: usize,
-        /// Re-hash every cached file (default: only files whose size or mtime changed)
-        #[arg(long)]
-        verify: bool,
-        /// No progress lines
-        #[arg(short, long)]
-        quiet: bool,
+        #[command(flatten)]
+        flags: RunFlags,
     },
     /// Print the shell commands of the stages in order, each stage once; also write
     /// runs/<name>/Snakefile (Snakemake rules) and runs/<name>/slurm.sh (Slurm array

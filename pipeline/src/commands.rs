@@ -20,9 +20,7 @@ pub fn execute(command: Command) -> Result<()> {
             place,
             until,
             force,
-            jobs,
-            verify,
-            quiet,
+            flags,
         } => {
             let opts = RunOptions {
                 until: until.as_deref().map(stages::parse_stage).transpose()?,
@@ -30,10 +28,9 @@ pub fn execute(command: Command) -> Result<()> {
                     .iter()
                     .map(|s| stages::parse_stage(s))
                     .collect::<Result<_>>()?,
-                jobs,
-                verify_full: verify,
+                ..flags.options()
             };
-            run(&experiment, &place, &opts, quiet)
+            run(&experiment, &place, &opts, flags.quiet)
         }
         Command::Config {
             command: ConfigCommand::Show { experiment },
@@ -60,31 +57,13 @@ pub fn execute(command: Command) -> Result<()> {
         Command::Sweep {
             sweep,
             place,
-            jobs,
-            verify,
-            quiet,
-        } => {
-            let opts = RunOptions {
-                jobs,
-                verify_full: verify,
-                ..RunOptions::default()
-            };
-            run_sweep(&sweep, &place, &opts, quiet)
-        }
+            flags,
+        } => run_sweep(&sweep, &place, &flags.options(), flags.quiet),
         Command::Stress {
             stress,
             place,
-            jobs,
-            verify,
-            quiet,
-        } => {
-            let opts = RunOptions {
-                jobs,
-                verify_full: verify,
-                ..RunOptions::default()
-            };
-            run_stress(&stress, &place, &opts, quiet)
-        }
+            flags,
+        } => run_stress(&stress, &place, &flags.options(), flags.quiet),
         Command::Plan {
             experiment,
             place,
