@@ -18,7 +18,7 @@
 //! `stopped` (true on the step where the rule stops) and there `stop_reason`.
 
 use burn::tensor::{DType, Device};
-use evflow::finetune::{FlowSettings, coarse_level, finetune_observed, for_inference};
+use evflow::finetune::{FlowSettings, finetune_observed, for_inference};
 use evflow::predict::{dense_flow, event_flow};
 use evflow::source::{Source, WindowSpec};
 use evflow::stage::{Input, score_window};
@@ -78,13 +78,11 @@ fn main() -> anyhow::Result<()> {
             "zero_px": z0, "ratio": e0 / z0, "stopped": false})
     );
     // Run to max_steps (a window longer than any run never converges), replaying the
-    // settings' own rule on the pass losses: `fine_from` as finetune computes it.
+    // settings' own rule on the pass losses.
     let rule = s.budget();
     let steps_per_pass = src.windows.iter().filter(|w| !w.is_empty()).count();
     let plan = rule.schedule(steps_per_pass);
-    let fine_from = (0..plan.max_passes)
-        .find(|&e| coarse_level(&s, e, plan.coarse_passes) == 0)
-        .unwrap_or(0);
+    let fine_from = evflow::finetune::first_fine_pass(&s, &plan);
     let mut run = s.clone();
     run.stop.window = usize::MAX;
     let (mut pass_loss, mut pass_sum) = (Vec::new(), 0.0);

@@ -254,6 +254,14 @@ fn flow_of(net: &FlowNet, src: &Source, w: &crate::source::Window) -> (Tensor<4>
     (flow, vals)
 }
 
+/// The first pass at the finest CM level under `plan`: the stopping rule compares pass
+/// losses from there on.
+pub fn first_fine_pass(s: &FlowSettings, plan: &crate::budget::Schedule) -> usize {
+    (0..plan.max_passes)
+        .find(|&e| coarse_level(s, e, plan.coarse_passes) == 0)
+        .unwrap_or(0)
+}
+
 /// Finest CM pyramid level used at `epoch` when coarse-to-fine runs over `passes`
 /// epochs (0 unless `cm_coarse_to_fine`; 0 after them).
 pub fn coarse_level(s: &FlowSettings, epoch: usize, passes: usize) -> usize {
@@ -354,10 +362,7 @@ pub fn finetune_observed(
     let budget = s.budget();
     let plan = budget.schedule(trained.len());
     let total = (plan.lr_passes * trained.len()) as f64;
-    // The first epoch at the finest level: the rule compares losses from there on.
-    let fine_from = (0..plan.max_passes)
-        .find(|&e| coarse_level(s, e, plan.coarse_passes) == 0)
-        .unwrap_or(0);
+    let fine_from = first_fine_pass(s, &plan);
     let mut adam = Adam::default();
     let mut k = 0usize;
     let mut step_time = 0.0;
