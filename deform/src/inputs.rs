@@ -75,7 +75,7 @@ fn read_flows(flows: &Path, n: usize, range_px: f64) -> Result<(Vec<f32>, Vec<f3
     let (mut u, mut v) = (vec![f32::NAN; n], vec![f32::NAN; n]);
     let mut out_of_range = 0;
     for p in files {
-        let f = evflow::flowfile::read_evflow(&p)?;
+        let f = scene::formats::evflow::read_evflow(&p)?;
         // Largest |u|, |v| (px/s) the network can give over this window.
         let limit = range_px * (1.0 + 1e-3) / (f.t_b - f.t_a);
         for (k, &i) in f.index.iter().enumerate() {
