@@ -22,7 +22,9 @@
 //! `saturation` is clipped (its true brightness is unknown, so nothing can be predicted
 //! from it); a prediction outside the range the frames are trusted in — `exp(C·N)`
 //! overflowing to infinity, or underflowing towards 0, as a hot pixel's huge count does —
-//! is masked rather than used. `PseudoImage::n_eff` holds `∂log(P + ε)/∂C` per value, so
+//! is masked rather than used. Pixels whose events the counts leave out (hot pixels,
+//! `IntervalCounts::pixel_excluded`) are masked too: their count says nothing about
+//! the scene. `PseudoImage::n_eff` holds `∂log(P + ε)/∂C` per value, so
 //! `∂P/∂C = (P + ε)·n_eff`.
 //!
 //! [`event_loss`]: `L_event = mean over valid values of |R − P|` (L1, Eq. 11), with its
@@ -190,6 +192,10 @@ pub fn pseudo_image<R: Real>(
             let start = r * CHUNK; // index into the planar image
             for j in 0..p.len() {
                 let (vi, pi) = (start + j, (start + j) % n);
+                if k.pixel_excluded(pi) {
+                    (p[j], ok[j], ne[j]) = (R::ZERO, false, R::ZERO);
+                    continue;
+                }
                 let a = use_left
                     .then(|| side(inp.left[vi], R::from_f64(lc[pi] as f64), c, eps, black, sat))
                     .flatten();
