@@ -6,6 +6,7 @@ use crate::camera_path::{CameraPath, Interp};
 use crate::contrast::{ContrastEstimate, estimate_contrast};
 use crate::event_counts::EventCounts;
 use crate::event_image::srgb_to_linear;
+use crate::rate_outliers::RateOutliers;
 use crate::settings::{DeformSettings, FrameEncoding};
 use gaussians::model::Model;
 use gaussians::stage::load_views;
@@ -27,6 +28,9 @@ pub struct Inputs {
     /// Train frame times, seconds (the events' clock).
     pub times: Vec<f64>,
     pub events: EventStream,
+    /// Hot pixels and burst bins of `events` (left out of `counts` and of `L_motion`).
+    pub rate_outliers: RateOutliers,
+    /// Per-interval counts of `events` without the rate outliers.
     pub counts: EventCounts,
     /// Per event of the stream: flow in px/s (NaN where `evflow` gave none, or a flow
     /// beyond the network's range).
@@ -128,8 +132,15 @@ impl Inputs {
         let times: Vec<f64> = scene.train.frames.iter().map(|f| f.timestamp).collect();
         let events = scene.load_events()?;
         let train_file = scene.root.join(scene::manifest::TRAIN_FILE);
-        let counts = EventCounts::build(&events.as_slice(), &times, &s.counts)
-            .map_err(|e| Error::invalid(&train_file, e))?;
+        let rate_outliers =
+            RateOutliers::detect(&events.as_slice(), &times, s.counts.bins, &s.rate_outliers);
+        let counts = EventCounts::build_excluding(
+            &events.as_slice(),
+            &times,
+            &s.counts,
+            &rate_outliers.exclusion(),
+        )
+        .map_err(|e| Error::invalid(&train_file, e))?;
         let path = CameraPath::from_trajectory(&scene.train_trajectory(), Interp::Linear)
             .map_err(|e| Error::invalid(&train_file, e))?;
         let contrast_given = if s.contrast_threshold > 0.0 {
@@ -166,6 +177,7 @@ impl Inputs {
             linear,
             times,
             events,
+            rate_outliers,
             counts,
             flow_u,
             flow_v,

@@ -7,6 +7,7 @@ use crate::event_image::{PseudoMode, PseudoSettings};
 use crate::motion_loss::MotionSettings;
 use crate::neighbours::NeighbourSettings;
 use crate::posenet::PoseNetSettings;
+use crate::rate_outliers::RateOutlierSettings;
 use crate::schedule::LossSchedule;
 use serde::{Deserialize, Serialize};
 
@@ -71,6 +72,11 @@ pub struct DeformSettings {
     /// Fine time bins of the per-pixel event counts.
     pub counts: CountSettings,
     pub pseudo: PseudoSettings,
+    /// Event-rate outliers left out of `L_event` and `L_motion`: hot pixels (a count far
+    /// above the active pixels' median and the neighbours') and bursts (time bins far
+    /// above the recording's median rate); `hot_pixel_ratio = 0`, `burst_ratio = 0`:
+    /// off ([`crate::rate_outliers`]).
+    pub rate_outliers: RateOutlierSettings,
     /// Which frame(s) predict the pseudo image of `L_event`: `nearest` (Eq. 11) or
     /// `two_sided` (both neighbours, blended in log space by the distance in time).
     pub pseudo_mode: PseudoMode,
@@ -110,6 +116,7 @@ impl Default for DeformSettings {
             frame_encoding: FrameEncoding::Auto,
             counts: CountSettings::default(),
             pseudo: PseudoSettings::default(),
+            rate_outliers: RateOutlierSettings::default(),
             pseudo_mode: PseudoMode::Nearest,
             motion: MotionSettings::default(),
             motion_neighbours: NeighbourSettings::default(),
@@ -149,6 +156,7 @@ impl DeformSettings {
         }
         finite_nonneg("motion_span", self.motion_span)?;
         finite_nonneg("pseudo.band", self.pseudo.band)?;
+        self.rate_outliers.validate()?;
         if self.counts.bins == 0 {
             return Err("counts.bins must be at least 1".into());
         }

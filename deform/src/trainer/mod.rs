@@ -13,7 +13,7 @@
 use crate::camera_check::{CameraCheck, pose_error};
 use crate::contrast::LearnedContrast;
 use crate::event_image::{PseudoImage, PseudoInputs, event_loss, pseudo_image, srgb_to_linear};
-use crate::fallbacks::{EventSkip, Fallbacks, interval_skip};
+use crate::fallbacks::{DroppedBindings, EventSkip, Fallbacks, interval_skip};
 use crate::inputs::Inputs;
 use crate::posenet::{PoseNet, apply_correction, correction_backward};
 use crate::settings::DeformSettings;
@@ -58,7 +58,7 @@ pub struct JointStep {
     /// `L_event` was skipped (RGB-only supervision; [`crate::fallbacks`]).
     pub event_skipped: bool,
     /// Bound events left out of this iteration's `L_motion` (no flow, outliers,
-    /// Gaussians disagreeing with their neighbours).
+    /// Gaussians disagreeing with their neighbours, hot pixels and bursts).
     pub bindings_dropped: usize,
     /// The contrast threshold after this iteration.
     pub contrast: f64,
@@ -169,6 +169,10 @@ impl JointTrainer {
             fallbacks: Fallbacks {
                 flows_out_of_range: d.flows_out_of_range,
                 events_without_flow: d.flow_u.iter().filter(|u| !u.is_finite()).count(),
+                hot_pixels: d.rate_outliers.hot_pixels.len(),
+                hot_pixel_events: d.rate_outliers.hot_events,
+                burst_bins: d.rate_outliers.burst_bin_count(),
+                burst_events: d.rate_outliers.burst_events,
                 ..Fallbacks::default()
             },
             contrast: d.contrast,
@@ -298,17 +302,17 @@ impl JointTrainer {
         // RGB gradient on the rendered centres (one pass back through the field).
         let clock = Instant::now();
         let mut motion = MotionGrads::default();
-        let (l_motion, bound, [no_flow, outliers, disagreeing]) = if g2 > 0.0 {
+        let (l_motion, bound, dropped) = if g2 > 0.0 {
             self.motion_term(d, i, &rv, g2 as f32, &mut motion)
         } else {
-            (0.0, 0, [0; 3])
+            (0.0, 0, DroppedBindings::default())
         };
         self.timings.motion += clock.elapsed().as_secs_f64();
 
         let clock = Instant::now();
         self.posenet_grad.fill(0.0);
         let mut grads = self.backward_with_motion(r, d, &rv, &grad, &motion);
-        self.fallbacks.drop_bindings(no_flow, outliers, disagreeing);
+        self.fallbacks.drop_bindings(&dropped);
         self.inner.recycle_view(rv);
         self.timings.rgb += clock.elapsed().as_secs_f64();
 
@@ -346,7 +350,7 @@ impl JointTrainer {
             bound,
             gaussians: self.inner.splats.len(),
             event_skipped: self.fallbacks.event_steps_skipped > skipped,
-            bindings_dropped: no_flow + outliers + disagreeing,
+            bindings_dropped: dropped.total(),
             contrast: self.contrast,
         }
     }
@@ -435,9 +439,17 @@ impl JointTrainer {
             let alpha: Vec<f32> = depth.iter().map(|&z| f32::from(z > 0.0)).collect();
             let t0 = d.times[i];
             let window = d.events.window(t0 - s.delta_t, (t0 + s.delta_t).next_up());
+            // Events at hot pixels or in bursts are not bound (their indices mapped back).
+            let kept = d.rate_outliers.kept_events(&window);
+            let events = kept.as_ref().map_or(window, |(k, _)| k.as_slice());
             let b =
-                assoc::associate_frame(&v.camera, &depth, &alpha, &window, &splats.means, t0, s)
-                    .map(|(b, _)| b)
+                assoc::associate_frame(&v.camera, &depth, &alpha, &events, &splats.means, t0, s)
+                    .map(|(mut b, _)| {
+                        if let Some((_, index)) = &kept {
+                            b.events.iter_mut().for_each(|e| *e = index[*e as usize]);
+                        }
+                        b
+                    })
                     .unwrap_or_else(|_| assoc::Bindings {
                         offsets: vec![0; splats.len() + 1],
                         ..Default::default()
