@@ -3,9 +3,8 @@
 //! a dashed line at ratio 1 (the error of predicting no motion).
 
 use super::curve::{Curve, read_curve, to_csv};
-use super::draw::{
-    Drawing, LINE_COLOURS, draw_legend, linear_tick, polyline_anchors, range, write_png_and_svg,
-};
+use super::draw::{Drawing, LINE_COLOURS, linear_tick, range, write_png_and_svg};
+use super::legend::{draw_legend, polyline_anchors};
 use anyhow::{Result, anyhow};
 use plotters::coord::Shift;
 use plotters::prelude::*;

@@ -239,7 +239,8 @@ fn points_come_from_the_reports_and_shared_entries_count_once() {
 
 #[test]
 fn the_legend_takes_the_emptiest_place() {
-    use super::draw::{legend_place, polyline_anchors};
+    use super::legend::{legend_place, legend_size, polyline_anchors};
+    super::draw::register_font().unwrap();
     let area = (0, 0, 100, 90);
     let size = (40, 30);
     let place = |pts: &[(i32, i32)]| legend_place(pts, area, size).name;
@@ -276,12 +277,12 @@ fn the_legend_takes_the_emptiest_place() {
     }));
     assert_eq!((line[0], *line.last().unwrap()), ((50, 90), (100, 60)));
     // The box grows with the labels: a longer label makes a wider box.
-    let short = super::draw::legend_size(&["a".to_string()]);
-    let long = super::draw::legend_size(&["a much longer label".to_string()]);
+    let short = legend_size(&["a".to_string()]);
+    let long = legend_size(&["a much longer label".to_string()]);
     assert!(
         long.0 > short.0 + 50 && long.1 == short.1,
         "{short:?} {long:?}"
     );
-    let two = super::draw::legend_size(&["a".to_string(), "b".to_string()]);
+    let two = legend_size(&["a".to_string(), "b".to_string()]);
     assert!(two.1 > short.1 + 10, "{short:?} {two:?}");
 }

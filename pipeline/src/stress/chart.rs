@@ -7,9 +7,9 @@ use super::report::{StressRecord, StressResult};
 use super::variants::StressKind;
 use crate::chart::Method;
 use crate::chart::draw::{
-    Drawing, LINE_COLOURS, Marker, draw_legend, linear_tick, method_style, polyline_anchors, range,
-    write_png_and_svg,
+    Drawing, LINE_COLOURS, Marker, linear_tick, method_style, range, write_png_and_svg,
 };
+use crate::chart::legend::{draw_legend, polyline_anchors};
 use anyhow::Result;
 use plotters::coord::Shift;
 use plotters::prelude::*;
