@@ -83,6 +83,21 @@ pub enum PseudoMode {
     TwoSided,
 }
 
+/// What `L_event` compares (Eq. 11): the event model predicts a per-pixel brightness
+/// factor, which holds for the luminance an event pixel integrates but not for each
+/// colour channel (an object of another colour passing over a pixel changes its chroma,
+/// which no event count predicts).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EventChannels {
+    /// Rec. 709 luminance of the linear render against the pseudo image of the frames'
+    /// luminance.
+    #[default]
+    Luminance,
+    /// Each colour channel scaled by the same factor (the paper's Eq. 11 on RGB frames).
+    Rgb,
+}
+
 /// The inputs of a pseudo image: the interval's counts and its two frames.
 #[derive(Clone, Copy, Debug)]
 pub struct PseudoInputs<'a, R> {
@@ -348,6 +363,73 @@ pub fn srgb_to_linear<R: Real>(c: R) -> R {
     } else {
         ((c + R::from_f64(0.055)) / R::from_f64(1.055)).powf(R::from_f64(2.4))
     }
+}
+
+/// Luminance (Rec. 709, [`crate::contrast::LUMA`]) of a planar linear RGB image of `n`
+/// pixels into `out` (what an event pixel integrates); a one-channel image is copied.
+pub fn planar_luminance_into<R: Real>(rgb: &[R], n: usize, out: &mut Vec<R>) {
+    out.clear();
+    if rgb.len() == n {
+        out.extend_from_slice(rgb);
+        return;
+    }
+    assert_eq!(
+        rgb.len(),
+        3 * n,
+        "planar_luminance: expected 1 or 3 planes of {n}"
+    );
+    let w = crate::contrast::LUMA.map(R::from_f64);
+    out.extend((0..n).map(|i| w[0] * rgb[i] + w[1] * rgb[n + i] + w[2] * rgb[2 * n + i]));
+}
+
+/// `d linear / d encoded` of the sRGB curve, the linear segment below 0.04045 extended
+/// to negative values.
+#[inline]
+pub fn srgb_slope<R: Real>(c: R) -> R {
+    if c <= R::from_f64(0.040_45) {
+        R::ONE / R::from_f64(12.92)
+    } else {
+        R::from_f64(2.4 / 1.055)
+            * ((c + R::from_f64(0.055)) / R::from_f64(1.055)).powf(R::from_f64(1.4))
+    }
+}
+
+/// Eq. 11 on a render as stored (planar RGB, sRGB-encoded when `srgb`): linearised,
+/// reduced to luminance for [`EventChannels::Luminance`] (the pseudo image then has one
+/// plane), compared by [`event_loss`]; `grad` receives `∂L/∂(stored value)`.
+pub fn render_event_loss<R: Real>(
+    stored: &[R],
+    srgb: bool,
+    channels: EventChannels,
+    pseudo: &PseudoImage<R>,
+    grad: &mut [R],
+) -> EventLoss<R> {
+    let plane = stored.len() / 3;
+    let linear: Vec<R> = if srgb {
+        stored.iter().map(|&c| srgb_to_linear(c)).collect()
+    } else {
+        stored.to_vec()
+    };
+    let luma = channels == EventChannels::Luminance;
+    let compared = if luma {
+        let mut y = Vec::with_capacity(plane);
+        planar_luminance_into(&linear, plane, &mut y);
+        y
+    } else {
+        linear
+    };
+    let mut g = vec![R::ZERO; compared.len()];
+    let el = event_loss(&compared, pseudo, Some(&mut g));
+    let w = crate::contrast::LUMA.map(R::from_f64);
+    for (k, (gk, &c)) in grad.iter_mut().zip(stored).enumerate() {
+        let dl = if luma {
+            w[k / plane] * g[k % plane]
+        } else {
+            g[k]
+        };
+        *gk = dl * if srgb { srgb_slope(c) } else { R::ONE };
+    }
+    el
 }
 
 /// Linear value in `[0, 1]` → sRGB-encoded (IEC 61966-2-1).

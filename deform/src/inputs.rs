@@ -25,6 +25,8 @@ pub struct Inputs {
     pub test: Vec<View>,
     /// Train frames as linear intensity (planar), for the event model.
     pub linear: Vec<Vec<f32>>,
+    /// Their Rec. 709 luminance (one plane each), for `L_event` on luminance.
+    pub luma: Vec<Vec<f32>>,
     /// Train frame times, seconds (the events' clock).
     pub times: Vec<f64>,
     pub events: EventStream,
@@ -129,6 +131,15 @@ impl Inputs {
                 }
             })
             .collect();
+        let luma: Vec<Vec<f32>> = linear
+            .iter()
+            .zip(&views)
+            .map(|(l, v)| {
+                let mut y = Vec::new();
+                crate::event_image::planar_luminance_into(l, v.rgb.len() / 3, &mut y);
+                y
+            })
+            .collect();
         let times: Vec<f64> = scene.train.frames.iter().map(|f| f.timestamp).collect();
         let events = scene.load_events()?;
         let train_file = scene.root.join(scene::manifest::TRAIN_FILE);
@@ -175,6 +186,7 @@ impl Inputs {
             views,
             test,
             linear,
+            luma,
             times,
             events,
             rate_outliers,

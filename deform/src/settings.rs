@@ -3,6 +3,7 @@
 
 use crate::contrast::{ContrastMode, EstimateSettings};
 use crate::event_counts::CountSettings;
+pub use crate::event_image::EventChannels;
 use crate::event_image::{PseudoMode, PseudoSettings};
 use crate::motion_loss::MotionSettings;
 use crate::neighbours::NeighbourSettings;
@@ -80,6 +81,8 @@ pub struct DeformSettings {
     /// Which frame(s) predict the pseudo image of `L_event`: `nearest` (Eq. 11) or
     /// `two_sided` (both neighbours, blended in log space by the distance in time).
     pub pseudo_mode: PseudoMode,
+    /// What `L_event` compares: `luminance` (what events measure) or `rgb`.
+    pub event_channels: EventChannels,
     pub motion: MotionSettings,
     /// Bound Gaussians whose events' flow disagrees with their neighbours' are left
     /// out of `L_motion` (`radius_px = 0`: never).
@@ -118,6 +121,7 @@ impl Default for DeformSettings {
             pseudo: PseudoSettings::default(),
             rate_outliers: RateOutlierSettings::default(),
             pseudo_mode: PseudoMode::Nearest,
+            event_channels: EventChannels::Luminance,
             motion: MotionSettings::default(),
             motion_neighbours: NeighbourSettings::default(),
             flow_form: FlowForm::Paper,

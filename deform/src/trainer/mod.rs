@@ -12,11 +12,11 @@
 
 use crate::camera_check::{CameraCheck, pose_error};
 use crate::contrast::LearnedContrast;
-use crate::event_image::{PseudoImage, PseudoInputs, event_loss, pseudo_image, srgb_to_linear};
+use crate::event_image::{PseudoImage, PseudoInputs, pseudo_image, render_event_loss};
 use crate::fallbacks::{DroppedBindings, EventSkip, Fallbacks, interval_skip};
 use crate::inputs::Inputs;
 use crate::posenet::{PoseNet, apply_correction, correction_backward};
-use crate::settings::DeformSettings;
+use crate::settings::{DeformSettings, EventChannels};
 use gaussians::stage::PSNR_CAP;
 use gaussians::train::{ModelGrads, Trainer, ViewRender};
 use gaussians::{Rasterizer, TileRasterizer};
@@ -101,16 +101,6 @@ fn add_scaled(dst: &mut ModelGrads, src: &ModelGrads, w: f32) {
         add(&mut dst.field, &src.field);
     } else if dst.field.is_empty() {
         dst.field = src.field.iter().map(|g| w * g).collect();
-    }
-}
-
-/// `d linear / d encoded` of the sRGB curve (IEC 61966-2-1), the linear segment below
-/// 0.04045 extended to negative values.
-fn srgb_slope(c: f32) -> f32 {
-    if c <= 0.040_45 {
-        1.0 / 12.92
-    } else {
-        2.4 / 1.055 * ((c + 0.055) / 1.055).powf(1.4)
     }
 }
 
@@ -373,12 +363,18 @@ impl JointTrainer {
         }
         let t_e = ta + self.rng.random::<f64>() * (tb - ta);
         let all = d.events.as_slice();
+        let luma = self.settings.event_channels == EventChannels::Luminance;
+        let (left, right, channels) = if luma {
+            (&d.luma[j], &d.luma[j + 1], 1)
+        } else {
+            (&d.linear[j], &d.linear[j + 1], 3)
+        };
         let inp = PseudoInputs {
             counts: &d.counts.intervals()[j],
             events: Some(&all),
-            left: &d.linear[j],
-            right: &d.linear[j + 1],
-            channels: 3,
+            left,
+            right,
+            channels,
             contrast: self.contrast as f32,
         };
         pseudo_image(
@@ -390,14 +386,14 @@ impl JointTrainer {
         );
         let (camera, xi) = self.camera_at(d, t_e);
         let rv = self.inner.render_view(r, &camera, field_time(d, t_e));
-        let rgb = &rv.image.rgb;
-        let linear: Vec<f32> = if d.srgb {
-            rgb.iter().map(|&c| srgb_to_linear(c)).collect()
-        } else {
-            rgb.clone()
-        };
-        let mut g = vec![0.0f32; linear.len()];
-        let el = event_loss(&linear, &self.pseudo, Some(&mut g));
+        let mut g = vec![0.0f32; rv.image.rgb.len()];
+        let el = render_event_loss(
+            &rv.image.rgb,
+            d.srgb,
+            self.settings.event_channels,
+            &self.pseudo,
+            &mut g,
+        );
         if el.valid == 0 {
             self.fallbacks.skip_event(EventSkip::NoValidPixels);
             return 0.0;
@@ -406,9 +402,7 @@ impl JointTrainer {
             lc.step(f64::from(el.d_contrast));
             self.contrast = lc.value();
         }
-        for (gi, &c) in g.iter_mut().zip(rgb) {
-            *gi *= g1 * if d.srgb { srgb_slope(c) } else { 1.0 };
-        }
+        g.iter_mut().for_each(|x| *x *= g1);
         let ge = self.inner.view_backward(r, &rv, &g, None, None);
         self.inner.recycle_view(rv);
         // While the PoseNet warms up, L_event moves the camera only (not the scene).
