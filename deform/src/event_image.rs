@@ -39,6 +39,10 @@ use scene::real::Real;
 use scene::{EventSlice, Image};
 use serde::{Deserialize, Serialize};
 
+/// Rec. 709 luminance weights of linear RGB (what an event pixel integrates, as
+/// `synth`'s simulator assumes).
+pub const LUMA: [f64; 3] = [0.2126, 0.7152, 0.0722];
+
 /// Values per rayon task.
 const CHUNK: usize = 8192;
 
@@ -365,7 +369,7 @@ pub fn srgb_to_linear<R: Real>(c: R) -> R {
     }
 }
 
-/// Luminance (Rec. 709, [`crate::contrast::LUMA`]) of a planar linear RGB image of `n`
+/// Luminance (Rec. 709, [`LUMA`]) of a planar linear RGB image of `n`
 /// pixels into `out` (what an event pixel integrates); a one-channel image is copied.
 pub fn planar_luminance_into<R: Real>(rgb: &[R], n: usize, out: &mut Vec<R>) {
     out.clear();
@@ -378,7 +382,7 @@ pub fn planar_luminance_into<R: Real>(rgb: &[R], n: usize, out: &mut Vec<R>) {
         3 * n,
         "planar_luminance: expected 1 or 3 planes of {n}"
     );
-    let w = crate::contrast::LUMA.map(R::from_f64);
+    let w = LUMA.map(R::from_f64);
     out.extend((0..n).map(|i| w[0] * rgb[i] + w[1] * rgb[n + i] + w[2] * rgb[2 * n + i]));
 }
 
@@ -420,7 +424,7 @@ pub fn render_event_loss<R: Real>(
     };
     let mut g = vec![R::ZERO; compared.len()];
     let el = event_loss(&compared, pseudo, Some(&mut g));
-    let w = crate::contrast::LUMA.map(R::from_f64);
+    let w = LUMA.map(R::from_f64);
     for (k, (gk, &c)) in grad.iter_mut().zip(stored).enumerate() {
         let dl = if luma {
             w[k / plane] * g[k % plane]
