@@ -369,21 +369,18 @@ pub fn srgb_to_linear<R: Real>(c: R) -> R {
     }
 }
 
-/// Luminance (Rec. 709, [`LUMA`]) of a planar linear RGB image of `n`
-/// pixels into `out` (what an event pixel integrates); a one-channel image is copied.
-pub fn planar_luminance_into<R: Real>(rgb: &[R], n: usize, out: &mut Vec<R>) {
-    out.clear();
-    if rgb.len() == n {
-        out.extend_from_slice(rgb);
-        return;
-    }
+/// Luminance (Rec. 709, [`LUMA`]) of a planar linear RGB image of `n` pixels (what an
+/// event pixel integrates).
+pub fn planar_luminance<R: Real>(rgb: &[R], n: usize) -> Vec<R> {
     assert_eq!(
         rgb.len(),
         3 * n,
-        "planar_luminance: expected 1 or 3 planes of {n}"
+        "planar_luminance: expected 3 planes of {n}"
     );
     let w = LUMA.map(R::from_f64);
-    out.extend((0..n).map(|i| w[0] * rgb[i] + w[1] * rgb[n + i] + w[2] * rgb[2 * n + i]));
+    (0..n)
+        .map(|i| w[0] * rgb[i] + w[1] * rgb[n + i] + w[2] * rgb[2 * n + i])
+        .collect()
 }
 
 /// `d linear / d encoded` of the sRGB curve, the linear segment below 0.04045 extended
@@ -416,9 +413,7 @@ pub fn render_event_loss<R: Real>(
     };
     let luma = channels == EventChannels::Luminance;
     let compared = if luma {
-        let mut y = Vec::with_capacity(plane);
-        planar_luminance_into(&linear, plane, &mut y);
-        y
+        planar_luminance(&linear, plane)
     } else {
         linear
     };

@@ -134,11 +134,7 @@ impl Inputs {
         let luma: Vec<Vec<f32>> = linear
             .iter()
             .zip(&views)
-            .map(|(l, v)| {
-                let mut y = Vec::new();
-                crate::event_image::planar_luminance_into(l, v.rgb.len() / 3, &mut y);
-                y
-            })
+            .map(|(l, v)| crate::event_image::planar_luminance(l, v.rgb.len() / 3))
             .collect();
         let times: Vec<f64> = scene.train.frames.iter().map(|f| f.timestamp).collect();
         let events = scene.load_events()?;

@@ -2,7 +2,7 @@ use super::{Rng, assert_close, fd};
 use crate::event_counts::{CountSettings, EventCounts, IntervalCounts};
 use crate::event_image::{
     EventChannels, PseudoImage, PseudoInputs, PseudoMode, PseudoSettings, event_loss,
-    linear_to_srgb, planar_linear, planar_luminance_into, pseudo_image, render_event_loss,
+    linear_to_srgb, planar_linear, planar_luminance, pseudo_image, render_event_loss,
     srgb_to_linear,
 };
 use scene::{EventStream, Image};
@@ -427,9 +427,7 @@ fn render_event_loss_gradients_match_finite_differences() {
         saturation: 100.0,
         ..PseudoSettings::default()
     };
-    let (mut ly, mut ry) = (vec![], vec![]);
-    planar_luminance_into(&d.left, n, &mut ly);
-    planar_luminance_into(&d.right, n, &mut ry);
+    let (ly, ry) = (planar_luminance(&d.left, n), planar_luminance(&d.right, n));
     // Stored values away from the sRGB curve's knee (0.04045), where it has a kink.
     let stored: Vec<f64> = (0..3 * n).map(|_| rng.uniform(0.1, 0.9)).collect();
     for channels in [EventChannels::Luminance, EventChannels::Rgb] {
@@ -458,8 +456,7 @@ fn render_event_loss_gradients_match_finite_differences() {
                 stored.clone()
             };
             if channels == EventChannels::Luminance {
-                let mut y = vec![];
-                planar_luminance_into(&lin, n, &mut y);
+                let y = planar_luminance(&lin, n);
                 assert_eq!(
                     y[3],
                     0.2126 * lin[3] + 0.7152 * lin[n + 3] + 0.0722 * lin[2 * n + 3]
