@@ -7,13 +7,15 @@ use crate::schedule::LossSchedule;
 #[test]
 fn schedule_follows_eq_13() {
     let s = LossSchedule::default();
-    assert_eq!(s.gamma1(0), 1.0);
+    assert_eq!(s.gamma1(0), 2.0);
     assert_eq!(s.gamma2(0), 0.0);
     assert!((s.gamma2(4000) - (1.0 - (-1.0f64).exp())).abs() < 1e-15);
     let want = 1.0 - (-1.0f64 / 4000.0).exp();
     assert!((s.gamma2(1) - want).abs() < 1e-12 * want);
     assert!((s.gamma2(200_000) - 1.0).abs() < 1e-15);
-    assert!((s.total(4000, 0.5, 0.25, 2.0) - (0.5 + 0.25 + 2.0 * s.gamma2(4000))).abs() < 1e-15);
+    assert!(
+        (s.total(4000, 0.5, 0.25, 2.0) - (0.5 + 2.0 * 0.25 + 2.0 * s.gamma2(4000))).abs() < 1e-15
+    );
     let flat = LossSchedule {
         gamma2_iters: 0.0,
         gamma2_max: 0.3,
