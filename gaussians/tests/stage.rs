@@ -45,6 +45,13 @@ fn median_relative_depth_error(depth: &[f32], truth: &[f32]) -> (f64, usize) {
     )
 }
 
+/// The text of a PLY's header (up to `end_header`).
+fn ply_header(path: &Path) -> String {
+    let bytes = std::fs::read(path).unwrap();
+    let end = bytes.windows(10).position(|w| w == b"end_header").unwrap();
+    String::from_utf8_lossy(&bytes[..end]).into_owned()
+}
+
 fn tiny_settings(dir: &Path) -> std::path::PathBuf {
     let mut s = TrainSettings {
         iterations: 400,
@@ -59,6 +66,7 @@ fn tiny_settings(dir: &Path) -> std::path::PathBuf {
     s.densify.from_iter = 100;
     s.densify.interval = 50;
     s.densify.until_iter = 250;
+    s.size.at = 350;
     let p = dir.join("settings.toml");
     std::fs::write(&p, scene::cli::settings::to_toml(&s).unwrap()).unwrap();
     p
@@ -100,7 +108,42 @@ fn trains_writes_every_output_and_reloads_identically() {
         r.test.psnr_mean,
         r.test.mean_colour_psnr_mean
     );
-    assert!(o.model.field.is_some());
+    // Sized at iteration 350 (100 field iterations in): the train views need the field
+    // (the static scene's views differ by more than the canonical model explains), so it
+    // stays; Gaussians that add little go, within the tolerance.
+    let sz = r.sizing.as_ref().expect("sized");
+    eprintln!("sizing: {sz:?}\nmodel size: {:?}", r.model_size);
+    assert_eq!((sz.iteration, sz.gaussians_before), (350, 3200));
+    assert!(sz.train_psnr_after >= sz.train_psnr_before - sz.tolerance_db);
+    assert!(sz.gaussians < sz.gaussians_before && sz.gaussians == r.gaussians);
+    assert!(o.model.field.is_some() && !sz.field_dropped);
+    // The report's size is the files': no dynamic flags (no split), SH degree 1 columns.
+    let ms = &r.model_size;
+    let bytes = |f: &str| std::fs::metadata(out.join(f)).map_or(0, |m| m.len());
+    assert_eq!(ms.bytes.ply, bytes("point_cloud.ply"));
+    assert_eq!(
+        ms.bytes.field,
+        bytes("field.safetensors") + bytes("field.json")
+    );
+    assert!(!out.join("dynamic.safetensors").exists() && ms.bytes.dynamic_flags == 0);
+    let files = [
+        "point_cloud.ply",
+        "field.safetensors",
+        "field.json",
+        "model.json",
+    ];
+    assert_eq!(ms.bytes.total, files.iter().map(|f| bytes(f)).sum::<u64>());
+    assert_eq!(
+        (ms.gaussians, ms.sh_degree, ms.field),
+        (r.gaussians, 1, Some([2, 16]))
+    );
+    assert_eq!(ms.parameters.gaussians, r.gaussians * (11 + 3 * 4));
+    assert_eq!(ms.parameters.field, r.field_parameters);
+    let header = ply_header(&out.join("point_cloud.ply"));
+    assert!(
+        header.contains("f_rest_8\n") && !header.contains("f_rest_9"),
+        "{header}"
+    );
 
     // depth at every train frame, right size, finite, mostly covered, and close to the
     // scene's exact depth
