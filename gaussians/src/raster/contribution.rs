@@ -3,7 +3,7 @@
 //! over a finished render (the forward pass itself does not pay for it), walking each
 //! tile front to back exactly as the forward does (same lanes, same `α`, same stop), so
 //! the weights are the forward's own. Pruning by contribution reads them
-//! (`crate::train::sizing`).
+//! (the warm-up's sizing, `train/sizing.rs`).
 
 use super::alpha::{T_MIN, eval_alpha};
 use super::forward::{Plane, RenderState, TILE, lane_bits, row_span};

@@ -13,8 +13,9 @@
 //!   trained field also holds a part that does not change with time (a shift the
 //!   canonical Gaussians were trained beside), which the scene does need.
 //! - **SH degree**: the lowest degree ≤ the one in use whose renders stay within
-//!   tolerance becomes the model's degree (its higher coefficients are zeroed). When no
-//!   lower degree does, the setting stays and the degree may still grow.
+//!   tolerance becomes the model's degree for good (its higher coefficients are
+//!   zeroed; the degree no longer grows: a degree the sizing did not see is not
+//!   taken).
 //! - **Gaussians**: each Gaussian's blending weight `Σ α·T` summed over the train views
 //!   ranks them; a binary search on the count finds the fewest most-contributing
 //!   Gaussians whose renders stay within tolerance, and the rest are dropped.
@@ -341,7 +342,7 @@ impl Trainer {
         }
         let sh = c.sh_degree;
         let frozen = frozen.filter(|_| sum.field_dropped);
-        self.apply_sizing(sh < sh_before, sh, frozen, keep.as_deref());
+        self.apply_sizing(size.sh_degree.then_some(sh), frozen, keep.as_deref());
         let field_kept = had_field && !sum.field_dropped;
         let c = Candidate {
             splats: &self.splats,
@@ -356,22 +357,16 @@ impl Trainer {
         self.sizing = Some(sum);
     }
 
-    /// Make the sizing's decisions: a lower SH degree, the model `frozen` in place of
-    /// the canonical Gaussians and their field, only `keep`.
-    fn apply_sizing(
-        &mut self,
-        lower_sh: bool,
-        sh: u32,
-        frozen: Option<Splats>,
-        keep: Option<&[usize]>,
-    ) {
+    /// Make the sizing's decisions: the SH degree `sh` from now on, the model `frozen`
+    /// in place of the canonical Gaussians and their field, only `keep`.
+    fn apply_sizing(&mut self, sh: Option<u32>, frozen: Option<Splats>, keep: Option<&[usize]>) {
         if let Some(mut f) = frozen {
             f.dynamic.clear();
             self.splats = f;
             self.settings.deform = false;
             self.settings.dynamic_only = false;
         }
-        if lower_sh {
+        if let Some(sh) = sh {
             self.settings.sh_degree = sh;
             truncate_sh(&mut self.splats.sh_rest, sh);
             // Adam's moments of the zeroed coefficients too (group 5: sh_rest).
