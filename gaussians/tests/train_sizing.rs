@@ -120,7 +120,8 @@ fn a_static_scene_loses_its_field_its_sh_and_its_unseen_gaussians() {
     assert_eq!(tr.sh_degree(), 2);
     tr.size_if_due(&TileRasterizer, &v);
     let s = tr.sizing.clone().expect("sized at iteration 50");
-    assert!(s.field_dropped && !tr.field_on());
+    assert!(s.field_dropped && s.still && !tr.field_on());
+    assert_eq!(s.field_motion_px_quantiles, Some([0.0; 4]));
     assert_eq!((s.sh_degree_before, s.sh_degree), (2, 0));
     assert_eq!(s.train_psnr_by_sh_degree.len(), 1);
     assert_eq!((tr.settings.sh_degree, tr.sh_degree()), (0, 0));
@@ -183,7 +184,9 @@ fn a_moving_scene_keeps_its_field() {
     let mut tr = trainer(padded(&t), f);
     tr.size_if_due(&TileRasterizer, &v);
     let s = tr.sizing.clone().unwrap();
-    assert!(!s.field_dropped && tr.field_on(), "{s:?}");
+    assert!(!s.field_dropped && !s.still && tr.field_on(), "{s:?}");
+    let q = s.field_motion_px_quantiles.unwrap();
+    assert!(q[2] > 1.5 && q[3] >= q[2], "{q:?}");
     let without = s.train_psnr_without_field.unwrap();
     assert!(without < s.train_psnr_before - 3.0, "{s:?}");
     assert!(s.gaussians < 100 && s.train_psnr_after >= s.train_psnr_before - TOL);
@@ -207,7 +210,8 @@ fn a_constant_deformation_is_baked_in_when_the_field_goes() {
     tr.settings.size.prune = false;
     tr.size_if_due(&TileRasterizer, &v);
     let s = tr.sizing.clone().unwrap();
-    assert!(s.field_dropped && !tr.field_on(), "{s:?}");
+    assert!(s.field_dropped && s.still && !tr.field_on(), "{s:?}");
+    assert!(s.field_motion_px_quantiles.unwrap()[3] < 1e-4, "{s:?}");
     assert!(s.train_psnr_without_field.unwrap() >= s.train_psnr_before - TOL);
     assert_eq!(tr.splats.len(), 100);
     for i in 0..60 {

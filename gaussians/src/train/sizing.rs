@@ -3,10 +3,16 @@
 //! views decide, in this order, whether the model keeps its deformation field, its SH
 //! degree and each Gaussian. Every decision must keep the mean train-view PSNR within
 //! `tolerance_db` of the model before sizing (one budget for all three, so the sized
-//! model is at most `tolerance_db` below it); the iterations after sizing fine-tune
-//! the smaller model.
+//! model is at most `tolerance_db` below it; a still scene's field excepted); the
+//! iterations after sizing fine-tune the smaller model.
 //!
-//! - **field**: the model frozen at the middle of the recording (the field's
+//! - **field**: the scene is *still* when the field moves at most one Gaussian in a
+//!   thousand by more than `still_px` from where it puts it at the middle of the
+//!   recording (a field trained on the views of a still scene fits each view on its
+//!   own by fractions of a pixel, which the train views reward but no other view
+//!   does); a still scene loses its field whatever that costs on the train views, and
+//!   the rest of the budget counts from the frozen model below. Otherwise the model
+//!   frozen at the middle of the recording (the field's
 //!   deformation at that time baked into the Gaussians) is rendered at every train
 //!   view; within tolerance, it replaces the canonical Gaussians and the field is
 //!   dropped (a static scene ends with none). Frozen, not simply without the field: a
@@ -20,7 +26,7 @@
 //!   ranks them; a binary search on the count finds the fewest most-contributing
 //!   Gaussians whose renders stay within tolerance, and the rest are dropped.
 
-use super::{Trainer, View};
+use super::{Trainer, View, static_split};
 use crate::Rasterizer;
 use crate::field::{self, Mlp};
 use crate::raster::sh::num_coeffs;
@@ -42,6 +48,11 @@ pub struct SizeSettings {
     pub at: u32,
     /// Drop the deformation field when the train views do not need it.
     pub drop_field: bool,
+    /// A still scene: when the field moves at most one Gaussian in a thousand by more
+    /// than this many pixels of the train views (centre, from where it puts it at the
+    /// middle of the recording), the field goes whatever it is worth on the train views
+    /// (0 = only the PSNR test).
+    pub still_px: f32,
     /// Lower the SH degree to what the train views need.
     pub sh_degree: bool,
     /// Prune Gaussians by contribution.
@@ -54,6 +65,7 @@ impl Default for SizeSettings {
             tolerance_db: 0.1,
             at: 0,
             drop_field: true,
+            still_px: 1.5,
             sh_degree: true,
             prune: true,
         }
@@ -64,6 +76,9 @@ impl SizeSettings {
     pub fn validate(&self) -> Result<(), String> {
         if !(self.tolerance_db.is_finite() && self.tolerance_db >= 0.0) {
             return Err("size.tolerance_db must be finite and ≥ 0 (0: no sizing)".into());
+        }
+        if !(self.still_px.is_finite() && self.still_px >= 0.0) {
+            return Err("size.still_px must be finite and ≥ 0 (0: no still test)".into());
         }
         Ok(())
     }
@@ -81,6 +96,10 @@ pub struct SizingSummary {
     /// field was not tested).
     pub train_psnr_without_field: Option<f64>,
     pub field_dropped: bool,
+    /// Quantiles 0.5, 0.99, 0.999 and 1 of the field's motion of each Gaussian (pixels;
+    /// see `still_px`), and whether that made the scene still (absent: not measured).
+    pub field_motion_px_quantiles: Option<[f32; 4]>,
+    pub still: bool,
     pub sh_degree_before: u32,
     pub sh_degree: u32,
     /// Mean train-view PSNR at SH degree 0, 1, … (those tested).
@@ -302,17 +321,38 @@ impl Trainer {
             gaussians_before: self.splats.len(),
             ..SizingSummary::default()
         };
-        if let Some(f) = &frozen {
-            let still = Candidate {
+        let mut target = target;
+        if let (Some(f), Some(mlp)) = (&frozen, field) {
+            let frozen_c = Candidate {
                 splats: f,
                 field: None,
                 ..c
             };
-            let p = judge.psnr(&still);
+            let p = judge.psnr(&frozen_c);
             sum.train_psnr_without_field = Some(p);
-            if p >= target {
-                c = still;
+            if size.still_px > 0.0 {
+                let cams: Vec<_> = views.iter().map(|v| v.camera).collect();
+                let times: Vec<f32> = views.iter().map(|v| v.time).collect();
+                let times = static_split::sample_times(&times);
+                let motion = static_split::centre_motion_px(
+                    mlp,
+                    &self.splats,
+                    dynamic_only,
+                    &cams,
+                    &times,
+                    middle_time(views),
+                );
+                let moving = motion.iter().filter(|&&m| m > size.still_px).count();
+                sum.still = moving * 1000 <= motion.len();
+                sum.field_motion_px_quantiles =
+                    Some(static_split::quantiles(&motion, [0.5, 0.99, 0.999, 1.0]));
+            }
+            if sum.still || p >= target {
+                c = frozen_c;
                 sum.field_dropped = true;
+                // The rest of the budget counts from the frozen model when a still
+                // scene's field went below it.
+                target = target.min(p - size.tolerance_db);
             }
         }
         if size.sh_degree {
