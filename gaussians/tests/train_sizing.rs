@@ -186,7 +186,7 @@ fn a_moving_scene_keeps_its_field() {
     let s = tr.sizing.clone().unwrap();
     assert!(!s.field_dropped && !s.still && tr.field_on(), "{s:?}");
     let q = s.field_motion_px_quantiles.unwrap();
-    assert!(q[2] > 1.5 && q[3] >= q[2], "{q:?}");
+    assert!(q[2] > 1.0 && q[3] >= q[2], "{q:?}");
     let without = s.train_psnr_without_field.unwrap();
     assert!(without < s.train_psnr_before - 3.0, "{s:?}");
     assert!(s.gaussians < 100 && s.train_psnr_after >= s.train_psnr_before - TOL);

@@ -44,7 +44,7 @@ pub struct SizeSettings {
     pub tolerance_db: f64,
     /// Iteration of the sizing (0 = the end of densification, `densify.until_iter`, or
     /// the last iteration when the run ends before it). Sizing before the end of
-    /// densification lets densification grow the count again (up to its cap).
+    /// densification caps the count there at the sized count.
     pub at: u32,
     /// Drop the deformation field when the train views do not need it.
     pub drop_field: bool,
@@ -65,7 +65,7 @@ impl Default for SizeSettings {
             tolerance_db: 0.1,
             at: 0,
             drop_field: true,
-            still_px: 1.5,
+            still_px: 1.0,
             sh_degree: true,
             prune: true,
         }
@@ -419,6 +419,9 @@ impl Trainer {
             }
         }
         if let Some(keep) = keep {
+            // The sized count is the cap from now on (densification may still move
+            // Gaussians where they are needed, not add to them).
+            self.settings.densify.max_gaussians = keep.len();
             self.splats = gather(&self.splats, keep);
             let src: Vec<Option<usize>> = keep.iter().map(|&i| Some(i)).collect();
             for k in 0..self.adam.groups.len() {
