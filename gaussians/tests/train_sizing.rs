@@ -190,6 +190,16 @@ fn a_moving_scene_keeps_its_field() {
     let without = s.train_psnr_without_field.unwrap();
     assert!(without < s.train_psnr_before - 3.0, "{s:?}");
     assert!(s.gaussians < 100 && s.train_psnr_after >= s.train_psnr_before - TOL);
+    // The Gaussians the field barely moves (here: those behind the cameras, which no
+    // view sees, and any the small field leaves in place) are split off, baked.
+    let sp = s.split.expect("a split");
+    assert!(sp.train_psnr >= s.train_psnr_before - TOL, "{sp:?}");
+    assert_eq!(sp.dynamic + sp.static_, 100);
+    assert!(tr.settings.dynamic_only && tr.splats.dynamic.len() == tr.splats.len());
+    assert!(
+        tr.splats.dynamic.iter().any(|&d| d) && sp.static_ > 0,
+        "{sp:?}"
+    );
     // Sizing happens once.
     let before = tr.splats.clone();
     tr.size_if_due(&TileRasterizer, &v);
@@ -217,6 +227,33 @@ fn a_constant_deformation_is_baked_in_when_the_field_goes() {
     for i in 0..60 {
         let (a, b) = (tr.splats.means[i], t.means[i]);
         assert!((a[0] - b[0] - 0.3).abs() < 1e-6 && a[1] == b[1] && a[2] == b[2]);
+    }
+}
+
+/// The split takes the frozen parameters of the Gaussians at or under the tolerance and
+/// flags them static; the others keep theirs and move.
+#[test]
+fn a_split_bakes_the_still_gaussians() {
+    let canonical = truth(25);
+    let mut frozen = canonical.clone();
+    for m in &mut frozen.means {
+        m[0] += 1.0;
+    }
+    for l in &mut frozen.log_scales {
+        l[1] -= 0.5;
+    }
+    let motion: Vec<f32> = (0..60).map(|i| i as f32 * 0.1).collect();
+    let s = gaussians::train::sizing::split(&canonical, &frozen, &motion, 2.0);
+    for i in 0..60 {
+        let (src, dynamic) = if i <= 20 {
+            (&frozen, false)
+        } else {
+            (&canonical, true)
+        };
+        assert_eq!(s.dynamic[i], dynamic, "{i}");
+        assert_eq!(s.means[i], src.means[i]);
+        assert_eq!(s.log_scales[i], src.log_scales[i]);
+        assert_eq!(s.sh_dc[i], canonical.sh_dc[i]);
     }
 }
 

@@ -53,6 +53,11 @@ pub struct SizeSettings {
     /// middle of the recording), the field goes whatever it is worth on the train views
     /// (0 = only the PSNR test).
     pub still_px: f32,
+    /// Static/dynamic split of a scene that keeps its field: Gaussians the field moves
+    /// by at most a tolerance (pixels, as `still_px`) are baked at the middle of the
+    /// recording and skip the field; the largest of this, its half, quarter and eighth
+    /// whose split stays within the budget is taken (0 = no split here).
+    pub split_max_px: f32,
     /// Lower the SH degree to what the train views need.
     pub sh_degree: bool,
     /// Prune Gaussians by contribution.
@@ -66,6 +71,7 @@ impl Default for SizeSettings {
             at: 0,
             drop_field: true,
             still_px: 1.0,
+            split_max_px: 2.0,
             sh_degree: true,
             prune: true,
         }
@@ -79,6 +85,9 @@ impl SizeSettings {
         }
         if !(self.still_px.is_finite() && self.still_px >= 0.0) {
             return Err("size.still_px must be finite and ≥ 0 (0: no still test)".into());
+        }
+        if !(self.split_max_px.is_finite() && self.split_max_px >= 0.0) {
+            return Err("size.split_max_px must be finite and ≥ 0 (0: no split)".into());
         }
         Ok(())
     }
@@ -100,6 +109,8 @@ pub struct SizingSummary {
     /// see `still_px`), and whether that made the scene still (absent: not measured).
     pub field_motion_px_quantiles: Option<[f32; 4]>,
     pub still: bool,
+    /// The static/dynamic split made (absent: none).
+    pub split: Option<SplitChoice>,
     pub sh_degree_before: u32,
     pub sh_degree: u32,
     /// Mean train-view PSNR at SH degree 0, 1, … (those tested).
@@ -111,6 +122,34 @@ pub struct SizingSummary {
     /// Passes over the train views the sizing took, and its wall seconds.
     pub evaluations: usize,
     pub seconds: f64,
+}
+
+/// The static/dynamic split the sizing made.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct SplitChoice {
+    pub tolerance_px: f32,
+    pub dynamic: usize,
+    pub static_: usize,
+    /// Mean train-view PSNR of the split model.
+    pub train_psnr: f64,
+}
+
+/// Tolerances tried for the split: `split_max_px`, its half, quarter, eighth.
+const SPLIT_STEPS: u32 = 4;
+
+/// `canonical` with the Gaussians that move by at most `tolerance_px` (`motion`) taken
+/// from `frozen` and flagged static, the others flagged dynamic.
+pub fn split(canonical: &Splats, frozen: &Splats, motion: &[f32], tolerance_px: f32) -> Splats {
+    let mut out = canonical.clone();
+    out.dynamic = motion.iter().map(|&m| m > tolerance_px).collect();
+    for (i, &dynamic) in out.dynamic.iter().enumerate() {
+        if !dynamic {
+            out.means[i] = frozen.means[i];
+            out.log_scales[i] = frozen.log_scales[i];
+            out.rotations[i] = frozen.rotations[i];
+        }
+    }
+    out
 }
 
 /// The model as the sizing renders it.
@@ -302,7 +341,8 @@ impl Trainer {
         // that time baked into the Gaussians (a field switched on this very iteration is
         // still the identity: nothing to learn from it).
         let field_trained = self.iteration > self.settings.static_iterations;
-        let frozen = (size.drop_field && field.is_some() && field_trained)
+        let wanted = size.drop_field || size.split_max_px > 0.0;
+        let frozen = (wanted && field.is_some() && field_trained)
             .then(|| at_time(&self.splats, field, dynamic_only, middle_time(views)).into_owned());
         let mut c = Candidate {
             splats: &self.splats,
@@ -322,6 +362,7 @@ impl Trainer {
             ..SizingSummary::default()
         };
         let mut target = target;
+        let mut split_model = None;
         if let (Some(f), Some(mlp)) = (&frozen, field) {
             let frozen_c = Candidate {
                 splats: f,
@@ -330,30 +371,54 @@ impl Trainer {
             };
             let p = judge.psnr(&frozen_c);
             sum.train_psnr_without_field = Some(p);
+            let cams: Vec<_> = views.iter().map(|v| v.camera).collect();
+            let times: Vec<f32> = views.iter().map(|v| v.time).collect();
+            let times = static_split::sample_times(&times);
+            let mid = middle_time(views);
+            let motion =
+                static_split::centre_motion_px(mlp, &self.splats, dynamic_only, &cams, &times, mid);
+            sum.field_motion_px_quantiles =
+                Some(static_split::quantiles(&motion, [0.5, 0.99, 0.999, 1.0]));
             if size.still_px > 0.0 {
-                let cams: Vec<_> = views.iter().map(|v| v.camera).collect();
-                let times: Vec<f32> = views.iter().map(|v| v.time).collect();
-                let times = static_split::sample_times(&times);
-                let motion = static_split::centre_motion_px(
-                    mlp,
-                    &self.splats,
-                    dynamic_only,
-                    &cams,
-                    &times,
-                    middle_time(views),
-                );
                 let moving = motion.iter().filter(|&&m| m > size.still_px).count();
                 sum.still = moving * 1000 <= motion.len();
-                sum.field_motion_px_quantiles =
-                    Some(static_split::quantiles(&motion, [0.5, 0.99, 0.999, 1.0]));
             }
-            if sum.still || p >= target {
+            if size.drop_field && (sum.still || p >= target) {
                 c = frozen_c;
                 sum.field_dropped = true;
                 // The rest of the budget counts from the frozen model when a still
                 // scene's field went below it.
                 target = target.min(p - size.tolerance_db);
+            } else if size.split_max_px > 0.0 {
+                // The largest tolerance whose split stays within the budget.
+                for k in 0..SPLIT_STEPS {
+                    let tolerance_px = size.split_max_px / (1 << k) as f32;
+                    let model = split(&self.splats, f, &motion, tolerance_px);
+                    let p = judge.psnr(&Candidate {
+                        splats: &model,
+                        dynamic_only: true,
+                        ..c
+                    });
+                    if p >= target {
+                        let dynamic = model.dynamic.iter().filter(|&&d| d).count();
+                        sum.split = Some(SplitChoice {
+                            tolerance_px,
+                            dynamic,
+                            static_: model.len() - dynamic,
+                            train_psnr: p,
+                        });
+                        split_model = Some(model);
+                        break;
+                    }
+                }
             }
+        }
+        if let Some(m) = &split_model {
+            c = Candidate {
+                splats: m,
+                dynamic_only: true,
+                ..c
+            };
         }
         if size.sh_degree {
             let (d, tried) = choose_sh_degree(
@@ -380,10 +445,18 @@ impl Trainer {
             });
             keep = (k < n).then(|| top_k(&w, k));
         }
-        let sh = c.sh_degree;
-        let frozen = frozen.filter(|_| sum.field_dropped);
-        self.apply_sizing(size.sh_degree.then_some(sh), frozen, keep.as_deref());
+        let (sh, dynamic_only) = (c.sh_degree, c.dynamic_only);
         let field_kept = had_field && !sum.field_dropped;
+        let model = match frozen.filter(|_| sum.field_dropped) {
+            Some(f) => Some(f),
+            None => split_model,
+        };
+        self.apply_sizing(
+            size.sh_degree.then_some(sh),
+            model,
+            field_kept,
+            keep.as_deref(),
+        );
         let c = Candidate {
             splats: &self.splats,
             field: field_kept.then_some(&self.field),
@@ -397,14 +470,25 @@ impl Trainer {
         self.sizing = Some(sum);
     }
 
-    /// Make the sizing's decisions: the SH degree `sh` from now on, the model `frozen`
-    /// in place of the canonical Gaussians and their field, only `keep`.
-    fn apply_sizing(&mut self, sh: Option<u32>, frozen: Option<Splats>, keep: Option<&[usize]>) {
-        if let Some(mut f) = frozen {
-            f.dynamic.clear();
-            self.splats = f;
-            self.settings.deform = false;
-            self.settings.dynamic_only = false;
+    /// Make the sizing's decisions: the SH degree `sh` from now on, `model` in place of
+    /// the canonical Gaussians (frozen, without the field; or split, the field on its
+    /// dynamic ones), only `keep`.
+    fn apply_sizing(
+        &mut self,
+        sh: Option<u32>,
+        model: Option<Splats>,
+        field: bool,
+        keep: Option<&[usize]>,
+    ) {
+        if let Some(mut m) = model {
+            if field {
+                self.settings.dynamic_only = true;
+            } else {
+                m.dynamic.clear();
+                self.settings.deform = false;
+                self.settings.dynamic_only = false;
+            }
+            self.splats = m;
         }
         if let Some(sh) = sh {
             self.settings.sh_degree = sh;
