@@ -8,8 +8,9 @@
 use scene::Pose;
 use serde::Serialize;
 
-/// Mean and largest error of one camera against the recorded poses.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+/// Mean and largest error of one camera against the recorded poses, and the error at
+/// each frame (which interval the camera is off in).
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct PoseError {
     /// Distance between camera centres, scene units.
     pub position_mean: f64,
@@ -17,10 +18,13 @@ pub struct PoseError {
     /// Angle of the relative rotation, degrees.
     pub rotation_deg_mean: f64,
     pub rotation_deg_max: f64,
+    /// Per frame, in the order of the test frames.
+    pub position: Vec<f64>,
+    pub rotation_deg: Vec<f64>,
 }
 
 /// The check on the test frames (`frames` = 0 when there are none).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct CameraCheck {
     pub frames: usize,
     pub interpolated: PoseError,
@@ -52,6 +56,8 @@ pub fn pose_error(estimated: &[Pose], recorded: &[Pose]) -> PoseError {
         e.rotation_deg_mean += r / n as f64;
         e.position_max = e.position_max.max(p);
         e.rotation_deg_max = e.rotation_deg_max.max(r);
+        e.position.push(p);
+        e.rotation_deg.push(r);
     }
     e
 }
@@ -78,5 +84,7 @@ mod tests {
         assert!(pose_distance(&b, &c).1 < 1e-6);
         let e = pose_error(&[a, b], &[a, a]);
         assert!((e.position_mean - 0.25).abs() < 1e-12 && (e.rotation_deg_max - 3.0).abs() < 1e-9);
+        assert_eq!(e.position[0], 0.0);
+        assert!((e.position[1] - 0.5).abs() < 1e-12 && (e.rotation_deg[1] - 3.0).abs() < 1e-9);
     }
 }

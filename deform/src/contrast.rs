@@ -32,9 +32,7 @@ use scene::EventSlice;
 use scene::optim::Adam;
 use serde::{Deserialize, Serialize};
 
-/// Rec. 709 luminance weights of linear RGB (what an event pixel integrates, as
-/// `synth`'s simulator assumes).
-pub const LUMA: [f64; 3] = [0.2126, 0.7152, 0.0722];
+pub use crate::event_image::LUMA;
 
 /// Which contrast threshold the joint training uses.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]

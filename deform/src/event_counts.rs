@@ -21,10 +21,17 @@
 //! Times follow `scene::events`: half-open windows `t_a ≤ t < t_b`, so an event exactly
 //! at a frame time belongs to the interval that starts there. Query times are clamped
 //! to the interval. Two frames at the same time make an empty interval (all counts 0).
+//!
+//! **Excluded events** ([`Exclusion`]: whole bins, whole pixels; the event-rate outliers
+//! of `deform`) are not counted at all: an excluded bin adds nothing to the cumulative
+//! counts (`S_{b+1} = S_b`), neither in the planes nor in the exact partial-bin scatter,
+//! and an excluded pixel's count stays 0. [`IntervalCounts::events`] counts the events
+//! kept.
 
 use rayon::prelude::*;
 use scene::EventSlice;
 use serde::{Deserialize, Serialize};
+use std::sync::Arc;
 
 /// Settings of the count cube (serde, every field optional in files).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -56,6 +63,27 @@ impl Planes {
     }
 }
 
+/// The `B + 1` bin edges of `[t0, t1)` with `bins` bins: `edges[0] = t0`,
+/// `edges[B] = t1` exactly, `t0 + b·(t1 − t0)/B` between.
+pub fn bin_edges(t0: f64, t1: f64, bins: usize) -> Vec<f64> {
+    (0..=bins)
+        .map(|b| match b {
+            0 => t0,
+            b if b == bins => t1,
+            b => t0 + (t1 - t0) * (b as f64 / bins as f64),
+        })
+        .collect()
+}
+
+/// Events left out of the counts (module docs): nothing by default.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Exclusion {
+    /// Per interval, per bin: left out (an interval's entry empty or missing: none).
+    pub bins: Vec<Vec<bool>>,
+    /// Per pixel, row-major: left out (`None`: none).
+    pub pixels: Option<Arc<[bool]>>,
+}
+
 /// Cumulative signed counts of one interval between two frames (module docs).
 #[derive(Clone, Debug, PartialEq)]
 pub struct IntervalCounts {
@@ -71,6 +99,12 @@ pub struct IntervalCounts {
     planes: Planes,
     /// Where the source slice sat in its stream, and its length (checked by exact queries).
     source: (usize, usize),
+    /// Per bin: its events left out (empty: none).
+    excluded_bins: Vec<bool>,
+    /// Per pixel: its events left out.
+    excluded_pixels: Option<Arc<[bool]>>,
+    /// Events counted (in the interval, outside the excluded bins and pixels).
+    kept: usize,
 }
 
 impl IntervalCounts {
@@ -78,35 +112,65 @@ impl IntervalCounts {
     /// stream; only its events in the interval are read). `t1 < t0` is treated as
     /// `t1 = t0`. Panics if `bins` is 0 or an event lies outside the sensor.
     pub fn build(events: &EventSlice<'_>, t0: f64, t1: f64, bins: usize) -> Self {
+        Self::build_excluding(events, t0, t1, bins, &[], None)
+    }
+
+    /// [`IntervalCounts::build`] without the events of the bins flagged in
+    /// `excluded_bins` (empty: none; else one flag per bin) and of the pixels flagged in
+    /// `excluded_pixels` (module docs). Panics also if either has the wrong length.
+    pub fn build_excluding(
+        events: &EventSlice<'_>,
+        t0: f64,
+        t1: f64,
+        bins: usize,
+        excluded_bins: &[bool],
+        excluded_pixels: Option<Arc<[bool]>>,
+    ) -> Self {
         assert!(bins >= 1, "IntervalCounts: bins must be at least 1");
         let t1 = t1.max(t0);
         let (w, h) = (events.width as usize, events.height as usize);
         let n = w * h;
-        let edges: Vec<f64> = (0..=bins)
-            .map(|b| match b {
-                0 => t0,
-                b if b == bins => t1,
-                b => t0 + (t1 - t0) * (b as f64 / bins as f64),
-            })
-            .collect();
+        assert!(
+            excluded_bins.is_empty() || excluded_bins.len() == bins,
+            "IntervalCounts: one excluded-bin flag per bin"
+        );
+        assert!(
+            excluded_pixels.as_ref().is_none_or(|p| p.len() == n),
+            "IntervalCounts: one excluded-pixel flag per pixel"
+        );
+        let edges = bin_edges(t0, t1, bins);
         let bin_start: Vec<usize> = edges
             .iter()
             .map(|&e| events.t.partition_point(|&t| t < e))
             .collect();
-        let (lo, hi) = (bin_start[0], bin_start[bins]);
         let idx = |i: usize| events.y[i] as usize * w + events.x[i] as usize;
+        let bin_kept = |b: usize| !excluded_bins.get(b).copied().unwrap_or(false);
+        let pixel_kept = |k: usize| excluded_pixels.as_ref().is_none_or(|p| !p[k]);
         // Events per pixel bound every |S_b| and decide the storage width.
         let mut seen = vec![0u32; n];
-        for i in lo..hi {
-            seen[idx(i)] += 1;
+        for b in (0..bins).filter(|&b| bin_kept(b)) {
+            for i in bin_start[b]..bin_start[b + 1] {
+                seen[idx(i)] += 1;
+            }
         }
+        if let Some(p) = &excluded_pixels {
+            seen.iter_mut()
+                .zip(p.iter())
+                .for_each(|(c, &x)| *c *= u32::from(!x));
+        }
+        let kept = seen.iter().map(|&c| c as usize).sum();
         let wide = seen.iter().any(|&c| c > i16::MAX as u32);
         drop(seen);
         let mut run = vec![0i32; n];
         let mut fill = |store: &mut dyn FnMut(usize, &[i32])| {
             for b in 0..bins {
-                for i in bin_start[b]..bin_start[b + 1] {
-                    run[idx(i)] += events.p[i] as i32;
+                if bin_kept(b) {
+                    for i in bin_start[b]..bin_start[b + 1] {
+                        let k = idx(i);
+                        if pixel_kept(k) {
+                            run[k] += events.p[i] as i32;
+                        }
+                    }
                 }
                 store(b, &run);
             }
@@ -133,6 +197,14 @@ impl IntervalCounts {
             bin_start,
             planes,
             source: (events.offset, events.len()),
+            // none flagged is none excluded (compares equal to a plain build)
+            excluded_bins: if excluded_bins.contains(&true) {
+                excluded_bins.to_vec()
+            } else {
+                Vec::new()
+            },
+            excluded_pixels,
+            kept,
         }
     }
 
@@ -153,9 +225,25 @@ impl IntervalCounts {
         self.edges.len() - 1
     }
 
-    /// Number of events in the interval (0 for an empty interval or a recording gap).
+    /// Number of events counted: those in the interval outside the excluded bins and
+    /// pixels (0 for an empty interval or a recording gap).
     pub fn events(&self) -> usize {
+        self.kept
+    }
+
+    /// Number of events in the interval, excluded ones included.
+    pub fn all_events(&self) -> usize {
         self.bin_start[self.bins()] - self.bin_start[0]
+    }
+
+    /// Whether the events of bin `b` are left out.
+    pub fn bin_excluded(&self, b: usize) -> bool {
+        self.excluded_bins.get(b).copied().unwrap_or(false)
+    }
+
+    /// Whether the events of pixel `i` (row-major) are left out.
+    pub fn pixel_excluded(&self, i: usize) -> bool {
+        self.excluded_pixels.as_ref().is_some_and(|p| p[i])
     }
 
     /// Whether the planes are stored as `i16` (else `i32`).
@@ -276,12 +364,18 @@ impl IntervalCounts {
         }
     }
 
-    /// Add `sign·p` of the events in `[edges[b], t)` to `out`.
+    /// Add `sign·p` of the kept events in `[edges[b], t)` to `out`.
     fn scatter_partial(&self, ev: &EventSlice<'_>, b: usize, t: f64, sign: f32, out: &mut [f32]) {
+        if self.bin_excluded(b) {
+            return;
+        }
         let (lo, hi) = (self.bin_start[b], self.bin_start[b + 1]);
         let end = lo + ev.t[lo..hi].partition_point(|&s| s < t);
         for i in lo..end {
-            out[ev.y[i] as usize * self.width + ev.x[i] as usize] += sign * ev.p[i] as f32;
+            let k = ev.y[i] as usize * self.width + ev.x[i] as usize;
+            if !self.pixel_excluded(k) {
+                out[k] += sign * ev.p[i] as f32;
+            }
         }
     }
 }
@@ -301,6 +395,16 @@ impl EventCounts {
         frame_times: &[f64],
         settings: &CountSettings,
     ) -> Result<Self, String> {
+        Self::build_excluding(events, frame_times, settings, &Exclusion::default())
+    }
+
+    /// [`EventCounts::build`] without the events `excluded` names (module docs).
+    pub fn build_excluding(
+        events: &EventSlice<'_>,
+        frame_times: &[f64],
+        settings: &CountSettings,
+        excluded: &Exclusion,
+    ) -> Result<Self, String> {
         if settings.bins == 0 {
             return Err("event counts: bins must be at least 1".into());
         }
@@ -310,9 +414,30 @@ impl EventCounts {
         if frame_times.windows(2).any(|w| w[1] < w[0]) {
             return Err("event counts: frame times are not sorted".into());
         }
+        let n = events.width as usize * events.height as usize;
+        if excluded.pixels.as_ref().is_some_and(|p| p.len() != n) {
+            return Err("event counts: one excluded-pixel flag per pixel".into());
+        }
+        let bins_of = |j: usize| excluded.bins.get(j).map_or(&[][..], |b| b.as_slice());
+        if (0..frame_times.len().saturating_sub(1))
+            .any(|j| !bins_of(j).is_empty() && bins_of(j).len() != settings.bins)
+        {
+            return Err("event counts: one excluded-bin flag per bin".into());
+        }
         let intervals = frame_times
             .par_windows(2)
-            .map(|w| IntervalCounts::build(events, w[0], w[1], settings.bins))
+            .enumerate()
+            .map(|(j, w)| {
+                let pixels = excluded.pixels.clone();
+                IntervalCounts::build_excluding(
+                    events,
+                    w[0],
+                    w[1],
+                    settings.bins,
+                    bins_of(j),
+                    pixels,
+                )
+            })
             .collect();
         Ok(EventCounts {
             times: frame_times.to_vec(),

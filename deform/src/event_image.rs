@@ -22,7 +22,9 @@
 //! `saturation` is clipped (its true brightness is unknown, so nothing can be predicted
 //! from it); a prediction outside the range the frames are trusted in — `exp(C·N)`
 //! overflowing to infinity, or underflowing towards 0, as a hot pixel's huge count does —
-//! is masked rather than used. `PseudoImage::n_eff` holds `∂log(P + ε)/∂C` per value, so
+//! is masked rather than used. Pixels whose events the counts leave out (hot pixels,
+//! `IntervalCounts::pixel_excluded`) are masked too: their count says nothing about
+//! the scene. `PseudoImage::n_eff` holds `∂log(P + ε)/∂C` per value, so
 //! `∂P/∂C = (P + ε)·n_eff`.
 //!
 //! [`event_loss`]: `L_event = mean over valid values of |R − P|` (L1, Eq. 11), with its
@@ -36,6 +38,10 @@ use rayon::prelude::*;
 use scene::real::Real;
 use scene::{EventSlice, Image};
 use serde::{Deserialize, Serialize};
+
+/// Rec. 709 luminance weights of linear RGB (what an event pixel integrates, as
+/// `synth`'s simulator assumes).
+pub const LUMA: [f64; 3] = [0.2126, 0.7152, 0.0722];
 
 /// Values per rayon task.
 const CHUNK: usize = 8192;
@@ -79,6 +85,21 @@ pub enum PseudoMode {
     Nearest,
     /// Both frames, blended in log space.
     TwoSided,
+}
+
+/// What `L_event` compares (Eq. 11): the event model predicts a per-pixel brightness
+/// factor, which holds for the luminance an event pixel integrates but not for each
+/// colour channel (an object of another colour passing over a pixel changes its chroma,
+/// which no event count predicts).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EventChannels {
+    /// Rec. 709 luminance of the linear render against the pseudo image of the frames'
+    /// luminance.
+    #[default]
+    Luminance,
+    /// Each colour channel scaled by the same factor (the paper's Eq. 11 on RGB frames).
+    Rgb,
 }
 
 /// The inputs of a pseudo image: the interval's counts and its two frames.
@@ -190,6 +211,10 @@ pub fn pseudo_image<R: Real>(
             let start = r * CHUNK; // index into the planar image
             for j in 0..p.len() {
                 let (vi, pi) = (start + j, (start + j) % n);
+                if k.pixel_excluded(pi) {
+                    (p[j], ok[j], ne[j]) = (R::ZERO, false, R::ZERO);
+                    continue;
+                }
                 let a = use_left
                     .then(|| side(inp.left[vi], R::from_f64(lc[pi] as f64), c, eps, black, sat))
                     .flatten();
@@ -342,6 +367,68 @@ pub fn srgb_to_linear<R: Real>(c: R) -> R {
     } else {
         ((c + R::from_f64(0.055)) / R::from_f64(1.055)).powf(R::from_f64(2.4))
     }
+}
+
+/// Luminance (Rec. 709, [`LUMA`]) of a planar linear RGB image of `n` pixels (what an
+/// event pixel integrates).
+pub fn planar_luminance<R: Real>(rgb: &[R], n: usize) -> Vec<R> {
+    assert_eq!(
+        rgb.len(),
+        3 * n,
+        "planar_luminance: expected 3 planes of {n}"
+    );
+    let w = LUMA.map(R::from_f64);
+    (0..n)
+        .map(|i| w[0] * rgb[i] + w[1] * rgb[n + i] + w[2] * rgb[2 * n + i])
+        .collect()
+}
+
+/// `d linear / d encoded` of the sRGB curve, the linear segment below 0.04045 extended
+/// to negative values.
+#[inline]
+pub fn srgb_slope<R: Real>(c: R) -> R {
+    if c <= R::from_f64(0.040_45) {
+        R::ONE / R::from_f64(12.92)
+    } else {
+        R::from_f64(2.4 / 1.055)
+            * ((c + R::from_f64(0.055)) / R::from_f64(1.055)).powf(R::from_f64(1.4))
+    }
+}
+
+/// Eq. 11 on a render as stored (planar RGB, sRGB-encoded when `srgb`): linearised,
+/// reduced to luminance for [`EventChannels::Luminance`] (the pseudo image then has one
+/// plane), compared by [`event_loss`]; `grad` receives `∂L/∂(stored value)`.
+pub fn render_event_loss<R: Real>(
+    stored: &[R],
+    srgb: bool,
+    channels: EventChannels,
+    pseudo: &PseudoImage<R>,
+    grad: &mut [R],
+) -> EventLoss<R> {
+    let plane = stored.len() / 3;
+    let linear: Vec<R> = if srgb {
+        stored.iter().map(|&c| srgb_to_linear(c)).collect()
+    } else {
+        stored.to_vec()
+    };
+    let luma = channels == EventChannels::Luminance;
+    let compared = if luma {
+        planar_luminance(&linear, plane)
+    } else {
+        linear
+    };
+    let mut g = vec![R::ZERO; compared.len()];
+    let el = event_loss(&compared, pseudo, Some(&mut g));
+    let w = LUMA.map(R::from_f64);
+    for (k, (gk, &c)) in grad.iter_mut().zip(stored).enumerate() {
+        let dl = if luma {
+            w[k / plane] * g[k % plane]
+        } else {
+            g[k]
+        };
+        *gk = dl * if srgb { srgb_slope(c) } else { R::ONE };
+    }
+    el
 }
 
 /// Linear value in `[0, 1]` → sRGB-encoded (IEC 61966-2-1).

@@ -13,7 +13,11 @@
 //!   window covers them, or their flow is beyond the flow network's range and was
 //!   discarded when read) or are outliers among their Gaussian's events
 //!   ([`crate::motion_loss`]), or belong to a Gaussian whose events' mean flow
-//!   disagrees with its neighbours' in the image ([`crate::neighbours`]).
+//!   disagrees with its neighbours' in the image ([`crate::neighbours`]), or lie at a
+//!   hot pixel or in a burst ([`crate::rate_outliers`]).
+//! - **Event-rate outliers are left out** ([`crate::rate_outliers`]): hot pixels are
+//!   masked out of every pseudo image and the events of burst bins are not counted in
+//!   them.
 
 use crate::event_counts::IntervalCounts;
 use serde::Serialize;
@@ -60,6 +64,17 @@ pub struct Fallbacks {
     /// … because their Gaussian's mean flow disagreed with its neighbours'
     /// ([`crate::neighbours`]).
     pub bindings_dropped_disagreeing: u64,
+    /// … because they are at a hot pixel or in a burst bin.
+    pub bindings_dropped_rate_outliers: u64,
+    /// Hot pixels: masked out of every pseudo image, their events out of `L_motion`.
+    pub hot_pixels: usize,
+    /// Events at the hot pixels.
+    pub hot_pixel_events: usize,
+    /// Time bins of the counts (`counts.bins` per interval) taken for a burst: their
+    /// events are counted in no pseudo image and left out of `L_motion`.
+    pub burst_bins: usize,
+    /// Events in those bins (at hot pixels too).
+    pub burst_events: usize,
     /// Events of the stream whose flow was beyond the flow network's range (discarded
     /// when read; included in `events_without_flow`).
     pub flows_out_of_range: usize,
@@ -78,12 +93,31 @@ impl Fallbacks {
         } += 1;
     }
 
-    /// Count the bound events one `L_motion` left out: `(no flow, outliers,
-    /// disagreeing with the neighbours)`.
-    pub fn drop_bindings(&mut self, no_flow: usize, outliers: usize, disagreeing: usize) {
-        self.bindings_dropped_no_flow += no_flow as u64;
-        self.bindings_dropped_outliers += outliers as u64;
-        self.bindings_dropped_disagreeing += disagreeing as u64;
-        self.bindings_dropped += (no_flow + outliers + disagreeing) as u64;
+    /// Count the bound events one `L_motion` left out.
+    pub fn drop_bindings(&mut self, d: &DroppedBindings) {
+        self.bindings_dropped_no_flow += d.no_flow as u64;
+        self.bindings_dropped_outliers += d.outliers as u64;
+        self.bindings_dropped_disagreeing += d.disagreeing as u64;
+        self.bindings_dropped_rate_outliers += d.rate_outliers as u64;
+        self.bindings_dropped += d.total() as u64;
+    }
+}
+
+/// The bound events one `L_motion` left out, by reason.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct DroppedBindings {
+    /// No (finite) flow.
+    pub no_flow: usize,
+    /// Outliers among their Gaussian's events.
+    pub outliers: usize,
+    /// Their Gaussian disagrees with its neighbours.
+    pub disagreeing: usize,
+    /// At a hot pixel or in a burst bin.
+    pub rate_outliers: usize,
+}
+
+impl DroppedBindings {
+    pub fn total(&self) -> usize {
+        self.no_flow + self.outliers + self.disagreeing + self.rate_outliers
     }
 }

@@ -6,6 +6,7 @@ use crate::camera_path::{CameraPath, Interp};
 use crate::contrast::{ContrastEstimate, estimate_contrast};
 use crate::event_counts::EventCounts;
 use crate::event_image::srgb_to_linear;
+use crate::rate_outliers::RateOutliers;
 use crate::settings::{DeformSettings, FrameEncoding};
 use gaussians::model::Model;
 use gaussians::stage::load_views;
@@ -24,9 +25,14 @@ pub struct Inputs {
     pub test: Vec<View>,
     /// Train frames as linear intensity (planar), for the event model.
     pub linear: Vec<Vec<f32>>,
+    /// Their Rec. 709 luminance (one plane each), for `L_event` on luminance.
+    pub luma: Vec<Vec<f32>>,
     /// Train frame times, seconds (the events' clock).
     pub times: Vec<f64>,
     pub events: EventStream,
+    /// Hot pixels and burst bins of `events` (left out of `counts` and of `L_motion`).
+    pub rate_outliers: RateOutliers,
+    /// Per-interval counts of `events` without the rate outliers.
     pub counts: EventCounts,
     /// Per event of the stream: flow in px/s (NaN where `evflow` gave none, or a flow
     /// beyond the network's range).
@@ -75,7 +81,7 @@ fn read_flows(flows: &Path, n: usize, range_px: f64) -> Result<(Vec<f32>, Vec<f3
     let (mut u, mut v) = (vec![f32::NAN; n], vec![f32::NAN; n]);
     let mut out_of_range = 0;
     for p in files {
-        let f = evflow::flowfile::read_evflow(&p)?;
+        let f = scene::formats::evflow::read_evflow(&p)?;
         // Largest |u|, |v| (px/s) the network can give over this window.
         let limit = range_px * (1.0 + 1e-3) / (f.t_b - f.t_a);
         for (k, &i) in f.index.iter().enumerate() {
@@ -125,11 +131,23 @@ impl Inputs {
                 }
             })
             .collect();
+        let luma: Vec<Vec<f32>> = linear
+            .iter()
+            .zip(&views)
+            .map(|(l, v)| crate::event_image::planar_luminance(l, v.rgb.len() / 3))
+            .collect();
         let times: Vec<f64> = scene.train.frames.iter().map(|f| f.timestamp).collect();
         let events = scene.load_events()?;
         let train_file = scene.root.join(scene::manifest::TRAIN_FILE);
-        let counts = EventCounts::build(&events.as_slice(), &times, &s.counts)
-            .map_err(|e| Error::invalid(&train_file, e))?;
+        let rate_outliers =
+            RateOutliers::detect(&events.as_slice(), &times, s.counts.bins, &s.rate_outliers);
+        let counts = EventCounts::build_excluding(
+            &events.as_slice(),
+            &times,
+            &s.counts,
+            &rate_outliers.exclusion(),
+        )
+        .map_err(|e| Error::invalid(&train_file, e))?;
         let path = CameraPath::from_trajectory(&scene.train_trajectory(), Interp::Linear)
             .map_err(|e| Error::invalid(&train_file, e))?;
         let contrast_given = if s.contrast_threshold > 0.0 {
@@ -164,8 +182,10 @@ impl Inputs {
             views,
             test,
             linear,
+            luma,
             times,
             events,
+            rate_outliers,
             counts,
             flow_u,
             flow_v,

@@ -17,6 +17,7 @@
 //! | [`contrast`] | the contrast threshold `C` estimated from frames and events (robust fit of counts on log changes, bootstrap spread); the modes given / estimate / learn |
 //! | [`motion_loss`] | `L_motion` (Eq. 12) over CSR bindings with a robust norm; gradients w.r.t. `F_ego` and `F_gs` |
 //! | [`neighbours`] | bound Gaussians whose events' mean flow disagrees with their neighbours' in the image (dropped from `L_motion`) |
+//! | [`rate_outliers`] | hot pixels and bursts: event-rate outliers left out of the pseudo images and of `L_motion` |
 //! | [`schedule`] | loss weights γ1, γ2(iter) (Eq. 13) |
 //! | [`lie`] | SO(3) exp/log and Jacobians, the two pose perturbations and gradient conversion between them |
 //! | [`real`] | the float trait |
@@ -35,7 +36,8 @@
 //! [`fallbacks`] says on degenerate inputs; [`stage`] writes the outputs
 //! and `report.json`; [`settings`] holds every setting. The kernels depend only on
 //! `scene`, `glam`, `rayon` and `serde`. Imports between modules go one way only: any module may use the leaves
-//! `real` and `lie`, and `event_image`, `fallbacks` and `contrast` use `event_counts`.
+//! `real` and `lie`, and `event_image`, `fallbacks`, `contrast` and `rate_outliers` use
+//! `event_counts`.
 
 pub mod baselines;
 pub mod camera_check;
@@ -50,6 +52,7 @@ pub mod lie;
 pub mod motion_loss;
 pub mod neighbours;
 pub mod posenet;
+pub mod rate_outliers;
 pub mod schedule;
 pub mod settings;
 pub mod stage;

@@ -3,10 +3,12 @@
 
 use crate::contrast::{ContrastMode, EstimateSettings};
 use crate::event_counts::CountSettings;
+pub use crate::event_image::EventChannels;
 use crate::event_image::{PseudoMode, PseudoSettings};
 use crate::motion_loss::MotionSettings;
 use crate::neighbours::NeighbourSettings;
 use crate::posenet::PoseNetSettings;
+use crate::rate_outliers::RateOutlierSettings;
 use crate::schedule::LossSchedule;
 use serde::{Deserialize, Serialize};
 
@@ -71,9 +73,16 @@ pub struct DeformSettings {
     /// Fine time bins of the per-pixel event counts.
     pub counts: CountSettings,
     pub pseudo: PseudoSettings,
+    /// Event-rate outliers left out of `L_event` and `L_motion`: hot pixels (a count far
+    /// above the active pixels' median and the neighbours') and bursts (time bins far
+    /// above the recording's median rate); `hot_pixel_ratio = 0`, `burst_ratio = 0`:
+    /// off ([`crate::rate_outliers`]).
+    pub rate_outliers: RateOutlierSettings,
     /// Which frame(s) predict the pseudo image of `L_event`: `nearest` (Eq. 11) or
     /// `two_sided` (both neighbours, blended in log space by the distance in time).
     pub pseudo_mode: PseudoMode,
+    /// What `L_event` compares: `luminance` (what events measure) or `rgb`.
+    pub event_channels: EventChannels,
     pub motion: MotionSettings,
     /// Bound Gaussians whose events' flow disagrees with their neighbours' are left
     /// out of `L_motion` (`radius_px = 0`: never).
@@ -110,7 +119,9 @@ impl Default for DeformSettings {
             frame_encoding: FrameEncoding::Auto,
             counts: CountSettings::default(),
             pseudo: PseudoSettings::default(),
+            rate_outliers: RateOutlierSettings::default(),
             pseudo_mode: PseudoMode::Nearest,
+            event_channels: EventChannels::Luminance,
             motion: MotionSettings::default(),
             motion_neighbours: NeighbourSettings::default(),
             flow_form: FlowForm::Paper,
@@ -149,6 +160,7 @@ impl DeformSettings {
         }
         finite_nonneg("motion_span", self.motion_span)?;
         finite_nonneg("pseudo.band", self.pseudo.band)?;
+        self.rate_outliers.validate()?;
         if self.counts.bins == 0 {
             return Err("counts.bins must be at least 1".into());
         }

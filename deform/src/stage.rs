@@ -24,6 +24,7 @@ use crate::contrast::ContrastReport;
 use crate::fallbacks::Fallbacks;
 use crate::inputs::Inputs;
 use crate::posenet::PoseNet;
+use crate::rate_outliers::TypicalRates;
 use crate::settings::DeformSettings;
 use crate::trainer::{JointStep, JointTrainer, Timings};
 use gaussians::TileRasterizer;
@@ -114,8 +115,11 @@ pub struct TrainReport {
     pub timings: Timings,
     pub rebinds: u32,
     /// What the training left out on degenerate inputs (skipped `L_event`, dropped
-    /// bindings, flows out of range; `deform::fallbacks`).
+    /// bindings, flows out of range, hot pixels and bursts; `deform::fallbacks`).
     pub fallbacks: Fallbacks,
+    /// The typical rates the hot-pixel and burst tests compared with
+    /// (`deform::rate_outliers`).
+    pub rate_outliers: TypicalRates,
     /// The `C` used at the end (learned, estimated or given: see `contrast`).
     pub contrast_threshold: f64,
     /// The given `C`, its estimate from the recording with the spread, the `C` the
@@ -230,6 +234,7 @@ pub fn train(
         timings: tr.timings,
         rebinds: tr.rebinds,
         fallbacks: tr.fallbacks,
+        rate_outliers: d.rate_outliers.typical,
         contrast_threshold: tr.contrast,
         contrast: ContrastReport {
             mode: settings.contrast,

@@ -11,7 +11,8 @@ use deform::inputs::Inputs;
 use deform::settings::DeformSettings;
 use deform::stage::TrainOutcome;
 use deform::trainer::{JointStep, JointTrainer};
-use fixture::{Fixture, SETTINGS, TEST_TIME, Variant, build};
+use fixture::{BURST, BURST_EVENTS, Fixture, HOT_PIXEL_EVENTS, HOT_PIXELS, SETTINGS};
+use fixture::{TEST_TIME, Variant, build};
 use gaussians::model::Model;
 use gaussians::{Splats, TileRasterizer};
 use serde_json::Value;
@@ -128,6 +129,10 @@ fn a_normal_recording_skips_and_drops_nothing() {
         "bindings_dropped",
         "flows_out_of_range",
         "events_without_flow",
+        "hot_pixels",
+        "hot_pixel_events",
+        "burst_bins",
+        "burst_events",
     ] {
         assert_eq!(f[k], 0, "{k}: {f}");
     }
@@ -170,12 +175,64 @@ fn an_interval_without_events_falls_back_to_rgb_only() {
 #[test]
 fn a_hot_pixel_is_masked_and_training_goes_on() {
     let (_, r, steps) = run(Variant::HotPixel);
-    assert_eq!(
-        r["fallbacks"]["event_steps_skipped"], 0,
-        "{}",
-        r["fallbacks"]
-    );
+    let f = &r["fallbacks"];
+    assert_eq!(f["event_steps_skipped"], 0, "{f}");
     assert!(steps.iter().all(|s| s.l_event > 0.0));
+    // Found by its rate (40 000 events against a median of 4): masked, its events
+    // counted; its 0.1 s at 400 kHz is no burst (the bins' rates leave it out).
+    let at_hot = count_at(Variant::HotPixel, &[fixture::HOT]);
+    assert!(at_hot > fixture::HOT_EVENTS, "{at_hot}");
+    assert_eq!(
+        (f["hot_pixels"].as_u64(), f["burst_bins"].as_u64()),
+        (Some(1), Some(0)),
+        "{f}"
+    );
+    assert_eq!(f["hot_pixel_events"], at_hot as u64, "{f}");
+}
+
+/// Events of variant `v` at `pixels`.
+fn count_at(v: Variant, pixels: &[(u16, u16)]) -> usize {
+    let ev = fixture::events(v);
+    (0..ev.len())
+        .filter(|&i| pixels.contains(&(ev.x[i], ev.y[i])))
+        .count()
+}
+
+#[test]
+fn hot_pixels_and_a_burst_are_left_out_and_counted() {
+    let (_, r, steps) = run(Variant::RateOutliers);
+    let f = &r["fallbacks"];
+    // exactly the three hot pixels; the burst [0.19, 0.2) s is bins 28–31 of the
+    // interval [0.1, 0.2) (3.125 ms each; bin 28 holds 0.6 ms of it, 300 events)
+    assert_eq!(f["hot_pixels"], HOT_PIXELS.len() as u64, "{f}");
+    // theirs, the scene's and the burst's there
+    let at_hot = count_at(Variant::RateOutliers, &HOT_PIXELS);
+    let scene_at_hot = count_at(Variant::Normal, &HOT_PIXELS);
+    assert!(at_hot > HOT_PIXELS.len() * HOT_PIXEL_EVENTS + scene_at_hot);
+    assert_eq!(f["hot_pixel_events"], at_hot as u64, "{f}");
+    assert_eq!(f["burst_bins"], 4, "{f}");
+    let ev = fixture::events(Variant::RateOutliers);
+    let in_bins = ev.window_range(0.1 + 28.0 * 0.1 / 32.0, BURST[1]).len();
+    assert!(in_bins > BURST_EVENTS, "{in_bins}");
+    assert_eq!(f["burst_events"], in_bins as u64, "{f}");
+    // The stage's bindings hold burst and hot-pixel events until the first rebind
+    // (iteration 8): dropped from L_motion and counted; none after it.
+    let dropped = f["bindings_dropped_rate_outliers"].as_u64().unwrap();
+    assert!(dropped > 0, "{f}");
+    assert!(
+        steps[8..].iter().all(|s| s.bindings_dropped == 0),
+        "{steps:?}"
+    );
+    let before: usize = steps[..8].iter().map(|s| s.bindings_dropped).sum();
+    assert_eq!(before as u64, dropped, "{f}");
+    // every interval still supervises L_event with its other events
+    assert_eq!(f["event_steps_skipped"], 0, "{f}");
+    assert!(steps.iter().all(|s| s.l_event > 0.0));
+    assert!(steps.iter().any(|s| s.l_motion > 0.0 && s.bound > 0));
+    let typical = &r["rate_outliers"];
+    let median = typical["median_active_pixel_count"].as_f64().unwrap();
+    // 2 000 scene and 5 000 burst events over 576 pixels: about 12 each
+    assert!((9.0..15.0).contains(&median), "{typical}");
 }
 
 #[test]

@@ -7,10 +7,12 @@ pub mod cli;
 pub mod cm;
 pub mod eval;
 pub mod finetune;
-pub mod flowfile;
 pub mod net;
 pub mod predict;
 pub mod pretrain;
 pub mod source;
 pub mod stage;
 pub mod voxel;
+
+/// The `.evflow` and `.flo` files (in the data layer: their readers need no network).
+pub use scene::formats::evflow as flowfile;

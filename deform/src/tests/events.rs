@@ -1,8 +1,9 @@
 use super::{Rng, assert_close, fd};
 use crate::event_counts::{CountSettings, EventCounts, IntervalCounts};
 use crate::event_image::{
-    PseudoImage, PseudoInputs, PseudoMode, PseudoSettings, event_loss, linear_to_srgb,
-    planar_linear, pseudo_image, srgb_to_linear,
+    EventChannels, PseudoImage, PseudoInputs, PseudoMode, PseudoSettings, event_loss,
+    linear_to_srgb, planar_linear, planar_luminance, pseudo_image, render_event_loss,
+    srgb_to_linear,
 };
 use scene::{EventStream, Image};
 
@@ -407,6 +408,74 @@ fn event_loss_gradients_match_finite_differences() {
                 1e-6,
                 1e-10,
             );
+        }
+    }
+}
+
+/// `L_event` on a stored (sRGB or linear) render, on luminance or per channel: the
+/// gradient w.r.t. each stored value against central differences, and the luminance
+/// mode's loss equal to `event_loss` on the render's Rec. 709 luminance.
+#[test]
+fn render_event_loss_gradients_match_finite_differences() {
+    let mut rng = Rng::new(11);
+    let d = consistent(&mut rng, 0.2, 0.0);
+    let sl = d.ev.as_slice();
+    let k = IntervalCounts::build(&sl, 0.0, 1.0, 32);
+    let n = W * H;
+    let s = PseudoSettings {
+        black_level: 0.01,
+        saturation: 100.0,
+        ..PseudoSettings::default()
+    };
+    let (ly, ry) = (planar_luminance(&d.left, n), planar_luminance(&d.right, n));
+    // Stored values away from the sRGB curve's knee (0.04045), where it has a kink.
+    let stored: Vec<f64> = (0..3 * n).map(|_| rng.uniform(0.1, 0.9)).collect();
+    for channels in [EventChannels::Luminance, EventChannels::Rgb] {
+        let (left, right, planes) = match channels {
+            EventChannels::Luminance => (&ly, &ry, 1),
+            EventChannels::Rgb => (&d.left, &d.right, 3),
+        };
+        let inp = PseudoInputs {
+            counts: &k,
+            events: Some(&sl),
+            left,
+            right,
+            channels: planes,
+            contrast: 0.2,
+        };
+        let mut p = PseudoImage::default();
+        pseudo_image(&inp, 0.35, PseudoMode::Nearest, &s, &mut p);
+        assert_eq!(p.data.len(), planes * n);
+        for srgb in [false, true] {
+            let mut g = vec![0.0; 3 * n];
+            let l = render_event_loss(&stored, srgb, channels, &p, &mut g);
+            assert!(l.valid > n / 2, "{channels:?}: {} valid", l.valid);
+            let lin: Vec<f64> = if srgb {
+                stored.iter().map(|&c| srgb_to_linear(c)).collect()
+            } else {
+                stored.clone()
+            };
+            if channels == EventChannels::Luminance {
+                let y = planar_luminance(&lin, n);
+                assert_eq!(
+                    y[3],
+                    0.2126 * lin[3] + 0.7152 * lin[n + 3] + 0.0722 * lin[2 * n + 3]
+                );
+                assert_eq!(l.loss, event_loss(&y, &p, None).loss);
+            }
+            let mut scratch = vec![0.0; 3 * n];
+            for i in (0..3 * n).step_by(5) {
+                let num = fd(&stored, i, 1e-7, |x| {
+                    render_event_loss(x, srgb, channels, &p, &mut scratch).loss
+                });
+                assert_close(
+                    &format!("{channels:?} srgb {srgb} ∂L/∂stored[{i}]"),
+                    &[g[i]],
+                    &[num],
+                    1e-5,
+                    1e-10,
+                );
+            }
         }
     }
 }

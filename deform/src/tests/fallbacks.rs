@@ -4,7 +4,7 @@
 use crate::event_counts::{CountSettings, EventCounts, IntervalCounts};
 use crate::event_image::{PseudoImage, PseudoInputs, PseudoMode, PseudoSettings};
 use crate::event_image::{event_loss, pseudo_image};
-use crate::fallbacks::{EventSkip, Fallbacks, interval_skip};
+use crate::fallbacks::{DroppedBindings, EventSkip, Fallbacks, interval_skip};
 use crate::motion_loss::motion_loss;
 use crate::motion_loss::{CsrBindings, MotionInputs, MotionLoss, MotionSettings, PerGaussian};
 use scene::EventStream;
@@ -75,8 +75,14 @@ fn intervals_without_length_or_events_are_skipped_and_counted() {
     f.skip_event(EventSkip::NoEvents);
     f.skip_event(EventSkip::NoEvents);
     f.skip_event(EventSkip::NoValidPixels);
-    f.drop_bindings(3, 2, 4);
-    f.drop_bindings(0, 1, 0);
+    let dropped = |no_flow, outliers, disagreeing, rate_outliers| DroppedBindings {
+        no_flow,
+        outliers,
+        disagreeing,
+        rate_outliers,
+    };
+    f.drop_bindings(&dropped(3, 2, 4, 5));
+    f.drop_bindings(&dropped(0, 1, 0, 2));
     assert_eq!(
         (
             f.event_steps_skipped,
@@ -91,9 +97,10 @@ fn intervals_without_length_or_events_are_skipped_and_counted() {
             f.bindings_dropped,
             f.bindings_dropped_no_flow,
             f.bindings_dropped_outliers,
-            f.bindings_dropped_disagreeing
+            f.bindings_dropped_disagreeing,
+            f.bindings_dropped_rate_outliers
         ),
-        (10, 3, 3, 4)
+        (17, 3, 3, 4, 7)
     );
 }
 

@@ -8,6 +8,7 @@ mod fallbacks;
 mod flow;
 mod motion;
 mod posenet;
+mod rate_outliers;
 
 use glam::{DQuat, DVec3};
 use scene::Pose;

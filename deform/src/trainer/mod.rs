@@ -12,11 +12,11 @@
 
 use crate::camera_check::{CameraCheck, pose_error};
 use crate::contrast::LearnedContrast;
-use crate::event_image::{PseudoImage, PseudoInputs, event_loss, pseudo_image, srgb_to_linear};
-use crate::fallbacks::{EventSkip, Fallbacks, interval_skip};
+use crate::event_image::{PseudoImage, PseudoInputs, pseudo_image, render_event_loss};
+use crate::fallbacks::{DroppedBindings, EventSkip, Fallbacks, interval_skip};
 use crate::inputs::Inputs;
 use crate::posenet::{PoseNet, apply_correction, correction_backward};
-use crate::settings::DeformSettings;
+use crate::settings::{DeformSettings, EventChannels};
 use gaussians::stage::PSNR_CAP;
 use gaussians::train::{ModelGrads, Trainer, ViewRender};
 use gaussians::{Rasterizer, TileRasterizer};
@@ -58,7 +58,7 @@ pub struct JointStep {
     /// `L_event` was skipped (RGB-only supervision; [`crate::fallbacks`]).
     pub event_skipped: bool,
     /// Bound events left out of this iteration's `L_motion` (no flow, outliers,
-    /// Gaussians disagreeing with their neighbours).
+    /// Gaussians disagreeing with their neighbours, hot pixels and bursts).
     pub bindings_dropped: usize,
     /// The contrast threshold after this iteration.
     pub contrast: f64,
@@ -101,16 +101,6 @@ fn add_scaled(dst: &mut ModelGrads, src: &ModelGrads, w: f32) {
         add(&mut dst.field, &src.field);
     } else if dst.field.is_empty() {
         dst.field = src.field.iter().map(|g| w * g).collect();
-    }
-}
-
-/// `d linear / d encoded` of the sRGB curve (IEC 61966-2-1), the linear segment below
-/// 0.04045 extended to negative values.
-fn srgb_slope(c: f32) -> f32 {
-    if c <= 0.040_45 {
-        1.0 / 12.92
-    } else {
-        2.4 / 1.055 * ((c + 0.055) / 1.055).powf(1.4)
     }
 }
 
@@ -169,6 +159,10 @@ impl JointTrainer {
             fallbacks: Fallbacks {
                 flows_out_of_range: d.flows_out_of_range,
                 events_without_flow: d.flow_u.iter().filter(|u| !u.is_finite()).count(),
+                hot_pixels: d.rate_outliers.hot_pixels.len(),
+                hot_pixel_events: d.rate_outliers.hot_events,
+                burst_bins: d.rate_outliers.burst_bin_count(),
+                burst_events: d.rate_outliers.burst_events,
                 ..Fallbacks::default()
             },
             contrast: d.contrast,
@@ -298,17 +292,17 @@ impl JointTrainer {
         // RGB gradient on the rendered centres (one pass back through the field).
         let clock = Instant::now();
         let mut motion = MotionGrads::default();
-        let (l_motion, bound, [no_flow, outliers, disagreeing]) = if g2 > 0.0 {
+        let (l_motion, bound, dropped) = if g2 > 0.0 {
             self.motion_term(d, i, &rv, g2 as f32, &mut motion)
         } else {
-            (0.0, 0, [0; 3])
+            (0.0, 0, DroppedBindings::default())
         };
         self.timings.motion += clock.elapsed().as_secs_f64();
 
         let clock = Instant::now();
         self.posenet_grad.fill(0.0);
         let mut grads = self.backward_with_motion(r, d, &rv, &grad, &motion);
-        self.fallbacks.drop_bindings(no_flow, outliers, disagreeing);
+        self.fallbacks.drop_bindings(&dropped);
         self.inner.recycle_view(rv);
         self.timings.rgb += clock.elapsed().as_secs_f64();
 
@@ -346,7 +340,7 @@ impl JointTrainer {
             bound,
             gaussians: self.inner.splats.len(),
             event_skipped: self.fallbacks.event_steps_skipped > skipped,
-            bindings_dropped: no_flow + outliers + disagreeing,
+            bindings_dropped: dropped.total(),
             contrast: self.contrast,
         }
     }
@@ -369,12 +363,18 @@ impl JointTrainer {
         }
         let t_e = ta + self.rng.random::<f64>() * (tb - ta);
         let all = d.events.as_slice();
+        let luma = self.settings.event_channels == EventChannels::Luminance;
+        let (left, right, channels) = if luma {
+            (&d.luma[j], &d.luma[j + 1], 1)
+        } else {
+            (&d.linear[j], &d.linear[j + 1], 3)
+        };
         let inp = PseudoInputs {
             counts: &d.counts.intervals()[j],
             events: Some(&all),
-            left: &d.linear[j],
-            right: &d.linear[j + 1],
-            channels: 3,
+            left,
+            right,
+            channels,
             contrast: self.contrast as f32,
         };
         pseudo_image(
@@ -386,14 +386,14 @@ impl JointTrainer {
         );
         let (camera, xi) = self.camera_at(d, t_e);
         let rv = self.inner.render_view(r, &camera, field_time(d, t_e));
-        let rgb = &rv.image.rgb;
-        let linear: Vec<f32> = if d.srgb {
-            rgb.iter().map(|&c| srgb_to_linear(c)).collect()
-        } else {
-            rgb.clone()
-        };
-        let mut g = vec![0.0f32; linear.len()];
-        let el = event_loss(&linear, &self.pseudo, Some(&mut g));
+        let mut g = vec![0.0f32; rv.image.rgb.len()];
+        let el = render_event_loss(
+            &rv.image.rgb,
+            d.srgb,
+            self.settings.event_channels,
+            &self.pseudo,
+            &mut g,
+        );
         if el.valid == 0 {
             self.fallbacks.skip_event(EventSkip::NoValidPixels);
             return 0.0;
@@ -402,9 +402,7 @@ impl JointTrainer {
             lc.step(f64::from(el.d_contrast));
             self.contrast = lc.value();
         }
-        for (gi, &c) in g.iter_mut().zip(rgb) {
-            *gi *= g1 * if d.srgb { srgb_slope(c) } else { 1.0 };
-        }
+        g.iter_mut().for_each(|x| *x *= g1);
         let ge = self.inner.view_backward(r, &rv, &g, None, None);
         self.inner.recycle_view(rv);
         // While the PoseNet warms up, L_event moves the camera only (not the scene).
@@ -435,9 +433,17 @@ impl JointTrainer {
             let alpha: Vec<f32> = depth.iter().map(|&z| f32::from(z > 0.0)).collect();
             let t0 = d.times[i];
             let window = d.events.window(t0 - s.delta_t, (t0 + s.delta_t).next_up());
+            // Events at hot pixels or in bursts are not bound (their indices mapped back).
+            let kept = d.rate_outliers.kept_events(&window);
+            let events = kept.as_ref().map_or(window, |(k, _)| k.as_slice());
             let b =
-                assoc::associate_frame(&v.camera, &depth, &alpha, &window, &splats.means, t0, s)
-                    .map(|(b, _)| b)
+                assoc::associate_frame(&v.camera, &depth, &alpha, &events, &splats.means, t0, s)
+                    .map(|(mut b, _)| {
+                        if let Some((_, index)) = &kept {
+                            b.events.iter_mut().for_each(|e| *e = index[*e as usize]);
+                        }
+                        b
+                    })
                     .unwrap_or_else(|_| assoc::Bindings {
                         offsets: vec![0; splats.len() + 1],
                         ..Default::default()

@@ -3,6 +3,7 @@
 
 use super::{JointTrainer, NEAR, field_time};
 use crate::camera_path::{CameraVelocity, velocity_between, velocity_between_backward};
+use crate::fallbacks::DroppedBindings;
 use crate::flow::{EgoGrad, ego_flow, ego_flow_backward, gaussian_flow, gaussian_flow_backward};
 use crate::flow::{EgoPoints, Flow2, GsCameras, GsGrad, Pinhole, ProjCam};
 use crate::inputs::Inputs;
@@ -46,8 +47,7 @@ impl MotionGrads {
 impl JointTrainer {
     /// Eq. 12 over the Gaussians bound at train frame `i` (rendered as `rv`, whose
     /// deformed centres are `x(t0)`): writes `γ2·∂L/∂θ` into `out`; returns
-    /// `(L_motion, bound Gaussians, [bound events left out for want of a flow, as
-    /// outliers, with Gaussians that disagree with their neighbours])`.
+    /// `(L_motion, bound Gaussians, bound events left out and why)`.
     pub(super) fn motion_term(
         &self,
         d: &Inputs,
@@ -55,16 +55,17 @@ impl JointTrainer {
         rv: &ViewRender<<TileRasterizer as Rasterizer>::State>,
         g2: f32,
         out: &mut MotionGrads,
-    ) -> (f64, usize, [usize; 3]) {
+    ) -> (f64, usize, DroppedBindings) {
         let b = &self.bindings[i];
+        let mut dropped = DroppedBindings::default();
         if b.gaussians() != self.inner.splats.len() {
-            return (0.0, 0, [0; 3]);
+            return (0.0, 0, dropped);
         }
         let idx: Vec<usize> = (0..b.gaussians())
             .filter(|&g| !b.of(g).0.is_empty())
             .collect();
         if idx.is_empty() {
-            return (0.0, 0, [0; 3]);
+            return (0.0, 0, dropped);
         }
         let t0 = d.times[i];
         let t1 = if i + 1 < d.times.len() {
@@ -73,12 +74,21 @@ impl JointTrainer {
             t0 - self.span
         };
         let tau1 = field_time(d, t1);
-        // Compact CSR over the bound Gaussians.
+        // Compact CSR over the bound Gaussians, without the events at hot pixels or in
+        // bursts (the others' weights are renormalised by the loss).
         let (mut offsets, mut events, mut weights) = (vec![0u32], Vec::new(), Vec::new());
+        let ev = &d.events;
         for &g in &idx {
             let (e, w) = b.of(g);
-            events.extend_from_slice(e);
-            weights.extend_from_slice(w);
+            for (&k, &wk) in e.iter().zip(w) {
+                let at = k as usize;
+                if at < ev.len() && d.rate_outliers.excludes(ev.t[at], ev.x[at], ev.y[at]) {
+                    dropped.rate_outliers += 1;
+                } else {
+                    events.push(k);
+                    weights.push(wk);
+                }
+            }
             offsets.push(events.len() as u32);
         }
         // Deformed centres at t0 and t1 (the field sees canonical positions detached).
@@ -135,7 +145,7 @@ impl JointTrainer {
         if paper {
             ego_flow(&pinhole, &vel, pts, (1.0 / NEAR) as f32, &mut fego);
         }
-        let disagreeing = self.drop_disagreeing(
+        dropped.disagreeing = self.drop_disagreeing(
             d,
             &cam0,
             &x0,
@@ -165,11 +175,8 @@ impl JointTrainer {
         };
         let mut mg = MotionGrad::default();
         let ml = motion_loss(&self.settings.motion, &inp, Some(&mut mg));
-        let dropped = [
-            ml.missing_events + ml.dropped_non_finite,
-            ml.dropped_outliers,
-            disagreeing,
-        ];
+        dropped.no_flow = ml.missing_events + ml.dropped_non_finite;
+        dropped.outliers = ml.dropped_outliers;
         if ml.bound == 0 {
             return (0.0, idx.len(), dropped);
         }

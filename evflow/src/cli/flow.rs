@@ -115,14 +115,15 @@ pub struct EvalArgs {
 impl EvalArgs {
     /// Score the flow files; print the figures as JSON (and write them to `--out`).
     pub fn run(&self) -> anyhow::Result<()> {
-        // The windows the flows were computed over: their run's settings.toml, if any.
+        // The windows the flows were computed over: their run's settings.toml, if any,
+        // else the default's.
         let settings = self.flows.join("settings.toml");
         let frame_window = if settings.is_file() {
             let text = std::fs::read_to_string(&settings)?;
             scene::cli::settings::parse::<crate::finetune::FlowSettings>(&text, &settings)?
                 .frame_window
         } else {
-            0.0
+            crate::finetune::FlowSettings::default().frame_window
         };
         let e = crate::stage::eval_flows(
             &self.input.input()?,

@@ -3,7 +3,8 @@
 //! a dashed line at ratio 1 (the error of predicting no motion).
 
 use super::curve::{Curve, read_curve, to_csv};
-use super::draw::{Drawing, LINE_COLOURS, draw_legend, linear_tick, range, write_png_and_svg};
+use super::draw::{Drawing, LINE_COLOURS, linear_tick, range, write_png_and_svg};
+use super::legend::{draw_legend, polyline_anchors};
 use anyhow::{Result, anyhow};
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -78,18 +79,26 @@ impl Drawing for CurveChart<'_> {
             .map_err(|e| err(&e))?
             .label("zero flow (ratio 1: predicting no motion)")
             .legend(move |(x, y)| PathElement::new([(x, y), (x + 24, y)], grey.stroke_width(2)));
+        let mut labels = vec!["zero flow (ratio 1: predicting no motion)".to_string()];
+        let mut drawn = polyline_anchors(&[
+            chart.backend_coord(&(x0, 1.0)),
+            chart.backend_coord(&(x1, 1.0)),
+        ]);
         for (i, c) in self.curves.iter().enumerate() {
             let colour = CURVE_COLOURS[i % CURVE_COLOURS.len()];
             let xy: Vec<(f64, f64)> = c.steps.iter().map(|s| (s.locm_s, s.ratio)).collect();
+            let pixels: Vec<(i32, i32)> = xy.iter().map(|p| chart.backend_coord(p)).collect();
+            drawn.extend(polyline_anchors(&pixels));
             let zero = c.steps[0].zero_px;
+            labels.push(format!(
+                "{}: {} steps, zero-flow EPE {zero:.2} px",
+                c.name,
+                c.steps.len() - 1
+            ));
             chart
                 .draw_series(LineSeries::new(xy.clone(), colour.stroke_width(2)))
                 .map_err(|e| err(&e))?
-                .label(format!(
-                    "{}: {} steps, zero-flow EPE {zero:.2} px",
-                    c.name,
-                    c.steps.len() - 1
-                ))
+                .label(labels.last().cloned().unwrap_or_default())
                 .legend(move |(x, y)| {
                     PathElement::new([(x, y), (x + 24, y)], colour.stroke_width(2))
                 });
@@ -107,6 +116,7 @@ impl Drawing for CurveChart<'_> {
             })
             .collect();
         if !stops.is_empty() {
+            labels.push("where the stopping rule stopped".to_string());
             chart
                 .draw_series(
                     stops
@@ -137,10 +147,8 @@ impl Drawing for CurveChart<'_> {
                 EmptyElement::at((s.0, s.1)) + Text::new(s.2.clone(), off, font.clone())
             }))
             .map_err(|e| err(&e))?;
-        let every: Vec<(i32, i32)> = steps()
-            .map(|s| chart.backend_coord(&(s.locm_s, s.ratio)))
-            .collect();
-        draw_legend(&mut chart, &every)
+        drawn.extend(&anchors);
+        draw_legend(&mut chart, &drawn, &labels)
     }
 }
 

@@ -1,6 +1,7 @@
 //! The chart images (plotters): one scatter chart per question and scene, as PNG
 //! (bitmap backend, text drawn with the bundled DejaVu Sans) and SVG.
 
+use super::legend::{draw_legend, polyline_anchors};
 use super::{ChartData, Method, ModelPoint, pareto_front};
 use anyhow::{Result, anyhow};
 use plotters::coord::Shift;
@@ -388,8 +389,15 @@ fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, spec: &Spec) -> Resul
         .light_line_style(RGBColor(246, 246, 246))
         .draw()
         .map_err(|e| err(&e))?;
+    let mut labels = Vec::new();
+    let mut lines_drawn = Vec::new();
     for (i, (label, y)) in spec.lines.iter().enumerate() {
         let c = LINE_COLOURS[i % LINE_COLOURS.len()];
+        labels.push(format!("2D baseline: {label} ({y:.2} dB)"));
+        lines_drawn.extend(polyline_anchors(&[
+            chart.backend_coord(&(x0, *y)),
+            chart.backend_coord(&(x1, *y)),
+        ]));
         chart
             .draw_series(DashedLineSeries::new(
                 [(x0, *y), (x1, *y)],
@@ -398,7 +406,7 @@ fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, spec: &Spec) -> Resul
                 c.stroke_width(2),
             ))
             .map_err(|e| err(&e))?
-            .label(format!("2D baseline: {label} ({y:.2} dB)"))
+            .label(labels.last().cloned().unwrap_or_default())
             .legend(move |(x, y)| PathElement::new([(x, y), (x + 24, y)], c.stroke_width(2)));
     }
     // the Pareto front over every series
@@ -407,6 +415,9 @@ fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, spec: &Spec) -> Resul
     let front = pareto_front(&pts.iter().map(|p| (p.0, sign * p.1)).collect::<Vec<_>>());
     if front.len() > 1 {
         let line: Vec<(f64, f64)> = front.iter().map(|&i| (pts[i].0, pts[i].1)).collect();
+        let pixels: Vec<(i32, i32)> = line.iter().map(|p| chart.backend_coord(p)).collect();
+        lines_drawn.extend(polyline_anchors(&pixels));
+        labels.push("Pareto front".to_string());
         chart
             .draw_series(LineSeries::new(line, BLACK.stroke_width(1)))
             .map_err(|e| err(&e))?
@@ -414,6 +425,7 @@ fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, spec: &Spec) -> Resul
             .legend(|(x, y)| PathElement::new([(x, y), (x + 24, y)], BLACK));
     }
     for s in &spec.series {
+        labels.push(s.label.clone());
         let (c, style) = (s.color, s.color.filled());
         let coords = s.points.iter().map(|p| (tx(p.0), p.1));
         match s.marker {
@@ -467,53 +479,8 @@ fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, spec: &Spec) -> Resul
             EmptyElement::at((pts[i].0, pts[i].1)) + Text::new(pts[i].2.to_string(), off, font(i))
         }))
         .map_err(|e| err(&e))?;
-    draw_legend(&mut chart, &anchors)
-}
-
-/// The legend on a translucent white box, in the plot corner with the fewest of
-/// `anchors` (pixel positions of what was drawn).
-pub(crate) fn draw_legend<'a, DB: DrawingBackend + 'a, CT: plotters::coord::CoordTranslate>(
-    chart: &mut ChartContext<'a, DB, CT>,
-    anchors: &[(i32, i32)],
-) -> Result<(), String> {
-    let (xs, ys) = chart.plotting_area().get_pixel_range();
-    let area = (xs.start, ys.start, xs.end, ys.end);
-    chart
-        .configure_series_labels()
-        .position(legend_position(legend_corner(anchors, area)))
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font(("sans-serif", 14))
-        .draw()
-        .map_err(|e| format!("{e:?}"))
-}
-
-/// The corners a legend may take, in order of preference on ties.
-pub const LEGEND_CORNERS: [&str; 4] = ["lower right", "upper right", "lower left", "upper left"];
-
-/// The corner (index into [`LEGEND_CORNERS`]) of the plotting area `(x0, y0, x1, y1)`
-/// (pixels, y down) for the legend box: the one whose box region (40 % of the width, a
-/// third of the height) holds the fewest points, the earlier corner on ties.
-pub fn legend_corner(points: &[(i32, i32)], area: (i32, i32, i32, i32)) -> usize {
-    let (x0, y0, x1, y1) = area;
-    let (w, h) = ((x1 - x0) * 2 / 5, (y1 - y0) / 3);
-    let origins = [(x1 - w, y1 - h), (x1 - w, y0), (x0, y1 - h), (x0, y0)];
-    let inside = |&(cx, cy): &(i32, i32)| {
-        points
-            .iter()
-            .filter(|&&(x, y)| x >= cx && x <= cx + w && y >= cy && y <= cy + h)
-            .count()
-    };
-    (0..4).min_by_key(|&k| inside(&origins[k])).unwrap_or(0)
-}
-
-pub(crate) fn legend_position(corner: usize) -> SeriesLabelPosition {
-    match corner {
-        1 => SeriesLabelPosition::UpperRight,
-        2 => SeriesLabelPosition::LowerLeft,
-        3 => SeriesLabelPosition::UpperLeft,
-        _ => SeriesLabelPosition::LowerRight,
-    }
+    lines_drawn.extend(&anchors);
+    draw_legend(&mut chart, &lines_drawn, &labels)
 }
 
 #[cfg(test)]

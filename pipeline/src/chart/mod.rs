@@ -22,6 +22,7 @@ pub mod curve;
 pub mod curve_draw;
 pub mod draw;
 mod labels;
+pub mod legend;
 
 use crate::record::RunRecord;
 use crate::stages;

@@ -238,30 +238,51 @@ fn points_come_from_the_reports_and_shared_entries_count_once() {
 }
 
 #[test]
-fn the_legend_takes_the_emptiest_corner() {
-    use super::draw::{LEGEND_CORNERS, legend_corner};
+fn the_legend_takes_the_emptiest_place() {
+    use super::legend::{legend_place, legend_size, polyline_anchors};
+    super::draw::register_font().unwrap();
     let area = (0, 0, 100, 90);
-    // No points: the preferred corner.
-    assert_eq!(LEGEND_CORNERS[legend_corner(&[], area)], "lower right");
-    // A point in the lower right box (x ≥ 60, y ≥ 60) moves it up.
-    assert_eq!(
-        LEGEND_CORNERS[legend_corner(&[(90, 80)], area)],
-        "upper right"
+    let size = (40, 30);
+    let place = |pts: &[(i32, i32)]| legend_place(pts, area, size).name;
+    // No points: the preferred corner. The lower right box is x 55..95, y 55..85.
+    assert_eq!(place(&[]), "lower right");
+    // A point in the lower right box moves it up.
+    assert_eq!(place(&[(90, 80)]), "upper right");
+    // Points in both right boxes (the upper one is y 5..35): lower left.
+    assert_eq!(place(&[(90, 80), (70, 10)]), "lower left");
+    // Every corner taken: the upper middle (x 30..70, y 5..35) if it is free…
+    let corners = [(90, 80), (80, 10), (10, 70), (20, 20)];
+    assert_eq!(place(&corners), "upper middle");
+    // …and the middle left (y 30..60) when every other middle holds a point too.
+    let mut busy = corners.to_vec();
+    busy.extend([(50, 20), (50, 70), (80, 45)]);
+    assert_eq!(place(&busy), "middle left");
+    // With every named place covered, a free box elsewhere: three lines across a wide
+    // area leave a band between the lower two.
+    let wide = (0, 0, 200, 100);
+    let mut lines = polyline_anchors(&[(0, 20), (200, 20)]);
+    lines.extend(polyline_anchors(&[(0, 45), (200, 45)]));
+    lines.extend(polyline_anchors(&[(0, 95), (200, 95)]));
+    let p = legend_place(&lines, wide, (40, 30));
+    assert_eq!(p.name, "inside");
+    assert!(p.origin.1 > 45 && p.origin.1 + 30 < 95, "{p:?}");
+    // A line crossing the lower right box without a vertex inside still moves the legend.
+    let line = polyline_anchors(&[(50, 90), (100, 60)]);
+    assert!(line.len() >= 14, "{}", line.len());
+    assert_eq!(place(&line), "upper right");
+    // Consecutive anchors lie about 4 pixels apart (5 with rounding), both ends kept.
+    assert!(line.windows(2).all(|w| {
+        let (dx, dy) = (w[1].0 - w[0].0, w[1].1 - w[0].1);
+        dx * dx + dy * dy <= 5 * 5
+    }));
+    assert_eq!((line[0], *line.last().unwrap()), ((50, 90), (100, 60)));
+    // The box grows with the labels: a longer label makes a wider box.
+    let short = legend_size(&["a".to_string()]);
+    let long = legend_size(&["a much longer label".to_string()]);
+    assert!(
+        long.0 > short.0 + 50 && long.1 == short.1,
+        "{short:?} {long:?}"
     );
-    // Points in both right boxes: lower left.
-    assert_eq!(
-        LEGEND_CORNERS[legend_corner(&[(90, 80), (70, 10)], area)],
-        "lower left"
-    );
-    // Every corner taken, the lower left by one point and the others by two.
-    let pts = [
-        (90, 80),
-        (95, 85),
-        (70, 10),
-        (75, 5),
-        (10, 70),
-        (5, 5),
-        (20, 20),
-    ];
-    assert_eq!(LEGEND_CORNERS[legend_corner(&pts, area)], "lower left");
+    let two = legend_size(&["a".to_string(), "b".to_string()]);
+    assert!(two.1 > short.1 + 10, "{short:?} {two:?}");
 }

@@ -7,8 +7,9 @@ use super::report::{StressRecord, StressResult};
 use super::variants::StressKind;
 use crate::chart::Method;
 use crate::chart::draw::{
-    Drawing, LINE_COLOURS, Marker, draw_legend, linear_tick, method_style, range, write_png_and_svg,
+    Drawing, LINE_COLOURS, Marker, linear_tick, method_style, range, write_png_and_svg,
 };
+use crate::chart::legend::{draw_legend, polyline_anchors};
 use anyhow::Result;
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -135,7 +136,8 @@ impl Drawing for StressChart {
         let mut anchors = Vec::new();
         for l in &self.lines {
             let (c, style) = (l.color, l.color.stroke_width(2));
-            anchors.extend(l.points.iter().map(|p| chart.backend_coord(p)));
+            let pixels: Vec<(i32, i32)> = l.points.iter().map(|p| chart.backend_coord(p)).collect();
+            anchors.extend(polyline_anchors(&pixels));
             let drawn = if l.dashed {
                 chart.draw_series(DashedLineSeries::new(l.points.clone(), 8, 5, style))
             } else {
@@ -166,7 +168,8 @@ impl Drawing for StressChart {
                 None => {}
             }
         }
-        draw_legend(&mut chart, &anchors)
+        let labels: Vec<String> = self.lines.iter().map(|l| l.label.clone()).collect();
+        draw_legend(&mut chart, &anchors, &labels)
     }
 }
 

@@ -17,6 +17,7 @@
 pub mod aedat4;
 pub mod aedat4_frames;
 pub mod event_stream;
+pub mod evflow;
 pub mod evs;
 pub mod npz;
 pub mod prophesee;

@@ -1,5 +1,6 @@
 //! Per-event flow files `.evflow` (`docs/DESIGN.md` §3) and Middlebury `.flo` dense
-//! previews.
+//! previews: written by `evflow`, read by `deform` and `degs eval` (here, in the data
+//! layer, so that a reader of flows needs no flow network).
 //!
 //! **`.evflow`**, little-endian, an 88-byte header followed by three columns:
 //!
@@ -14,7 +15,7 @@
 //! | 32 | 8 | window end `t_b` (`f64`, s) |
 //! | 40 | 8 | reference time `t_ref` (`f64`, s) |
 //! | 48 | 8 | event count `n` (`u64`) |
-//! | 56 | 32 | source-stream hash (BLAKE3 of the `.evs` column bytes, [`scene::formats::evs::content_hash`]) |
+//! | 56 | 32 | source-stream hash (BLAKE3 of the `.evs` column bytes, [`crate::formats::evs::content_hash`]) |
 //! | 88 | 8n | event index into the source stream (`u64`, strictly increasing) |
 //! | 88 + 8n | 4n | flow `u`, px/s (`f32`, right) |
 //! | 88 + 12n | 4n | flow `v`, px/s (`f32`, down) |
@@ -27,8 +28,8 @@
 //! **`.flo`** (Middlebury): `f32` 202021.25, `i32` width, `i32` height, then `u v`
 //! interleaved per pixel, row-major, in pixels of displacement over the window.
 
-use scene::atomic::write_atomic;
-use scene::error::{Error, IoContext, Result};
+use crate::atomic::write_atomic;
+use crate::error::{Error, IoContext, Result};
 use std::io::Write;
 use std::path::Path;
 
