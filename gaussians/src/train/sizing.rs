@@ -53,6 +53,14 @@ pub struct SizeSettings {
     /// middle of the recording), the field goes whatever it is worth on the train views
     /// (0 = only the PSNR test).
     pub still_px: f32,
+    /// …and when the model without its field is visibly worse on at most one train
+    /// pixel in two thousand (`STILL_WORSE_FRACTION`): its largest channel error grows
+    /// by more than this (display value, 0–1). Centre motion alone misses a field that
+    /// hides and shows Gaussians (by their scale) instead of moving them, as an RGB-only
+    /// warm-up does at a low frame rate (`fast` 64² at 4 fps: 99.9 % of the Gaussians
+    /// moved less than 0.8 px, yet without the field 0.66 % of the train pixels were
+    /// worse by more than 0.2; on `static` 128², 0.009 %: BENCHMARKS.md).
+    pub still_visible: f32,
     /// Static/dynamic split of a scene that keeps its field: Gaussians the field moves
     /// by at most a tolerance (pixels, as `still_px`) are baked at the middle of the
     /// recording and skip the field; the largest of this, its half, quarter and eighth
@@ -71,6 +79,7 @@ impl Default for SizeSettings {
             at: 0,
             drop_field: true,
             still_px: 1.0,
+            still_visible: 0.2,
             split_max_px: 2.0,
             sh_degree: true,
             prune: true,
@@ -86,12 +95,19 @@ impl SizeSettings {
         if !(self.still_px.is_finite() && self.still_px >= 0.0) {
             return Err("size.still_px must be finite and ≥ 0 (0: no still test)".into());
         }
+        if !(self.still_visible.is_finite() && self.still_visible >= 0.0) {
+            return Err("size.still_visible must be finite and ≥ 0".into());
+        }
         if !(self.split_max_px.is_finite() && self.split_max_px >= 0.0) {
             return Err("size.split_max_px must be finite and ≥ 0 (0: no split)".into());
         }
         Ok(())
     }
 }
+
+/// The largest fraction of train pixels the model without its field may render
+/// visibly worse (`SizeSettings::still_visible`) for the scene to count as still.
+pub const STILL_WORSE_FRACTION: f64 = 5e-4;
 
 /// What the sizing decided (for `report.json`).
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
@@ -108,6 +124,9 @@ pub struct SizingSummary {
     /// Quantiles 0.5, 0.99, 0.999 and 1 of the field's motion of each Gaussian (pixels;
     /// see `still_px`), and whether that made the scene still (absent: not measured).
     pub field_motion_px_quantiles: Option<[f32; 4]>,
+    /// Fraction of the train pixels the model without its field renders visibly worse
+    /// (see `still_visible`; absent: not measured).
+    pub visibly_worse_without_field: Option<f64>,
     pub still: bool,
     /// The static/dynamic split made (absent: none).
     pub split: Option<SplitChoice>,
@@ -213,6 +232,32 @@ impl<R: Rasterizer> Judge<'_, R> {
             })
             .sum();
         sum / self.views.len().max(1) as f64
+    }
+
+    /// Fraction of the views' pixels where `b` is visibly worse than `a`: its largest
+    /// channel error exceeds `a`'s by more than `by`.
+    pub fn worse_fraction(&mut self, a: &Candidate, b: &Candidate, by: f32) -> f64 {
+        self.evaluations += 2;
+        let (mut worse, mut pixels) = (0usize, 0usize);
+        for v in self.views {
+            let render = |c: &Candidate| {
+                let s = at_time(c.splats, c.field, c.dynamic_only, v.time);
+                self.r.render(&s, &v.camera, c.sh_degree, self.background).0
+            };
+            let (ia, ib) = (render(a), render(b));
+            // planar 3×H×W, as rendered
+            let n = v.rgb.len() / 3;
+            let err = |img: &[f32], px: usize| {
+                (0..3).fold(0f32, |m, k| {
+                    m.max((img[k * n + px] - v.rgb[k * n + px]).abs())
+                })
+            };
+            worse += (0..n)
+                .filter(|&px| err(&ib.rgb, px) > err(&ia.rgb, px) + by)
+                .count();
+            pixels += n;
+        }
+        worse as f64 / pixels.max(1) as f64
     }
 
     /// Each Gaussian's blending weight summed over the views (None when the rasterizer
@@ -381,7 +426,9 @@ impl Trainer {
                 Some(static_split::quantiles(&motion, [0.5, 0.99, 0.999, 1.0]));
             if size.still_px > 0.0 {
                 let moving = motion.iter().filter(|&&m| m > size.still_px).count();
-                sum.still = moving * 1000 <= motion.len();
+                let worse = judge.worse_fraction(&c, &frozen_c, size.still_visible);
+                sum.visibly_worse_without_field = Some(worse);
+                sum.still = moving * 1000 <= motion.len() && worse <= STILL_WORSE_FRACTION;
             }
             if size.drop_field && (sum.still || p >= target) {
                 c = frozen_c;
