@@ -138,6 +138,11 @@ pub struct TrainReport {
     /// The static/dynamic split (absent when none was made).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub static_split: Option<crate::train::static_split::SplitSummary>,
+    /// What the sizing decided (absent when `size.tolerance_db = 0`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sizing: Option<crate::train::sizing::SizingSummary>,
+    /// The written model: Gaussians, SH degree, field shape, parameters and bytes.
+    pub model_size: crate::model::size::ModelSize,
     pub train_frames: usize,
     /// Initial Gaussians placed on surfaces (from the PLY or stereo; the rest random).
     pub init_surface_points: usize,
@@ -380,8 +385,10 @@ pub fn train(
     // The settings as trained (the automatic Gaussian cap resolved).
     let settings = trainer.settings.clone();
     let split = trainer.split;
+    let sizing = trainer.sizing.take();
     drop(trainer);
     model.save(out.path())?;
+    let model_size = crate::model::size::ModelSize::of(&model, out.path())?;
     write_resolved(out.path(), &settings)?;
     phases.start("depth");
     write_depths(&model, &views, &out.path().join("depth"))?;
@@ -412,6 +419,8 @@ pub fn train(
         gaussians: model.splats.len(),
         field_parameters: model.field.as_ref().map_or(0, |f| f.params.len()),
         static_split: split,
+        sizing,
+        model_size,
         train_frames: views.len(),
         init_surface_points,
         init_ply_dropped_transparent,

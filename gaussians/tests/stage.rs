@@ -45,6 +45,13 @@ fn median_relative_depth_error(depth: &[f32], truth: &[f32]) -> (f64, usize) {
     )
 }
 
+/// The text of a PLY's header (up to `end_header`).
+fn ply_header(path: &Path) -> String {
+    let bytes = std::fs::read(path).unwrap();
+    let end = bytes.windows(10).position(|w| w == b"end_header").unwrap();
+    String::from_utf8_lossy(&bytes[..end]).into_owned()
+}
+
 fn tiny_settings(dir: &Path) -> std::path::PathBuf {
     let mut s = TrainSettings {
         iterations: 400,
@@ -59,6 +66,7 @@ fn tiny_settings(dir: &Path) -> std::path::PathBuf {
     s.densify.from_iter = 100;
     s.densify.interval = 50;
     s.densify.until_iter = 250;
+    s.size.at = 350;
     let p = dir.join("settings.toml");
     std::fs::write(&p, scene::cli::settings::to_toml(&s).unwrap()).unwrap();
     p
@@ -100,7 +108,42 @@ fn trains_writes_every_output_and_reloads_identically() {
         r.test.psnr_mean,
         r.test.mean_colour_psnr_mean
     );
-    assert!(o.model.field.is_some());
+    // Sized at iteration 350 (100 field iterations in): the scene is static, and the
+    // field moves no Gaussian by a pixel, so it goes (though it is worth more than the
+    // tolerance on the train views: it fits each one on its own); Gaussians that add
+    // little go, within the tolerance of the frozen model.
+    let sz = r.sizing.as_ref().expect("sized");
+    eprintln!("sizing: {sz:?}\nmodel size: {:?}", r.model_size);
+    assert_eq!((sz.iteration, sz.gaussians_before), (350, 3200));
+    assert!(
+        sz.still && sz.field_dropped && o.model.field.is_none(),
+        "{sz:?}"
+    );
+    assert!(sz.field_motion_px_quantiles.unwrap()[2] <= 1.0);
+    let frozen = sz.train_psnr_without_field.unwrap();
+    assert!(sz.train_psnr_after >= frozen - sz.tolerance_db, "{sz:?}");
+    assert!(sz.gaussians < sz.gaussians_before && sz.gaussians == r.gaussians);
+    // The report's size is the files': no field, no dynamic flags, SH degree 1 columns.
+    let ms = &r.model_size;
+    let bytes = |f: &str| std::fs::metadata(out.join(f)).map_or(0, |m| m.len());
+    assert_eq!(ms.bytes.ply, bytes("point_cloud.ply"));
+    for f in ["field.safetensors", "field.json", "dynamic.safetensors"] {
+        assert!(!out.join(f).exists(), "{f}");
+    }
+    assert_eq!((ms.bytes.field, ms.bytes.dynamic_flags), (0, 0));
+    let files = ["point_cloud.ply", "model.json"];
+    assert_eq!(ms.bytes.total, files.iter().map(|f| bytes(f)).sum::<u64>());
+    assert_eq!(
+        (ms.gaussians, ms.sh_degree, ms.field),
+        (r.gaussians, 1, None)
+    );
+    assert_eq!(ms.parameters.gaussians, r.gaussians * (11 + 3 * 4));
+    assert_eq!((ms.parameters.field, r.field_parameters), (0, 0));
+    let header = ply_header(&out.join("point_cloud.ply"));
+    assert!(
+        header.contains("f_rest_8\n") && !header.contains("f_rest_9"),
+        "{header}"
+    );
 
     // depth at every train frame, right size, finite, mostly covered, and close to the
     // scene's exact depth
@@ -137,9 +180,9 @@ fn trains_writes_every_output_and_reloads_identically() {
     let settings = std::fs::read_to_string(&file).unwrap();
     let back: TrainSettings = scene::cli::settings::parse(&settings, &file).unwrap();
     assert_eq!(back, r.settings);
-    // the automatic Gaussian cap is recorded as resolved: 2 per pixel of 40×40, at
-    // least the 2000 initial Gaussians
-    assert_eq!(r.settings.densify.max_gaussians, 3200);
+    // the automatic Gaussian cap (2 per pixel of 40×40, at least the 2000 initial
+    // Gaussians: 3200, `sizing.gaussians_before`) became the sized count
+    assert_eq!(r.settings.densify.max_gaussians, r.gaussians);
 
     // the saved model renders exactly as the trained one
     let back = Model::load(&out).unwrap();

@@ -349,7 +349,8 @@ fn default_field_starts_as_the_identity() {
 }
 
 /// The static/dynamic split happens once, at its iteration, flags the Gaussians the field
-/// moves by at most the tolerance, and freezes them at their canonical parameters.
+/// moves by at most the tolerance, and freezes them at their canonical parameters; when
+/// it finds every Gaussian static, the model drops its field.
 #[test]
 fn static_split_flags_and_freezes_the_gaussians_the_field_barely_moves() {
     let cams = cameras(2);
@@ -373,6 +374,11 @@ fn static_split_flags_and_freezes_the_gaussians_the_field_barely_moves() {
                 width: 8,
                 ..Default::default()
             },
+            // The split alone (no sizing at the run's end).
+            size: gaussians::train::sizing::SizeSettings {
+                tolerance_db: 0.0,
+                ..Default::default()
+            },
             ..Default::default()
         };
         let mut t = Trainer::new(s, random_splats(10, DVec3::ZERO, 0.5, 4), 1.0);
@@ -388,10 +394,12 @@ fn static_split_flags_and_freezes_the_gaussians_the_field_barely_moves() {
     let sp = t.split.unwrap();
     assert_eq!((sp.iteration, sp.dynamic, sp.static_), (4, 10, 0));
     assert!(t.settings.dynamic_only && t.splats.dynamic.iter().all(|&d| d));
-    // A huge tolerance flags all static: the field no longer moves anything.
+    // A huge tolerance flags all static: the model keeps no field at all.
     let t = run(1e9);
     let sp = t.split.unwrap();
     assert_eq!((sp.dynamic, sp.static_), (0, 10));
+    assert!(!t.field_on() && !t.settings.dynamic_only && t.splats.dynamic.is_empty());
+    assert!(gaussians::model::Model::from_trainer(&t).field.is_none());
     let (d, _) = t.deformed(0.7);
     assert_eq!(d.means, t.splats.means);
     assert_eq!(d.rotations, t.splats.rotations);

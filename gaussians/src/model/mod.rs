@@ -8,6 +8,7 @@
 //! models still load.
 
 pub mod dynamic_flags;
+pub mod size;
 
 use crate::field::{self, Mlp};
 use crate::raster::{Rasterizer, RenderedImage, TileRasterizer};
@@ -74,17 +75,26 @@ pub struct Model {
 
 impl Model {
     /// The model a trainer holds now (field included once it has been switched on, or
-    /// whenever deformation is enabled and the run got past the static phase).
+    /// whenever deformation is enabled and the run got past the static phase), at the
+    /// SH degree it renders with now, with dynamic flags only when the field uses them.
     pub fn from_trainer(tr: &Trainer) -> Model {
         let s = &tr.settings;
         let field = tr.field_on().then(|| tr.field.clone());
+        let mut splats = tr.splats.clone();
+        // Dynamic flags are written only where the field reads them.
+        if field.is_none() || !s.dynamic_only {
+            splats.dynamic.clear();
+        }
+        let n = splats.len();
         Model {
-            splats: tr.splats.clone(),
+            splats,
             info: ModelInfo {
-                sh_degree: s.sh_degree.min(3),
+                // The degree in use: the coefficients above it are zero, and the PLY
+                // holds only the columns of this degree.
+                sh_degree: tr.sh_degree().min(3),
                 background: s.background,
                 dynamic_only: s.dynamic_only,
-                gaussians: tr.splats.len(),
+                gaussians: n,
                 has_field: field.is_some(),
                 iterations: tr.iteration,
                 ..ModelInfo::default()

@@ -23,6 +23,7 @@
 
 mod alpha;
 mod backward;
+mod contribution;
 mod forward;
 pub mod project;
 mod rasterizer;
@@ -31,6 +32,7 @@ pub mod sh;
 pub mod simd;
 
 pub use alpha::{ALPHA_MAX, ALPHA_MIN, CULL_OPACITY, LOW_PASS, NEAR, SIGMA_CUTOFF, T_MIN};
+pub use contribution::add_contributions;
 pub use forward::{Projected, RenderState, TILE};
 pub use rasterizer::{Rasterizer, RenderedImage};
 
@@ -124,6 +126,14 @@ impl Rasterizer for TileRasterizer {
             reuse.unwrap_or_else(|| (RenderedImage::default(), RenderState::empty(&cs)));
         forward::render_into(s, &cs, sh_degree.min(3), background, &mut image, &mut state);
         (image, state)
+    }
+
+    /// The forward pass at SH degree 0 (colour does not change the weights), then
+    /// [`add_contributions`] on its state.
+    fn add_contributions(&self, s: &Splats, cam: &Camera, acc: &mut [f64]) -> bool {
+        let (_, st) = forward::render(s, &CamSetup::new(cam), 0, [0.0; 3]);
+        add_contributions(&st, acc);
+        true
     }
 
     fn backward_view_into(

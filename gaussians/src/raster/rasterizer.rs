@@ -94,6 +94,13 @@ pub trait Rasterizer: Sync {
         *grads = g;
         twist
     }
+    /// Add each Gaussian's blending weight `Σ_pixels α·T` in the render of `s` at `cam`
+    /// to `acc` (one entry per Gaussian); false (and `acc` untouched) when this
+    /// renderer cannot tell them.
+    fn add_contributions(&self, s: &Splats, cam: &Camera, acc: &mut [f64]) -> bool {
+        let _ = (s, cam, acc);
+        false
+    }
     /// Backward from the gradient of the loss w.r.t. the planar RGB image.
     fn backward(&self, s: &Splats, cam: &Camera, state: &Self::State, d_rgb: &[f32]) -> SplatGrads {
         self.backward_view(s, cam, state, d_rgb, None).0

@@ -117,6 +117,24 @@ pub fn render(
     sh_degree: u32,
     background: [f64; 3],
 ) -> RenderedImage64 {
+    composite(g, cam, sh_degree, background, None)
+}
+
+/// Each Gaussian's blending weight `Σ_pixels αᵢ·Tᵢ` in the render of `g` at `cam`.
+pub fn contributions(g: &Gaussians64, cam: &Camera) -> Vec<f64> {
+    let mut w = vec![0.0; g.means.len()];
+    composite(g, cam, 0, [0.0; 3], Some(&mut w));
+    w
+}
+
+/// The render, and when `weights` is given each Gaussian's `α·T` summed into it.
+fn composite(
+    g: &Gaussians64,
+    cam: &Camera,
+    sh_degree: u32,
+    background: [f64; 3],
+    mut weights: Option<&mut Vec<f64>>,
+) -> RenderedImage64 {
     let (w, h) = (
         cam.intrinsics.width as usize,
         cam.intrinsics.height as usize,
@@ -140,7 +158,7 @@ pub fn render(
             let mut t = 1.0f64;
             let mut rgb = [0.0f64; 3];
             let mut depth = 0.0;
-            for (_, s) in &splats {
+            for (i, s) in &splats {
                 let dx = x as f64 - s.mean[0];
                 let dy = y as f64 - s.mean[1];
                 let m = s.conic[0] * dx * dx + 2.0 * s.conic[1] * dx * dy + s.conic[2] * dy * dy;
@@ -159,6 +177,9 @@ pub fn render(
                     rgb[c] += alpha * t * s.color[c];
                 }
                 depth += alpha * t * s.depth;
+                if let Some(wts) = weights.as_deref_mut() {
+                    wts[*i] += alpha * t;
+                }
                 t = next;
             }
             let p = y * w + x;

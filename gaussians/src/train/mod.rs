@@ -7,6 +7,7 @@
 
 pub mod init;
 pub mod settings;
+pub mod sizing;
 pub mod static_split;
 pub mod stereo;
 
@@ -71,6 +72,8 @@ pub struct Trainer {
     pub iteration: u32,
     /// The static/dynamic split, once made.
     pub split: Option<static_split::SplitSummary>,
+    /// What the sizing decided, once done ([`sizing`]).
+    pub sizing: Option<sizing::SizingSummary>,
     order: Vec<usize>,
     rng: rand_chacha::ChaCha8Rng,
     /// Buffers given back by [`Self::recycle_view`] / [`Self::recycle_grads`].
@@ -137,6 +140,7 @@ impl Trainer {
             extent,
             iteration: 0,
             split: None,
+            sizing: None,
             order: Vec::new(),
             spare: Mutex::default(),
         }
@@ -364,6 +368,7 @@ impl Trainer {
         self.apply_gradients(&g);
         self.recycle_grads(g);
         self.split_static_if_due(views);
+        self.size_if_due(r, views);
         StepInfo {
             iteration: self.iteration,
             loss,
@@ -396,6 +401,12 @@ impl Trainer {
         self.splats.dynamic = static_split::dynamic_flags(&motion, tol);
         self.settings.dynamic_only = true;
         let dynamic = self.splats.dynamic.iter().filter(|&&d| d).count();
+        if dynamic == 0 {
+            // Nothing moves: the model needs no field at all.
+            self.settings.deform = false;
+            self.settings.dynamic_only = false;
+            self.splats.dynamic.clear();
+        }
         self.split = Some(static_split::SplitSummary {
             iteration: self.iteration,
             tolerance_px: tol,

@@ -1,6 +1,7 @@
 //! Training settings (`settings.toml`): schedules and learning rates after Deform-GS
 //! (`docs/REFERENCES.md`), scaled to the 3500-iteration warm-up of DEGS.
 
+pub use super::sizing::SizeSettings;
 pub use super::stereo::StereoSettings;
 use crate::densify::DensifySettings;
 use crate::field::FieldSettings;
@@ -58,6 +59,10 @@ pub struct TrainSettings {
     pub sh_degree: u32,
     pub sh_interval: u32,
     pub densify: DensifySettings,
+    /// Right-sizing once during the warm-up: field, SH degree and Gaussian count chosen
+    /// by the train views within a PSNR tolerance (`tolerance_db = 0`: the fixed sizes
+    /// of `field`, `sh_degree` and the cap below).
+    pub size: SizeSettings,
     /// Cap on the Gaussians per pixel of a train frame, used when
     /// `densify.max_gaussians` is 0 (auto): a model needs no more Gaussians than its
     /// views have pixels to constrain them (measured, BENCHMARKS.md).
@@ -103,6 +108,7 @@ impl Default for TrainSettings {
             sh_degree: 3,
             sh_interval: 1000,
             densify: DensifySettings::default(),
+            size: SizeSettings::default(),
             max_gaussians_per_pixel: 2.0,
             init_points: 20_000,
             init: Init::Stereo,
@@ -153,6 +159,7 @@ impl scene::cli::Settings for TrainSettings {
             return Err("0 < init_near < init_far required".into());
         }
         self.stereo.validate()?;
+        self.size.validate()?;
         if !(self.max_gaussians_per_pixel > 0.0 && self.max_gaussians_per_pixel.is_finite()) {
             return Err("max_gaussians_per_pixel must be positive".into());
         }

@@ -29,11 +29,45 @@ pub fn field_motion_px(
         let (d, _) = field::Deformation::forward(mlp, &splats.means, &[t]);
         accumulate_motion(splats, &d, &mut world);
     }
+    to_pixels(splats, cams, &world)
+}
+
+/// How far the field moves each Gaussian's centre away from where it puts it at time
+/// `reference`, in pixels of the train views: over `times`, the largest
+/// `|δμ(t) − δμ(reference)|`, divided by the Gaussian's smallest depth over `cams` and
+/// multiplied by the focal length (0 behind every camera). Unlike [`field_motion_px`]
+/// it ignores what the field does at every time alike (a constant shift), which is no
+/// motion.
+pub fn centre_motion_px(
+    mlp: &Mlp<f32>,
+    splats: &Splats,
+    dynamic_only: bool,
+    cams: &[Camera],
+    times: &[f32],
+    reference: f32,
+) -> Vec<f32> {
+    let n = splats.len();
+    let (at_ref, _) = field::splat_deltas(mlp, splats, reference, dynamic_only);
+    let mut world = vec![0.0f32; n];
+    for &t in times {
+        let (d, _) = field::splat_deltas(mlp, splats, t, dynamic_only);
+        for (i, w) in world.iter_mut().enumerate() {
+            let (a, b) = (d.dx[i], at_ref.dx[i]);
+            let m = (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f32>().sqrt();
+            *w = w.max(m);
+        }
+    }
+    to_pixels(splats, cams, &world)
+}
+
+/// World distances `world[i]` at Gaussian i's centre, in pixels at its smallest depth
+/// over `cams` (0 for a Gaussian behind every camera).
+fn to_pixels(splats: &Splats, cams: &[Camera], world: &[f32]) -> Vec<f32> {
     let focal = cams
         .iter()
         .map(|c| c.intrinsics.fx.max(c.intrinsics.fy))
         .fold(0.0f64, f64::max);
-    (0..n)
+    (0..splats.len())
         .map(|i| {
             let p = glam::DVec3::from(splats.means[i].map(f64::from));
             let z = cams
@@ -171,6 +205,11 @@ mod tests {
         mlp.params[head.bias] = 0.01;
         let m = field_motion_px(&mlp, &splats, &cams, &times);
         let f = cams[0].intrinsics.fx as f32;
+        // A shift at every time alike is no motion from the middle of the recording.
+        assert_eq!(
+            centre_motion_px(&mlp, &splats, false, &cams, &times, 0.5),
+            vec![0.0, 0.0]
+        );
         assert!((m[0] - 0.01 * f / 3.0).abs() < 1e-4, "{m:?}");
         assert!((m[1] - 0.01 * f / 6.0).abs() < 1e-4, "{m:?}");
         // A Gaussian behind the camera is not seen to move.
