@@ -1,5 +1,5 @@
-//! The portable 4-lane kernels (SSE2) against the f64 reference (same images) and, where
-//! the CPU has AVX-512F, against the 16-lane kernels (same images, same gradients). On a
+//! The portable 4-lane kernels (SSE2) against the f64 reference and, where the CPU has
+//! AVX-512F, against the 16-lane kernels (the same images and gradients to rounding). On a
 //! CPU without AVX-512 only the first comparison can run; the test says which ran.
 //! One test in its own binary, because it flips the process-wide kernel switch.
 
@@ -67,18 +67,22 @@ fn narrow_and_wide_kernels_agree() {
             out.push((f, flat(&g), pose));
         }
         let rf = reference::render(&Gaussians64::from(&s), &cam, 3, [0.2, 0.1, 0.0]);
-        let narrow = &out[0];
-        for (name, a, b) in [
-            ("rgb", &narrow.0.rgb, &rf.rgb),
-            ("depth", &narrow.0.depth, &rf.depth),
-            ("alpha", &narrow.0.alpha, &rf.alpha),
-        ] {
-            let d = max_abs_diff(a, b);
-            assert!(
-                d < 1e-4,
-                "scene {scene}: narrow vs reference, {name} by {d:e}"
-            );
+        // Each kernel against the reference; the 16-lane one uses fused multiply-adds
+        // and a reciprocal estimate, so the two agree to rounding, not bit for bit.
+        for (kernel, o) in ["narrow", "wide"].iter().zip(&out) {
+            for (name, a, b) in [
+                ("rgb", &o.0.rgb, &rf.rgb),
+                ("depth", &o.0.depth, &rf.depth),
+                ("alpha", &o.0.alpha, &rf.alpha),
+            ] {
+                let d = max_abs_diff(a, b);
+                assert!(
+                    d < 1e-4,
+                    "scene {scene}: {kernel} vs reference, {name} by {d:e}"
+                );
+            }
         }
+        let narrow = &out[0];
         let Some(wide) = out.get(1) else {
             continue;
         };
@@ -87,9 +91,14 @@ fn narrow_and_wide_kernels_agree() {
             (&narrow.0.depth, &wide.0.depth),
             (&narrow.0.alpha, &wide.0.alpha),
         ] {
-            assert_eq!(
-                a, b,
-                "scene {scene}: the kernels must composite identically"
+            let d = a
+                .iter()
+                .zip(b)
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0, f32::max);
+            assert!(
+                d < 1e-5,
+                "scene {scene}: the kernels' images differ by {d:e}"
             );
         }
         let norm = narrow

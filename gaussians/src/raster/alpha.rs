@@ -26,7 +26,9 @@ pub const T_MIN: f32 = 1e-4;
 #[inline(always)]
 pub(crate) fn eval_alpha<V: Lanes>(conic: [f32; 3], op: f32, dx: V, dy: V) -> (V, V) {
     let s = V::splat;
-    let maha = (s(conic[0]) * dx + s(2.0 * conic[1]) * dy) * dx + s(conic[2]) * dy * dy;
+    let maha = s(conic[0])
+        .mul_add(dx, s(2.0 * conic[1]) * dy)
+        .mul_add(dx, s(conic[2]) * dy * dy);
     let raw = s(op) * simd::fast_exp(s(-0.5) * maha);
     let alpha = raw.min(s(ALPHA_MAX));
     let ok = maha

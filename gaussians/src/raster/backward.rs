@@ -53,12 +53,14 @@ fn tile_backward_lanes<V: Lanes>(
     let p = &st.proj;
     let bg = st.background;
     let z = [[0.0f32; TILE]; TILE];
-    // Per pixel: transmittance (walked back), colour/depth behind, loss gradients.
+    // Per pixel: transmittance (walked back), loss gradients of colour and depth, and
+    // `behind` = Σ_ch ∂L/∂ch · (what lies behind the current entry in channel ch) −
+    // ∂L/∂alpha · T_final: the one sum `∂L/∂α` needs of the pixels behind (Eq. 1 walked
+    // back to front; `behind` starts with the background).
     let mut tt: Plane<f32> = z;
-    let mut t_fin: Plane<f32> = z;
     let mut last: Plane<f32> = z;
-    let mut behind: [Plane<f32>; 4] = [z; 4];
-    let mut dl: [Plane<f32>; 5] = [z; 5];
+    let mut behind: Plane<f32> = z;
+    let mut dl: [Plane<f32>; 4] = [z; 4];
     let mut max_last = 0u32;
     for y in r[2]..r[3] {
         for x in r[0]..r[1] {
@@ -66,15 +68,16 @@ fn tile_backward_lanes<V: Lanes>(
             let pix = y * w + x;
             let tf = st.t_final[pix];
             tt[ty][tx] = tf;
-            t_fin[ty][tx] = tf;
             last[ty][tx] = st.last[pix] as f32;
             max_last = max_last.max(st.last[pix]);
+            let mut b = -g.d_alpha.map_or(0.0, |d| d[pix]) * tf;
             for c in 0..3 {
-                behind[c][ty][tx] = tf * bg[c];
-                dl[c][ty][tx] = g.d_rgb[c * np + pix];
+                let d = g.d_rgb[c * np + pix];
+                dl[c][ty][tx] = d;
+                b += d * tf * bg[c];
             }
+            behind[ty][tx] = b;
             dl[3][ty][tx] = g.d_depth.map_or(0.0, |d| d[pix]);
-            dl[4][ty][tx] = g.d_alpha.map_or(0.0, |d| d[pix]);
         }
     }
     // Entries behind every pixel's last contributor get no gradient.
@@ -89,7 +92,8 @@ fn tile_backward_lanes<V: Lanes>(
         let (y0, y1) = ((b[2] as usize).max(r[2]), (b[3] as usize + 1).min(r[3]));
         let [u, v] = p.xy[gi];
         let (conic, op, col, dep) = (p.conic[gi], p.opacity[gi], p.color[gi], p.depth[gi]);
-        let (u4, col4, dep4, inv_op) = (s(u), col.map(s), s(dep), s(1.0 / op));
+        let cv = [s(col[0]), s(col[1]), s(col[2]), s(dep)];
+        let (u4, inv_op) = (s(u), s(1.0 / op));
         let (qa, qb, qc) = (s(conic[0]), s(conic[1]), s(conic[2]));
         let kk = s(k as f32);
         let mut acc = [s(0.0); 10];
@@ -114,30 +118,32 @@ fn tile_backward_lanes<V: Lanes>(
                 let dx = xs[c] - u4;
                 let (a0, raw) = eval_alpha(conic, op, dx, dy);
                 let a = a0.and(V::M::from_bits(bits));
-                let inv = s(1.0) / (s(1.0) - a);
+                let inv = (s(1.0) - a).recip();
                 let t_in = V::load(&tt[ro][l.clone()]) * inv;
                 let wgt = a * t_in;
-                let mut ga = V::load(&dl[4][ro][l.clone()]) * V::load(&t_fin[ro][l.clone()]) * inv;
+                // d·c: this entry's colour and depth against the pixel's loss gradients.
+                let mut dc = s(0.0);
                 for ch in 0..4 {
-                    let cv = if ch < 3 { col4[ch] } else { dep4 };
                     let d = V::load(&dl[ch][ro][l.clone()]);
-                    let bh = V::load(&behind[ch][ro][l.clone()]);
-                    ga = ga + d * (cv * t_in - bh * inv);
-                    acc[6 + ch] = acc[6 + ch] + wgt * d;
-                    (bh + cv * wgt).store(&mut behind[ch][ro][l.clone()]);
+                    dc = d.mul_add(cv[ch], dc);
+                    acc[6 + ch] = wgt.mul_add(d, acc[6 + ch]);
                 }
+                let bh = V::load(&behind[ro][l.clone()]);
+                // ∂L/∂α = T·(d·c) − (d·behind)/(1 − α).
+                let ga = t_in * dc - bh * inv;
+                wgt.mul_add(dc, bh).store(&mut behind[ro][l.clone()]);
                 t_in.store(&mut tt[ro][l]);
                 // α = o·exp(−½ m), m = dᵀQd with d = pixel − mean; no gradient through
                 // the clamp at ALPHA_MAX.
                 let ga = ga.and(raw.lt(s(ALPHA_MAX)));
-                acc[5] = acc[5] + ga * a * inv_op;
+                acc[5] = (ga * a).mul_add(inv_op, acc[5]);
                 let gm = s(-0.5) * a * ga;
                 let gm2 = gm + gm;
-                acc[0] = acc[0] - gm2 * (qa * dx + qb * dy);
-                acc[1] = acc[1] - gm2 * (qb * dx + qc * dy);
-                acc[2] = acc[2] + gm * dx * dx;
-                acc[3] = acc[3] + gm2 * dx * dy;
-                acc[4] = acc[4] + gm * dy * dy;
+                acc[0] = acc[0] - gm2 * qa.mul_add(dx, qb * dy);
+                acc[1] = acc[1] - gm2 * qb.mul_add(dx, qc * dy);
+                acc[2] = (gm * dx).mul_add(dx, acc[2]);
+                acc[3] = (gm2 * dx).mul_add(dy, acc[3]);
+                acc[4] = (gm * dy).mul_add(dy, acc[4]);
             }
         }
         out[k] = std::array::from_fn(|c| acc[c].sum());

@@ -375,10 +375,10 @@ fn tile_forward_lanes<V: Lanes>(p: &Projected, list: &[u32], r: [usize; 4]) -> T
                 let w = a * t;
                 for ch in 0..3 {
                     let dst = &mut o.rgb[ch][row][l.clone()];
-                    (V::load(dst) + w * col4[ch]).store(dst);
+                    w.mul_add(col4[ch], V::load(dst)).store(dst);
                 }
                 let dst = &mut o.depth[row][l.clone()];
-                (V::load(dst) + w * dep4).store(dst);
+                w.mul_add(dep4, V::load(dst)).store(dst);
                 let used = a.gt(s(0.0));
                 V::select(used, test_t, t).store(&mut o.t[row][l.clone()]);
                 let dst = &mut o.last[row][l];

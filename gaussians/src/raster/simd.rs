@@ -45,6 +45,16 @@ pub trait Lanes:
     /// `self · 2^i` by adding `i` to the exponent (no overflow handling).
     fn scale_pow2(self, i: Self::I) -> Self;
     fn sum(self) -> f32;
+    /// `self · b + c` (one rounding where the lanes have a fused multiply-add).
+    #[inline(always)]
+    fn mul_add(self, b: Self, c: Self) -> Self {
+        self * b + c
+    }
+    /// `1 / self` (≈ 1 ulp where the lanes use a reciprocal estimate and a Newton step).
+    #[inline(always)]
+    fn recip(self) -> Self {
+        Self::splat(1.0) / self
+    }
 }
 
 /// `exp(x)` for `x ≤ 0` per lane without libm: `2^t = 2^i · 2^f`, `i = round(t)`,
@@ -63,9 +73,10 @@ pub fn fast_exp<V: Lanes>(x: V) -> V {
     let s = V::splat;
     let t = x.max(s(-80.0)).min(s(0.0)) * s(std::f32::consts::LOG2_E);
     let (i, f) = t.round_split();
-    let p = s(1.0)
-        + f * (s(C[0])
-            + f * (s(C[1]) + f * (s(C[2]) + f * (s(C[3]) + f * (s(C[4]) + f * s(C[5]))))));
+    let mut p = f.mul_add(s(C[5]), s(C[4]));
+    for c in [C[3], C[2], C[1], C[0], 1.0] {
+        p = p.mul_add(f, s(c));
+    }
     p.scale_pow2(i)
 }
 
@@ -313,6 +324,20 @@ mod imp16 {
             self.store(&mut a);
             a.iter().sum()
         }
+        #[inline(always)]
+        fn mul_add(self, b: F16, c: F16) -> F16 {
+            F16(unsafe { _mm512_fmadd_ps(self.0, b.0, c.0) })
+        }
+        /// The 14-bit estimate and one Newton step `r·(2 − x·r)`: ≈ 1 ulp, a fraction
+        /// of a division's cost.
+        #[inline(always)]
+        fn recip(self) -> F16 {
+            unsafe {
+                let r = _mm512_rcp14_ps(self.0);
+                let e = _mm512_fnmadd_ps(self.0, r, _mm512_set1_ps(2.0));
+                F16(_mm512_mul_ps(r, e))
+            }
+        }
     }
 
     arith!(
@@ -482,6 +507,36 @@ mod tests {
         assert!((far / (-60.0f64).exp() - 1.0).abs() < 1e-5);
         assert_eq!(first(fast_exp(F4::splat(0.0))), 1.0);
         assert!(first(fast_exp(F4::splat(f32::NAN))).is_finite());
+    }
+
+    /// The 16-lane `fast_exp` (fused Horner steps) and `recip` (estimate + Newton step)
+    /// against f64, where the CPU has AVX-512F.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn wide_exp_and_recip_are_accurate() {
+        if !wide_available() {
+            eprintln!("no AVX-512F here: the 16-lane functions are not tested");
+            return;
+        }
+        #[target_feature(enable = "avx512f")]
+        fn worst() -> (f64, f64) {
+            let (mut e_worst, mut r_worst) = (0.0f64, 0.0f64);
+            for k in 0..=100_000 {
+                let x = -(k as f32) * 5.0 / 100_000.0;
+                let got = first(fast_exp(F16::splat(x))) as f64;
+                let e = (x as f64).exp();
+                e_worst = e_worst.max((got - e).abs() / e);
+                // 1 − α for α in [0, 0.99]: what the backward divides by.
+                let y = 0.01 + 0.99 * k as f32 / 100_000.0;
+                let r = first(F16::splat(y).recip()) as f64;
+                r_worst = r_worst.max((r * y as f64 - 1.0).abs());
+            }
+            (e_worst, r_worst)
+        }
+        // SAFETY: AVX-512F was detected above.
+        let (e, r) = unsafe { worst() };
+        assert!(e < 6e-7, "exp: relative error {e:e}");
+        assert!(r < 3e-7, "recip: relative error {r:e}");
     }
 
     #[test]
