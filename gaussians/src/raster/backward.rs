@@ -93,10 +93,11 @@ fn tile_backward_lanes<V: Lanes>(
         let [u, v] = p.xy[gi];
         let (conic, op, col, dep) = (p.conic[gi], p.opacity[gi], p.color[gi], p.depth[gi]);
         let cv = [s(col[0]), s(col[1]), s(col[2]), s(dep)];
-        let (u4, inv_op) = (s(u), s(1.0 / op));
-        let (qa, qb, qc) = (s(conic[0]), s(conic[1]), s(conic[2]));
+        let u4 = s(u);
         let kk = s(k as f32);
-        let mut acc = [s(0.0); 10];
+        // Colour and depth gradients, and the moments of the α gradient (below).
+        let mut acc = [s(0.0); 4];
+        let mut mom = [s(0.0); 6];
         for y in y0..y1 {
             let ro = y - r[2];
             let dyf = y as f32 - v;
@@ -126,7 +127,7 @@ fn tile_backward_lanes<V: Lanes>(
                 for ch in 0..4 {
                     let d = V::load(&dl[ch][ro][l.clone()]);
                     dc = d.mul_add(cv[ch], dc);
-                    acc[6 + ch] = wgt.mul_add(d, acc[6 + ch]);
+                    acc[ch] = wgt.mul_add(d, acc[ch]);
                 }
                 let bh = V::load(&behind[ro][l.clone()]);
                 // ∂L/∂α = T·(d·c) − (d·behind)/(1 − α).
@@ -134,19 +135,34 @@ fn tile_backward_lanes<V: Lanes>(
                 wgt.mul_add(dc, bh).store(&mut behind[ro][l.clone()]);
                 t_in.store(&mut tt[ro][l]);
                 // α = o·exp(−½ m), m = dᵀQd with d = pixel − mean; no gradient through
-                // the clamp at ALPHA_MAX.
-                let ga = ga.and(raw.lt(s(ALPHA_MAX)));
-                acc[5] = (ga * a).mul_add(inv_op, acc[5]);
-                let gm = s(-0.5) * a * ga;
-                let gm2 = gm + gm;
-                acc[0] = acc[0] - gm2 * qa.mul_add(dx, qb * dy);
-                acc[1] = acc[1] - gm2 * qb.mul_add(dx, qc * dy);
-                acc[2] = (gm * dx).mul_add(dx, acc[2]);
-                acc[3] = (gm2 * dx).mul_add(dy, acc[3]);
-                acc[4] = (gm * dy).mul_add(dy, acc[4]);
+                // the clamp at ALPHA_MAX. With g = α·∂L/∂α: ∂L/∂o = Σ g / o and
+                // ∂L/∂m = −½ g, so the mean and the conic need only the moments
+                // Σ g·(dx, dy, dx², dx·dy, dy²), summed here and combined once below.
+                let g = a * ga.and(raw.lt(s(ALPHA_MAX)));
+                let (gx, gy) = (g * dx, g * dy);
+                mom[0] = mom[0] + g;
+                mom[1] = mom[1] + gx;
+                mom[2] = mom[2] + gy;
+                mom[3] = gx.mul_add(dx, mom[3]);
+                mom[4] = gx.mul_add(dy, mom[4]);
+                mom[5] = gy.mul_add(dy, mom[5]);
             }
         }
-        out[k] = std::array::from_fn(|c| acc[c].sum());
+        let [g, gx, gy, gxx, gxy, gyy] = mom.map(|m| m.sum());
+        let colour: [f32; 4] = std::array::from_fn(|c| acc[c].sum());
+        // ∂m/∂u = −2(a·dx + b·dy), ∂m/∂v = −2(b·dx + c·dy); ∂m/∂(a, b, c) = (dx², 2dx·dy, dy²).
+        out[k] = [
+            conic[0] * gx + conic[1] * gy,
+            conic[1] * gx + conic[2] * gy,
+            -0.5 * gxx,
+            -gxy,
+            -0.5 * gyy,
+            g / op,
+            colour[0],
+            colour[1],
+            colour[2],
+            colour[3],
+        ];
     }
 }
 
