@@ -371,7 +371,10 @@ fn tile_forward_lanes<V: Lanes>(p: &Projected, list: &[u32], r: [usize; 4]) -> T
                 let sb = stop.bits();
                 active[row] &= !(sb << (n * c));
                 remaining -= sb.count_ones();
-                let a = V::select(stop, s(0.0), a0);
+                // Lanes that stop take nothing: α = 0 leaves colour and T as they are
+                // (`T·(1 − 0)` is T exactly).
+                let used = a0.gt(s(0.0)).and(V::M::from_bits(!sb));
+                let a = a0.and(used);
                 let w = a * t;
                 for ch in 0..3 {
                     let dst = &mut o.rgb[ch][row][l.clone()];
@@ -379,7 +382,6 @@ fn tile_forward_lanes<V: Lanes>(p: &Projected, list: &[u32], r: [usize; 4]) -> T
                 }
                 let dst = &mut o.depth[row][l.clone()];
                 w.mul_add(dep4, V::load(dst)).store(dst);
-                let used = a.gt(s(0.0));
                 V::select(used, test_t, t).store(&mut o.t[row][l.clone()]);
                 let dst = &mut o.last[row][l];
                 V::select(used, kk, V::load(dst)).store(dst);
