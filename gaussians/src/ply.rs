@@ -1,9 +1,11 @@
-//! Gaussians as PLY in the exact layout of the original 3DGS code (`docs/DESIGN.md`
-//! §3): one `vertex` element of float32 properties `x y z nx ny nz f_dc_0..2 f_rest_*
-//! opacity scale_0..2 rot_0..3`, binary little-endian. `f_rest` is channel-major in the file (all
-//! red coefficients 1..15, then green, then blue); [`Splats::sh_rest`] is
+//! Gaussians as PLY in the layout of the original 3DGS code (`docs/DESIGN.md` §3): one
+//! `vertex` element of float32 properties `x y z [nx ny nz] f_dc_0..2 f_rest_* opacity
+//! scale_0..2 rot_0..3`, binary little-endian. `f_rest` is channel-major in the file
+//! (all red coefficients 1..15, then green, then blue); [`Splats::sh_rest`] is
 //! coefficient-major. Degree d has `3·((d+1)² − 1)` `f_rest` fields. Stored raw: logit
-//! opacity, log scale, w-first unnormalised quaternion; normals zero.
+//! opacity, log scale, w-first unnormalised quaternion. The normals of the 3DGS layout
+//! are always zero there and unused: files written here leave them out (viewers find
+//! properties by name), files with them are read.
 //!
 //! Parsing uses `ply-rs-bw` with a typed element ([`Vertex`]), not the generic map.
 
@@ -76,9 +78,19 @@ impl PropertyAccess for Vertex {
     }
 }
 
-/// The 3DGS property names, in file order, for SH `degree` (0..=3).
+/// The property names this crate writes, in file order, for SH `degree` (0..=3): the
+/// 3DGS layout without its unused normals.
 pub fn property_names(degree: u32) -> Vec<String> {
-    let mut v: Vec<String> = ["x", "y", "z", "nx", "ny", "nz"].map(String::from).into();
+    layout(degree, false)
+}
+
+/// The 3DGS property names in file order for SH `degree`, with or without the normals
+/// `nx ny nz` after the position.
+pub fn layout(degree: u32, normals: bool) -> Vec<String> {
+    let mut v: Vec<String> = ["x", "y", "z"].map(String::from).into();
+    if normals {
+        v.extend(["nx", "ny", "nz"].map(String::from));
+    }
     v.extend((0..3).map(|k| format!("f_dc_{k}")));
     v.extend((0..3 * (num_coeffs(degree) - 1)).map(|k| format!("f_rest_{k}")));
     v.push("opacity".into());
@@ -199,21 +211,25 @@ pub fn parse_counted(path: &Path, bytes: &[u8]) -> Result<PlyCloud> {
     }
     let el = &header.elements["vertex"];
     let found: Vec<&str> = el.properties.keys().map(String::as_str).collect();
-    let degree = match (0..=3u32).find(|&d| property_names(d) == found) {
-        Some(d) => d,
+    let degree = match (0..=3u32)
+        .flat_map(|d| [(d, false), (d, true)])
+        .find(|&(d, normals)| layout(d, normals) == found)
+    {
+        Some((d, _)) => d,
         None => {
             // Name the first property that differs from the closest 3DGS layout.
             let n_rest = found.iter().filter(|n| n.starts_with("f_rest_")).count();
+            let has_normals = found.get(3) == Some(&"nx");
             let d = [0u32, 1, 2, 3]
                 .into_iter()
                 .min_by_key(|&d| (3 * (num_coeffs(d) - 1)).abs_diff(n_rest))
                 .unwrap_or(3);
-            let want = property_names(d);
+            let want = layout(d, has_normals);
             let k = (0..want.len().max(found.len()))
                 .find(|&k| want.get(k).map(String::as_str) != found.get(k).copied())
                 .unwrap_or(0);
             return Err(bad(format!(
-                "vertex properties are not the 3DGS layout (x y z nx ny nz f_dc_0..2 \
+                "vertex properties are not the 3DGS layout (x y z [nx ny nz] f_dc_0..2 \
                  f_rest_* opacity scale_0..2 rot_0..3): property {k} is {:?}, expected {:?} \
                  ({} properties found)",
                 found.get(k).copied().unwrap_or("<none>"),
@@ -263,7 +279,7 @@ pub fn parse_counted(path: &Path, bytes: &[u8]) -> Result<PlyCloud> {
             .enumerate()
             .position(|(k, x)| !x.is_finite() && (!transparent || k != OPACITY))
         {
-            let name = property_names(3)
+            let name = layout(3, true)
                 .into_iter()
                 .find(|n| slot(n) == Some(k))
                 .unwrap_or_default();
@@ -316,7 +332,7 @@ mod tests {
 
     #[test]
     fn slots_cover_every_property_once() {
-        let names = property_names(3);
+        let names = layout(3, true);
         assert_eq!(names.len(), SLOTS);
         let mut seen = [false; SLOTS];
         for n in &names {

@@ -89,12 +89,11 @@ fn header_lists_exactly_the_3dgs_properties_in_order() {
     let bytes = std::fs::read(&p).unwrap();
     let header = header_of(&bytes);
     let mut want = String::from("ply\nformat binary_little_endian 1.0\nelement vertex 3\n");
-    let mut names = vec![
-        "x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2",
-    ]
-    .into_iter()
-    .map(String::from)
-    .collect::<Vec<_>>();
+    // The 3DGS layout without its normals (always zero there, unused).
+    let mut names = vec!["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2"]
+        .into_iter()
+        .map(String::from)
+        .collect::<Vec<_>>();
     for k in 0..45 {
         names.push(format!("f_rest_{k}"));
     }
@@ -108,7 +107,7 @@ fn header_lists_exactly_the_3dgs_properties_in_order() {
     }
     want.push_str("end_header\n");
     assert_eq!(header, want);
-    assert_eq!(bytes.len(), header.len() + 3 * 62 * 4);
+    assert_eq!(bytes.len(), header.len() + 3 * 59 * 4);
 
     // Degree 1: 9 f_rest fields.
     ply::write(&p, &splats(2, 1), 1).unwrap();
@@ -133,11 +132,42 @@ fn f_rest_is_channel_major_in_the_file() {
     let body = &bytes[header_of(&bytes).len()..];
     let f = |k: usize| f32::from_le_bytes(body[4 * k..4 * k + 4].try_into().unwrap());
     for k in 0..45 {
-        assert_eq!(f(9 + k), (100 * (k / 15) + k % 15) as f32, "f_rest_{k}");
+        assert_eq!(f(6 + k), (100 * (k / 15) + k % 15) as f32, "f_rest_{k}");
     }
-    // Normals are zero; x is the first float.
-    assert_eq!((f(3), f(4), f(5)), (0.0, 0.0, 0.0));
+    // x is the first float, f_dc_0 the fourth (no normals between).
     assert_eq!(f(0).to_bits(), s.means[0][0].to_bits());
+    assert_eq!(f(3).to_bits(), s.sh_dc[0][0].to_bits());
+}
+
+/// A file in the original 3DGS layout, with its normals `nx ny nz` after the position
+/// (what the Inria code and most tools write), reads as the same Gaussians.
+#[test]
+fn the_layout_with_normals_is_read() {
+    let dir = tempfile::tempdir().unwrap();
+    for degree in [0u32, 3] {
+        let s = splats(5, degree);
+        let p = dir.path().join(format!("n{degree}.ply"));
+        ply::write(&p, &s, degree).unwrap();
+        let bytes = std::fs::read(&p).unwrap();
+        let header = header_of(&bytes);
+        let floats = ply::layout(degree, false).len();
+        // Rewrite with three zero floats after x y z in every vertex.
+        let with = header.replace(
+            "property float z\n",
+            "property float z\nproperty float nx\nproperty float ny\nproperty float nz\n",
+        );
+        let mut out = with.into_bytes();
+        for v in bytes[header.len()..].chunks(4 * floats) {
+            out.extend(&v[..12]);
+            out.extend([0u8; 12]);
+            out.extend(&v[12..]);
+        }
+        let q = dir.path().join(format!("n{degree}-normals.ply"));
+        std::fs::write(&q, &out).unwrap();
+        let (r, d) = ply::read(&q).unwrap();
+        assert_eq!(d, degree);
+        assert_eq!(bits(&r), bits(&s), "degree {degree}");
+    }
 }
 
 fn expect_err(path: &Path, bytes: &[u8], what: &str) {
@@ -164,9 +194,11 @@ fn bad_input_gives_errors_that_name_the_file() {
     for cut in [3, hlen - 5, hlen, hlen + 1, bytes.len() - 1] {
         expect_err(&p, &bytes[..cut], &format!("truncated at {cut}"));
     }
-    // NaN in the opacity of Gaussian 3 (opacity is the 34th float at degree 2).
+    // NaN in the opacity of Gaussian 3 (degree 2: 38 floats, opacity the 31st).
     let mut nan = bytes.clone();
-    let off = hlen + 3 * 4 * (9 + 24 + 8) + 4 * (9 + 24);
+    let (per, op) = (ply::property_names(2).len(), 6 + 24);
+    assert_eq!((per, ply::property_names(2)[op].as_str()), (38, "opacity"));
+    let off = hlen + 3 * 4 * per + 4 * op;
     nan[off..off + 4].copy_from_slice(&f32::NAN.to_le_bytes());
     expect_err(&p, &nan, "NaN");
     let e = ply::read(&p).unwrap_err().to_string();
@@ -303,7 +335,7 @@ from plyfile import PlyData
 d = PlyData.read(sys.argv[1])
 v = d['vertex']
 names = [p.name for p in v.properties]
-want = ['x','y','z','nx','ny','nz','f_dc_0','f_dc_1','f_dc_2'] + ['f_rest_%d' % k for k in range(45)] + ['opacity','scale_0','scale_1','scale_2','rot_0','rot_1','rot_2','rot_3']
+want = ['x','y','z','f_dc_0','f_dc_1','f_dc_2'] + ['f_rest_%d' % k for k in range(45)] + ['opacity','scale_0','scale_1','scale_2','rot_0','rot_1','rot_2','rot_3']
 assert names == want, names
 assert all(str(p.val_dtype).endswith('f4') for p in v.properties), [p.val_dtype for p in v.properties]
 assert len(v.data) == 4
@@ -348,8 +380,9 @@ fn minus_inf_opacities_are_dropped_and_counted_nan_and_plus_inf_are_not() {
     ply::write(&p, &front_row(), 0).unwrap();
     let bytes = std::fs::read(&p).unwrap();
     let hlen = header_of(&bytes).len();
-    // Degree 0: 17 floats per Gaussian, opacity the 10th. Gaussian 1 → −inf.
-    let opacity_at = |i: usize| hlen + i * 17 * 4 + 9 * 4;
+    // Degree 0: 14 floats per Gaussian, opacity the 7th. Gaussian 1 → −inf.
+    assert_eq!(ply::property_names(0)[6], "opacity");
+    let opacity_at = |i: usize| hlen + i * 14 * 4 + 6 * 4;
     let mut b = bytes.clone();
     b[opacity_at(1)..opacity_at(1) + 4].copy_from_slice(&f32::NEG_INFINITY.to_le_bytes());
     std::fs::write(&p, &b).unwrap();

@@ -6,7 +6,8 @@ mod raster_common;
 
 use gaussians::field::FieldSettings;
 use gaussians::raster::TileRasterizer;
-use gaussians::train::sizing::{Candidate, Judge, STILL_WORSE_FRACTION, gather, top_k};
+use gaussians::train::judge::{Candidate, Judge, gather_deltas, posed_deltas};
+use gaussians::train::sizing::{STILL_WORSE_FRACTION, gather, top_k};
 use gaussians::train::{TrainSettings, Trainer, View};
 use gaussians::{Rasterizer, Splats};
 use glam::DVec3;
@@ -106,6 +107,7 @@ fn psnr(views: &[View], s: &Splats, sh: u32) -> f64 {
         field: None,
         dynamic_only: false,
         sh_degree: sh,
+        deltas: None,
     })
 }
 
@@ -149,6 +151,7 @@ fn a_static_scene_loses_its_field_its_sh_and_its_unseen_gaussians() {
             field: None,
             dynamic_only: false,
             sh_degree: 0,
+            deltas: None,
         })
         .unwrap()
     };
@@ -204,6 +207,62 @@ fn a_moving_scene_keeps_its_field() {
     let before = tr.splats.clone();
     tr.size_if_due(&TileRasterizer, &v);
     assert_eq!(tr.splats, before);
+}
+
+/// The sizing evaluates the field once per view and scores SH degrees and pruned
+/// subsets from those deltas: the same PSNR as evaluating the field on each candidate.
+#[test]
+fn deltas_evaluated_once_score_as_the_field_does() {
+    let t = truth(24);
+    let mut f = small_field();
+    let head = *f.layers.last().unwrap();
+    f.params[head.bias] = 0.2;
+    for i in 0..head.fan_in {
+        f.params[head.weight + i * head.fan_out] = 0.04 * ((i * 5 % 11) as f32 - 5.0);
+    }
+    let v = views(&t, Some(&f));
+    let model = padded(&t);
+    let mut j = Judge {
+        r: &TileRasterizer,
+        views: &v,
+        background: [0.0; 3],
+        evaluations: 0,
+    };
+    let with_field = Candidate {
+        splats: &model,
+        field: Some(&f),
+        dynamic_only: false,
+        sh_degree: 0,
+        deltas: None,
+    };
+    let posed = posed_deltas(&with_field, &v).expect("a field");
+    assert_eq!(posed.len(), v.len());
+    let from_deltas = Candidate {
+        deltas: Some(&posed),
+        ..with_field
+    };
+    let p = j.psnr(&with_field);
+    assert!(p > 25.0 && p.is_finite(), "{p}");
+    assert_eq!(j.psnr(&from_deltas), p);
+    // Every other Gaussian of the model: the gathered deltas against the field on the
+    // subset (the field moves each Gaussian on its own).
+    let keep: Vec<usize> = (0..model.len()).step_by(2).collect();
+    let sub = gather(&model, &keep);
+    let sub_deltas = gather_deltas(&posed, &keep);
+    let a = j.psnr(&Candidate {
+        splats: &sub,
+        ..with_field
+    });
+    let b = j.psnr(&Candidate {
+        splats: &sub,
+        deltas: Some(&sub_deltas),
+        ..with_field
+    });
+    assert!(
+        a < p - 1.0,
+        "half the Gaussians must score lower: {a} vs {p}"
+    );
+    assert!((a - b).abs() < 1e-9, "{a} vs {b}");
 }
 
 /// A field that grows and shrinks the Gaussians over time without moving them (how an

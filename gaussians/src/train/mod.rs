@@ -6,6 +6,7 @@
 //! on its own; [`Splats`] holds the trainable parameters.
 
 pub mod init;
+pub mod judge;
 pub mod settings;
 pub mod sizing;
 pub mod static_split;

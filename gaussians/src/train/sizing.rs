@@ -26,14 +26,12 @@
 //!   ranks them; a binary search on the count finds the fewest most-contributing
 //!   Gaussians whose renders stay within tolerance, and the rest are dropped.
 
+use super::judge::{Candidate, Judge, at_time, gather_deltas, middle_time, posed_deltas};
 use super::{Trainer, View, static_split};
 use crate::Rasterizer;
-use crate::field::{self, Mlp};
 use crate::raster::sh::num_coeffs;
 use crate::splats::Splats;
-use scene::metrics;
 use serde::{Deserialize, Serialize};
-use std::borrow::Cow;
 
 /// Settings of the sizing (`[size]` in the warm-up's settings).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -171,110 +169,6 @@ pub fn split(canonical: &Splats, frozen: &Splats, motion: &[f32], tolerance_px: 
     out
 }
 
-/// The model as the sizing renders it.
-#[derive(Clone, Copy)]
-pub struct Candidate<'a> {
-    pub splats: &'a Splats,
-    pub field: Option<&'a Mlp<f32>>,
-    pub dynamic_only: bool,
-    pub sh_degree: u32,
-}
-
-/// Renders candidates at the train views.
-pub struct Judge<'a, R> {
-    pub r: &'a R,
-    pub views: &'a [View],
-    pub background: [f32; 3],
-    /// Passes over the views so far.
-    pub evaluations: usize,
-}
-
-/// The middle of the views' time span (0 without views).
-fn middle_time(views: &[View]) -> f32 {
-    let lo = views.iter().map(|v| v.time).fold(f32::INFINITY, f32::min);
-    let hi = views
-        .iter()
-        .map(|v| v.time)
-        .fold(f32::NEG_INFINITY, f32::max);
-    if lo <= hi { 0.5 * (lo + hi) } else { 0.0 }
-}
-
-/// PSNR above this (identical 8-bit images) counts as this, as the stage reports it.
-const PSNR_CAP: f64 = 100.0;
-
-/// `s` deformed to time `t` by `field` (`s` itself without one).
-fn at_time<'s>(
-    s: &'s Splats,
-    field: Option<&Mlp<f32>>,
-    dynamic_only: bool,
-    t: f32,
-) -> Cow<'s, Splats> {
-    match field {
-        None => Cow::Borrowed(s),
-        Some(f) => {
-            let (d, _) = field::splat_deltas(f, s, t, dynamic_only);
-            Cow::Owned(field::deform_splats(s, &d))
-        }
-    }
-}
-
-impl<R: Rasterizer> Judge<'_, R> {
-    /// Mean PSNR (8-bit, capped) of the candidate's renders against the train views.
-    pub fn psnr(&mut self, c: &Candidate) -> f64 {
-        self.evaluations += 1;
-        let sum: f64 = self
-            .views
-            .iter()
-            .map(|v| {
-                let s = at_time(c.splats, c.field, c.dynamic_only, v.time);
-                let (img, _) = self.r.render(&s, &v.camera, c.sh_degree, self.background);
-                metrics::psnr_u8(&img.rgb, &v.rgb).min(PSNR_CAP)
-            })
-            .sum();
-        sum / self.views.len().max(1) as f64
-    }
-
-    /// Fraction of the views' pixels where `b` is visibly worse than `a`: its largest
-    /// channel error exceeds `a`'s by more than `by`.
-    pub fn worse_fraction(&mut self, a: &Candidate, b: &Candidate, by: f32) -> f64 {
-        self.evaluations += 2;
-        let (mut worse, mut pixels) = (0usize, 0usize);
-        for v in self.views {
-            let render = |c: &Candidate| {
-                let s = at_time(c.splats, c.field, c.dynamic_only, v.time);
-                self.r.render(&s, &v.camera, c.sh_degree, self.background).0
-            };
-            let (ia, ib) = (render(a), render(b));
-            // planar 3×H×W, as rendered
-            let n = v.rgb.len() / 3;
-            let err = |img: &[f32], px: usize| {
-                (0..3).fold(0f32, |m, k| {
-                    m.max((img[k * n + px] - v.rgb[k * n + px]).abs())
-                })
-            };
-            worse += (0..n)
-                .filter(|&px| err(&ib.rgb, px) > err(&ia.rgb, px) + by)
-                .count();
-            pixels += n;
-        }
-        worse as f64 / pixels.max(1) as f64
-    }
-
-    /// Each Gaussian's blending weight summed over the views (None when the rasterizer
-    /// cannot give them).
-    pub fn contributions(&mut self, c: &Candidate) -> Option<Vec<f64>> {
-        self.evaluations += 1;
-        let mut acc = vec![0.0; c.splats.len()];
-        for v in self.views {
-            let s = at_time(c.splats, c.field, c.dynamic_only, v.time);
-            if !self.r.add_contributions(&s, &v.camera, &mut acc) {
-                return None;
-            }
-        }
-        Some(acc)
-    }
-}
-
 /// The lowest SH degree below `current` whose PSNR reaches `target` (`current` when
 /// none does), with the PSNR of each degree tested.
 pub fn choose_sh_degree(
@@ -394,6 +288,7 @@ impl Trainer {
             field,
             dynamic_only,
             sh_degree: sh_before,
+            deltas: None,
         };
         let before = judge.psnr(&c);
         let target = before - size.tolerance_db;
@@ -467,6 +362,13 @@ impl Trainer {
                 ..c
             };
         }
+        // From here on the candidates keep the field's motion of each Gaussian they
+        // keep: evaluate the field once per view.
+        let posed = posed_deltas(&c, views);
+        let mut c = Candidate {
+            deltas: posed.as_deref(),
+            ..c
+        };
         if size.sh_degree {
             let (d, tried) = choose_sh_degree(
                 |d| judge.psnr(&Candidate { sh_degree: d, ..c }),
@@ -487,8 +389,14 @@ impl Trainer {
             let weighed = w.iter().filter(|&&v| v > 0.0).count();
             sum.gaussians_without_weight = n - weighed;
             let k = smallest_count(n, weighed, |k| {
-                let sub = gather(c.splats, &top_k(&w, k));
-                judge.psnr(&Candidate { splats: &sub, ..c }) >= target
+                let kept = top_k(&w, k);
+                let sub = gather(c.splats, &kept);
+                let deltas = c.deltas.map(|d| gather_deltas(d, &kept));
+                judge.psnr(&Candidate {
+                    splats: &sub,
+                    deltas: deltas.as_deref(),
+                    ..c
+                }) >= target
             });
             keep = (k < n).then(|| top_k(&w, k));
         }
@@ -509,6 +417,7 @@ impl Trainer {
             field: field_kept.then_some(&self.field),
             dynamic_only,
             sh_degree: sh,
+            deltas: None,
         };
         sum.train_psnr_after = judge.psnr(&c);
         sum.gaussians = self.splats.len();

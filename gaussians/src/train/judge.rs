@@ -1,0 +1,151 @@
+//! How the warm-up's sizing (`sizing.rs`) scores a candidate model: renders of it at
+//! every train view against the frames.
+
+use super::View;
+use crate::Rasterizer;
+use crate::field::{self, Deltas, Mlp};
+use crate::splats::Splats;
+use scene::metrics;
+use std::borrow::Cow;
+
+/// The model as the sizing renders it.
+#[derive(Clone, Copy)]
+pub struct Candidate<'a> {
+    pub splats: &'a Splats,
+    pub field: Option<&'a Mlp<f32>>,
+    pub dynamic_only: bool,
+    pub sh_degree: u32,
+    /// The field's deltas of `splats` at each view, in view order, when already known
+    /// (used instead of evaluating `field`): the field moves every Gaussian on its own,
+    /// so candidates that differ only in SH degree or in which Gaussians they keep
+    /// share one evaluation per view ([`posed_deltas`], [`gather_deltas`]).
+    pub deltas: Option<&'a [Deltas]>,
+}
+
+/// The field's deltas of the candidate's Gaussians at every view (None without a
+/// field).
+pub fn posed_deltas(c: &Candidate, views: &[View]) -> Option<Vec<Deltas>> {
+    let f = c.field?;
+    Some(
+        views
+            .iter()
+            .map(|v| field::splat_deltas(f, c.splats, v.time, c.dynamic_only).0)
+            .collect(),
+    )
+}
+
+/// The deltas of the Gaussians `keep` (indices) at every view.
+pub fn gather_deltas(per_view: &[Deltas], keep: &[usize]) -> Vec<Deltas> {
+    per_view
+        .iter()
+        .map(|d| Deltas {
+            dx: keep.iter().map(|&i| d.dx[i]).collect(),
+            dq: keep.iter().map(|&i| d.dq[i]).collect(),
+            ds: keep.iter().map(|&i| d.ds[i]).collect(),
+        })
+        .collect()
+}
+
+/// Renders candidates at the train views.
+pub struct Judge<'a, R> {
+    pub r: &'a R,
+    pub views: &'a [View],
+    pub background: [f32; 3],
+    /// Passes over the views so far.
+    pub evaluations: usize,
+}
+
+/// The middle of the views' time span (0 without views).
+pub fn middle_time(views: &[View]) -> f32 {
+    let lo = views.iter().map(|v| v.time).fold(f32::INFINITY, f32::min);
+    let hi = views
+        .iter()
+        .map(|v| v.time)
+        .fold(f32::NEG_INFINITY, f32::max);
+    if lo <= hi { 0.5 * (lo + hi) } else { 0.0 }
+}
+
+/// PSNR above this (identical 8-bit images) counts as this, as the stage reports it.
+const PSNR_CAP: f64 = 100.0;
+
+/// `s` deformed to time `t` by `field` (`s` itself without one).
+pub fn at_time<'s>(
+    s: &'s Splats,
+    field: Option<&Mlp<f32>>,
+    dynamic_only: bool,
+    t: f32,
+) -> Cow<'s, Splats> {
+    match field {
+        None => Cow::Borrowed(s),
+        Some(f) => {
+            let (d, _) = field::splat_deltas(f, s, t, dynamic_only);
+            Cow::Owned(field::deform_splats(s, &d))
+        }
+    }
+}
+
+/// The candidate's Gaussians at view `k` (at time `t`).
+fn posed<'s>(c: &Candidate<'s>, k: usize, t: f32) -> Cow<'s, Splats> {
+    match c.deltas {
+        Some(d) => Cow::Owned(field::deform_splats(c.splats, &d[k])),
+        None => at_time(c.splats, c.field, c.dynamic_only, t),
+    }
+}
+
+impl<R: Rasterizer> Judge<'_, R> {
+    /// Mean PSNR (8-bit, capped) of the candidate's renders against the train views.
+    pub fn psnr(&mut self, c: &Candidate) -> f64 {
+        self.evaluations += 1;
+        let sum: f64 = self
+            .views
+            .iter()
+            .enumerate()
+            .map(|(k, v)| {
+                let s = posed(c, k, v.time);
+                let (img, _) = self.r.render(&s, &v.camera, c.sh_degree, self.background);
+                metrics::psnr_u8(&img.rgb, &v.rgb).min(PSNR_CAP)
+            })
+            .sum();
+        sum / self.views.len().max(1) as f64
+    }
+
+    /// Fraction of the views' pixels where `b` is visibly worse than `a`: its largest
+    /// channel error exceeds `a`'s by more than `by`.
+    pub fn worse_fraction(&mut self, a: &Candidate, b: &Candidate, by: f32) -> f64 {
+        self.evaluations += 2;
+        let (mut worse, mut pixels) = (0usize, 0usize);
+        for (k, v) in self.views.iter().enumerate() {
+            let render = |c: &Candidate| {
+                let s = posed(c, k, v.time);
+                self.r.render(&s, &v.camera, c.sh_degree, self.background).0
+            };
+            let (ia, ib) = (render(a), render(b));
+            // planar 3×H×W, as rendered
+            let n = v.rgb.len() / 3;
+            let err = |img: &[f32], px: usize| {
+                (0..3).fold(0f32, |m, k| {
+                    m.max((img[k * n + px] - v.rgb[k * n + px]).abs())
+                })
+            };
+            worse += (0..n)
+                .filter(|&px| err(&ib.rgb, px) > err(&ia.rgb, px) + by)
+                .count();
+            pixels += n;
+        }
+        worse as f64 / pixels.max(1) as f64
+    }
+
+    /// Each Gaussian's blending weight summed over the views (None when the rasterizer
+    /// cannot give them).
+    pub fn contributions(&mut self, c: &Candidate) -> Option<Vec<f64>> {
+        self.evaluations += 1;
+        let mut acc = vec![0.0; c.splats.len()];
+        for (k, v) in self.views.iter().enumerate() {
+            let s = posed(c, k, v.time);
+            if !self.r.add_contributions(&s, &v.camera, &mut acc) {
+                return None;
+            }
+        }
+        Some(acc)
+    }
+}
