@@ -8,6 +8,7 @@
 pub mod init;
 pub mod judge;
 pub mod settings;
+pub mod sh_refit;
 pub mod sizing;
 pub mod static_split;
 pub mod stereo;

@@ -19,14 +19,15 @@
 //!   trained field also holds a part that does not change with time (a shift the
 //!   canonical Gaussians were trained beside), which the scene does need.
 //! - **SH degree**: the lowest degree ≤ the one in use whose renders stay within
-//!   tolerance becomes the model's degree for good (its higher coefficients are
-//!   zeroed; the degree no longer grows: a degree the sizing did not see is not
-//!   taken).
+//!   tolerance becomes the model's degree for good, its coefficients refitted to the
+//!   colours the train cameras see (`sh_refit.rs`; the higher ones zeroed; the degree
+//!   no longer grows: a degree the sizing did not see is not taken).
 //! - **Gaussians**: each Gaussian's blending weight `Σ α·T` summed over the train views
 //!   ranks them; a binary search on the count finds the fewest most-contributing
 //!   Gaussians whose renders stay within tolerance, and the rest are dropped.
 
 use super::judge::{Candidate, Judge, at_time, gather_deltas, middle_time, posed_deltas};
+use super::sh_refit::refit_sh;
 use super::{Trainer, View, static_split};
 use crate::Rasterizer;
 use crate::raster::sh::num_coeffs;
@@ -130,7 +131,7 @@ pub struct SizingSummary {
     pub split: Option<SplitChoice>,
     pub sh_degree_before: u32,
     pub sh_degree: u32,
-    /// Mean train-view PSNR at SH degree 0, 1, … (those tested).
+    /// Mean train-view PSNR at SH degree 0, 1, … (those tested; each refitted).
     pub train_psnr_by_sh_degree: Vec<f64>,
     pub gaussians_before: usize,
     pub gaussians: usize,
@@ -369,14 +370,39 @@ impl Trainer {
             deltas: posed.as_deref(),
             ..c
         };
+        // A lower degree is scored (and kept) refitted to the colours the train cameras
+        // see, not truncated (`sh_refit.rs`).
+        let eyes: Vec<[f64; 3]> = views
+            .iter()
+            .map(|v| v.camera.cam_to_world.translation.to_array())
+            .collect();
+        let mut refit = None;
         if size.sh_degree {
             let (d, tried) = choose_sh_degree(
-                |d| judge.psnr(&Candidate { sh_degree: d, ..c }),
+                |d| {
+                    let r = refit_sh(c.splats, sh_before, d, &eyes);
+                    let p = judge.psnr(&Candidate {
+                        splats: &r,
+                        sh_degree: d,
+                        ..c
+                    });
+                    refit = Some(r);
+                    p
+                },
                 sh_before,
                 target,
             );
-            c.sh_degree = d;
+            if d == sh_before {
+                refit = None;
+            }
             (sum.sh_degree, sum.train_psnr_by_sh_degree) = (d, tried);
+        }
+        if let Some(r) = &refit {
+            c = Candidate {
+                splats: r,
+                sh_degree: sum.sh_degree,
+                ..c
+            };
         }
         let mut keep = None;
         let weights = if size.prune {
@@ -412,6 +438,13 @@ impl Trainer {
             field_kept,
             keep.as_deref(),
         );
+        if let Some(r) = refit {
+            let r = match &keep {
+                Some(k) => gather(&r, k),
+                None => r,
+            };
+            (self.splats.sh_dc, self.splats.sh_rest) = (r.sh_dc, r.sh_rest);
+        }
         let c = Candidate {
             splats: &self.splats,
             field: field_kept.then_some(&self.field),
