@@ -85,6 +85,20 @@ fn small_field() -> gaussians::field::Mlp<f32> {
     f
 }
 
+/// [`small_field`] moving along x (head output 0 only): by `shift` at every time, plus
+/// a part that varies with position and time, head weight i = `gain`·((i·`mul` mod
+/// `modulo`) − (`modulo` − 1)/2).
+fn moving_field(shift: f32, gain: f32, mul: usize, modulo: usize) -> gaussians::field::Mlp<f32> {
+    let mut f = small_field();
+    let head = *f.layers.last().unwrap();
+    f.params[head.bias] = shift;
+    let centre = (modulo - 1) as f32 / 2.0;
+    for i in 0..head.fan_in {
+        f.params[head.weight + i * head.fan_out] = gain * ((i * mul % modulo) as f32 - centre);
+    }
+    f
+}
+
 /// The truth plus Gaussians behind every camera and far outside every view.
 fn padded(t: &Splats) -> Splats {
     let mut m = t.clone();
@@ -175,14 +189,9 @@ fn a_static_scene_loses_its_field_its_sh_and_its_unseen_gaussians() {
 #[test]
 fn a_moving_scene_keeps_its_field() {
     let t = truth(22);
-    let mut f = small_field();
     // δx: a shift of 0.3 units along x (≈ 2.7 px) at every time, plus a part that
-    // varies with position and time (head weights of output 0 only).
-    let head = *f.layers.last().unwrap();
-    f.params[head.bias] = 0.3;
-    for i in 0..head.fan_in {
-        f.params[head.weight + i * head.fan_out] = 0.05 * ((i * 7 % 13) as f32 - 6.0);
-    }
+    // varies with position and time.
+    let f = moving_field(0.3, 0.05, 7, 13);
     let v = views(&t, Some(&f));
     let mut tr = trainer(padded(&t), f);
     tr.size_if_due(&TileRasterizer, &v);
@@ -214,12 +223,7 @@ fn a_moving_scene_keeps_its_field() {
 #[test]
 fn deltas_evaluated_once_score_as_the_field_does() {
     let t = truth(24);
-    let mut f = small_field();
-    let head = *f.layers.last().unwrap();
-    f.params[head.bias] = 0.2;
-    for i in 0..head.fan_in {
-        f.params[head.weight + i * head.fan_out] = 0.04 * ((i * 5 % 11) as f32 - 5.0);
-    }
+    let f = moving_field(0.2, 0.04, 5, 11);
     let v = views(&t, Some(&f));
     let model = padded(&t);
     let mut j = Judge {
