@@ -109,13 +109,18 @@ fn padded(t: &Splats) -> Splats {
     m
 }
 
-fn psnr(views: &[View], s: &Splats, sh: u32) -> f64 {
-    let mut j = Judge {
+/// A judge of candidates at `views` on a black background.
+fn judge(views: &[View]) -> Judge<'_, TileRasterizer> {
+    Judge {
         r: &TileRasterizer,
         views,
         background: [0.0; 3],
         evaluations: 0,
-    };
+    }
+}
+
+fn psnr(views: &[View], s: &Splats, sh: u32) -> f64 {
+    let mut j = judge(views);
     j.psnr(&Candidate {
         splats: s,
         field: None,
@@ -154,12 +159,7 @@ fn a_static_scene_loses_its_field_its_sh_and_its_unseen_gaussians() {
     // Smallest: the weights of the padded model rank the same kept set; one fewer fails.
     let w = {
         let model = padded(&t);
-        let mut j = Judge {
-            r: &TileRasterizer,
-            views: &v,
-            background: [0.0; 3],
-            evaluations: 0,
-        };
+        let mut j = judge(&v);
         j.contributions(&Candidate {
             splats: &model,
             field: None,
@@ -226,12 +226,7 @@ fn deltas_evaluated_once_score_as_the_field_does() {
     let f = moving_field(0.2, 0.04, 5, 11);
     let v = views(&t, Some(&f));
     let model = padded(&t);
-    let mut j = Judge {
-        r: &TileRasterizer,
-        views: &v,
-        background: [0.0; 3],
-        evaluations: 0,
-    };
+    let mut j = judge(&v);
     let with_field = Candidate {
         splats: &model,
         field: Some(&f),
