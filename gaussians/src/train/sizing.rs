@@ -372,12 +372,12 @@ impl Trainer {
         };
         // A lower degree is scored (and kept) refitted to the colours the train cameras
         // see, not truncated (`sh_refit.rs`).
-        let eyes: Vec<[f64; 3]> = views
-            .iter()
-            .map(|v| v.camera.cam_to_world.translation.to_array())
-            .collect();
         let mut refit = None;
         if size.sh_degree {
+            let eyes: Vec<[f64; 3]> = views
+                .iter()
+                .map(|v| v.camera.cam_to_world.translation.to_array())
+                .collect();
             let (d, tried) = choose_sh_degree(
                 |d| {
                     let r = refit_sh(c.splats, sh_before, d, &eyes);
@@ -434,17 +434,11 @@ impl Trainer {
         };
         self.apply_sizing(
             size.sh_degree.then_some(sh),
+            refit,
             model,
             field_kept,
             keep.as_deref(),
         );
-        if let Some(r) = refit {
-            let r = match &keep {
-                Some(k) => gather(&r, k),
-                None => r,
-            };
-            (self.splats.sh_dc, self.splats.sh_rest) = (r.sh_dc, r.sh_rest);
-        }
         let c = Candidate {
             splats: &self.splats,
             field: field_kept.then_some(&self.field),
@@ -459,12 +453,14 @@ impl Trainer {
         self.sizing = Some(sum);
     }
 
-    /// Make the sizing's decisions: the SH degree `sh` from now on, `model` in place of
-    /// the canonical Gaussians (frozen, without the field; or split, the field on its
-    /// dynamic ones), only `keep`.
+    /// Make the sizing's decisions: the SH degree `sh` from now on (with the colours of
+    /// `refit`, indexed as the model before `keep`, when the degree was lowered),
+    /// `model` in place of the canonical Gaussians (frozen, without the field; or split,
+    /// the field on its dynamic ones), only `keep`.
     fn apply_sizing(
         &mut self,
         sh: Option<u32>,
+        refit: Option<Splats>,
         model: Option<Splats>,
         field: bool,
         keep: Option<&[usize]>,
@@ -478,6 +474,9 @@ impl Trainer {
                 self.settings.dynamic_only = false;
             }
             self.splats = m;
+        }
+        if let Some(r) = refit {
+            (self.splats.sh_dc, self.splats.sh_rest) = (r.sh_dc, r.sh_rest);
         }
         if let Some(sh) = sh {
             self.settings.sh_degree = sh;
