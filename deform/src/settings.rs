@@ -97,6 +97,10 @@ pub struct DeformSettings {
     pub assoc: assoc::AssocSettings,
     /// Continue densification as in the warm-up (within its `until_iter`).
     pub densify: bool,
+    /// Let that densification grow the model back up to the warm-up's per-pixel cap
+    /// (`max_gaussians_per_pixel`) instead of the count the warm-up's sizing chose from
+    /// the frames alone (the events may need Gaussians the frames did not).
+    pub regrow: bool,
     /// Record the losses every this many iterations in the report.
     pub log_every: u32,
 }
@@ -129,6 +133,7 @@ impl Default for DeformSettings {
             rebind_every: 500,
             assoc: assoc::AssocSettings::default(),
             densify: true,
+            regrow: false,
             log_every: 10,
         }
     }

@@ -127,6 +127,9 @@ pub struct TrainReport {
     pub contrast: ContrastReport,
     pub frames_srgb: bool,
     pub gaussians: usize,
+    /// The written model: Gaussians, SH degree, field shape, parameters and bytes (as the
+    /// warm-up's report gives them).
+    pub model_size: gaussians::model::size::ModelSize,
     /// Every `log_every`-th iteration's figures (losses, PSNR, bound Gaussians, …).
     pub curve: Vec<JointStep>,
     /// The camera at the test frames' times against their recorded poses.
@@ -200,6 +203,7 @@ pub fn train(
     phases.start("save");
     let model = Model::from_trainer(&tr.inner);
     model.save(out.path())?;
+    let model_size = gaussians::model::size::ModelSize::of(&model, out.path())?;
     if let Some(p) = &tr.posenet {
         save_posenet(p, out.path())?;
     }
@@ -246,6 +250,7 @@ pub fn train(
         },
         frames_srgb: d.srgb,
         gaussians: model.splats.len(),
+        model_size,
         curve,
         camera,
         test,

@@ -88,6 +88,18 @@ fn degs_run_builds_every_stage_once_and_beats_the_mean_colour() {
             .is_finite()
     );
     assert!(report["novel"].get("baselines").is_none(), "{report}");
+    // the joint model's size, as the warm-up reports it: the files' bytes
+    let size = &report["model_size"];
+    assert_eq!(size["gaussians"], report["gaussians"], "{report}");
+    let ply = std::fs::metadata(dir.join("point_cloud.ply"))
+        .unwrap()
+        .len();
+    assert_eq!(size["bytes"]["ply"].as_u64(), Some(ply), "{report}");
+    let parts: u64 = ["ply", "field", "dynamic_flags", "model_json"]
+        .iter()
+        .map(|k| size["bytes"][k].as_u64().unwrap())
+        .sum();
+    assert_eq!(size["bytes"]["total"].as_u64(), Some(parts), "{report}");
 
     // everything is cached: the second run runs nothing
     let out = w.degs(&["run", exp, "-j", "2", "--quiet"]);

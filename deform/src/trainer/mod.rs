@@ -128,6 +128,10 @@ impl JointTrainer {
         if !settings.densify {
             warm.densify.until_iter = 0;
         }
+        if settings.regrow {
+            // 0: the per-pixel cap, set from the views when the trainer starts.
+            warm.densify.max_gaussians = 0;
+        }
         let cams: Vec<Camera> = d.views.iter().map(|v| v.camera).collect();
         let extent = gaussians::stage::scene_extent(&warm, &cams);
         let mut inner = Trainer::new(warm, d.model.splats.clone(), extent);

@@ -325,17 +325,28 @@ pub(crate) fn linear_tick(v: f64, span: f64) -> String {
     format!("{v:.decimals$}")
 }
 
+/// On an axis of a non-negative cost (time, bytes, count) the range spans at least
+/// this fraction of its largest value, so that runs a fraction of a percent apart
+/// (one warm-up shared by a sweep: model sizes a few KB apart in 1.4 MB) are drawn
+/// close together, not across the whole chart.
+const MIN_RELATIVE_SPAN: f64 = 0.1;
+
 /// Padded range of `values` (a unit either side when they are all equal).
 pub(crate) fn range(
     values: impl Iterator<Item = f64>,
     pad: f64,
     clamp_at_zero: bool,
 ) -> (f64, f64) {
-    let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+    let (mut lo, mut hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
         (a.min(v), b.max(v))
     });
     if !lo.is_finite() {
         return (0.0, 1.0);
+    }
+    let min_span = MIN_RELATIVE_SPAN * hi;
+    if clamp_at_zero && lo >= 0.0 && hi > lo && hi - lo < min_span {
+        let centre = 0.5 * (lo + hi);
+        (lo, hi) = (centre - 0.5 * min_span, centre + 0.5 * min_span);
     }
     let span = if hi > lo {
         hi - lo
@@ -498,5 +509,24 @@ mod tests {
         assert_eq!(linear_tick(20.0, 8.0), "20.0");
         assert_eq!(linear_tick(20.0, 40.0), "20");
         assert_eq!(tick(1234.5), "1234");
+    }
+
+    #[test]
+    fn a_cost_axis_spans_at_least_a_tenth_of_its_largest_value() {
+        // Sizes 5 KB apart in 1.42 MB: widened to 142 KB about their centre, then padded.
+        let (a, b) = range([1_418_000.0, 1_423_000.0].into_iter(), 0.0, true);
+        assert!(
+            (a - 1_349_350.0).abs() < 1e-6 && (b - 1_491_650.0).abs() < 1e-6,
+            "{a} {b}"
+        );
+        let (a, b) = range([1_418_000.0, 1_423_000.0].into_iter(), 0.1, true);
+        assert!((b - a - 1.2 * 142_300.0).abs() < 1e-6, "{a} {b}");
+        // Spread wider than that: only the padding.
+        assert_eq!(range([100.0, 150.0].into_iter(), 0.1, true), (95.0, 155.0));
+        // Not a cost (PSNR; may be negative): as drawn before.
+        assert_eq!(range([24.0, 24.1].into_iter(), 0.0, false), (24.0, 24.1));
+        // Widening never crosses zero.
+        let (a, _) = range([0.0, 0.001].into_iter(), 0.0, true);
+        assert_eq!(a, 0.0);
     }
 }
