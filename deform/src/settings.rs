@@ -99,7 +99,9 @@ pub struct DeformSettings {
     pub densify: bool,
     /// Let that densification grow the model back up to the warm-up's per-pixel cap
     /// (`max_gaussians_per_pixel`) instead of the count the warm-up's sizing chose from
-    /// the frames alone (the events may need Gaussians the frames did not).
+    /// the frames alone: the events need Gaussians the frames did not (`nonrigid` 64²,
+    /// warm-up 1500: +0.46 / +0.22 dB at 8 / 4 fps; BENCHMARKS.md). Only a warm-up that
+    /// stops before the end of densification leaves the joint training any to do.
     pub regrow: bool,
     /// Record the losses every this many iterations in the report.
     pub log_every: u32,
@@ -133,7 +135,7 @@ impl Default for DeformSettings {
             rebind_every: 500,
             assoc: assoc::AssocSettings::default(),
             densify: true,
-            regrow: false,
+            regrow: true,
             log_every: 10,
         }
     }

@@ -346,3 +346,32 @@ fn duplicate_frame_times_are_refused_by_the_cli_and_survived_by_the_trainer() {
     );
     assert!(!out.exists());
 }
+
+/// A warm-up sized before the end of densification leaves its count as the cap; the
+/// joint training lifts it back to the per-pixel cap (`regrow`, the default) or keeps it.
+#[test]
+fn the_joint_training_may_regrow_a_sized_warm_up_to_the_per_pixel_cap() {
+    let fx = build(Variant::Normal);
+    let settings: DeformSettings = scene::cli::settings::parse(SETTINGS, Path::new("x")).unwrap();
+    assert!(settings.regrow, "regrow is the default");
+    let mut d = Inputs::load(&fx.scene, &fx.model, &fx.flows, &fx.assoc, &settings).unwrap();
+    let pixels = d.views[0].rgb.len() / 3;
+    let mut per_pixel = d.warmup.clone();
+    per_pixel.densify.max_gaussians = 0;
+    let cap = per_pixel.gaussian_cap(pixels);
+    let sized = 7;
+    assert!(cap > sized);
+    d.warmup.densify.max_gaussians = sized;
+    for (regrow, want) in [(true, cap), (false, sized)] {
+        let s = DeformSettings {
+            regrow,
+            ..settings.clone()
+        };
+        let mut tr = JointTrainer::new(&d, s);
+        tr.step(&TileRasterizer, &d);
+        assert_eq!(
+            tr.inner.settings.densify.max_gaussians, want,
+            "regrow {regrow}"
+        );
+    }
+}
