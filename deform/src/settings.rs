@@ -101,7 +101,10 @@ pub struct DeformSettings {
     /// (`max_gaussians_per_pixel`) instead of the count the warm-up's sizing chose from
     /// the frames alone: the events need Gaussians the frames did not (`nonrigid` 64²,
     /// warm-up 1500: +0.46 / +0.22 dB at 8 / 4 fps; BENCHMARKS.md). Only a warm-up that
-    /// stops before the end of densification leaves the joint training any to do.
+    /// stops before the end of densification leaves the joint training any to do. The
+    /// joint training cannot tell the sized count from an absolute
+    /// `densify.max_gaussians` set for the warm-up: both are replaced (limit the joint
+    /// model with `max_gaussians_per_pixel`, or switch this off).
     pub regrow: bool,
     /// Record the losses every this many iterations in the report.
     pub log_every: u32,
