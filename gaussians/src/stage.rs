@@ -141,6 +141,9 @@ pub struct TrainReport {
     /// What the sizing decided (absent when `size.tolerance_db = 0`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub sizing: Option<crate::train::sizing::SizingSummary>,
+    /// What the field's width probe measured and chose (absent when none ran).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub field_probe: Option<crate::train::field_probe::FieldProbeSummary>,
     /// The written model: Gaussians, SH degree, field shape, parameters and bytes.
     pub model_size: crate::model::size::ModelSize,
     pub train_frames: usize,
@@ -386,6 +389,7 @@ pub fn train(
     let settings = trainer.settings.clone();
     let split = trainer.split;
     let sizing = trainer.sizing.take();
+    let field_probe = trainer.field_probe.take();
     drop(trainer);
     model.save(out.path())?;
     let model_size = crate::model::size::ModelSize::of(&model, out.path())?;
@@ -420,6 +424,7 @@ pub fn train(
         field_parameters: model.field.as_ref().map_or(0, |f| f.params.len()),
         static_split: split,
         sizing,
+        field_probe,
         model_size,
         train_frames: views.len(),
         init_surface_points,

@@ -5,6 +5,7 @@
 //! The rasterizer is reached through the [`Rasterizer`] trait so the loop can be tested
 //! on its own; [`Splats`] holds the trainable parameters.
 
+pub mod field_probe;
 pub mod init;
 pub mod judge;
 pub mod settings;
@@ -76,6 +77,8 @@ pub struct Trainer {
     pub split: Option<static_split::SplitSummary>,
     /// What the sizing decided, once done ([`sizing`]).
     pub sizing: Option<sizing::SizingSummary>,
+    /// What the field's width probe measured and chose, once done ([`field_probe`]).
+    pub field_probe: Option<field_probe::FieldProbeSummary>,
     order: Vec<usize>,
     rng: rand_chacha::ChaCha8Rng,
     /// Buffers given back by [`Self::recycle_view`] / [`Self::recycle_grads`].
@@ -143,6 +146,7 @@ impl Trainer {
             iteration: 0,
             split: None,
             sizing: None,
+            field_probe: None,
             order: Vec::new(),
             spare: Mutex::default(),
         }
@@ -150,6 +154,11 @@ impl Trainer {
 
     fn spare(&self) -> MutexGuard<'_, Spare> {
         self.spare.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Drop the reused buffers (after the model's shape changed).
+    fn clear_spare(&mut self) {
+        *self.spare.get_mut().unwrap_or_else(|e| e.into_inner()) = Spare::default();
     }
 
     /// Give back a view when done with it (after [`Self::view_backward`]): a later
@@ -359,8 +368,9 @@ impl Trainer {
     where
         R::State: Send + 'static,
     {
+        self.resolve_cap(views[0].rgb.len() / 3);
+        self.probe_field_if_due(r, views);
         let view = &views[self.next_view(views.len())];
-        self.resolve_cap(view.rgb.len() / 3);
         let field_on = self.field_on();
         let rendered = self.render_view(r, &view.camera, view.time);
         let (loss, grad) = self.rgb_loss(&rendered.image, &view.rgb);
@@ -533,13 +543,16 @@ impl Trainer {
                 break;
             }
             let t0 = std::time::Instant::now();
+            let before = self.iteration;
             let info = self.step(r, views);
             let dt = t0.elapsed().as_secs_f64();
+            // More than one when the field's width probe ran in this step.
+            let steps = self.iteration - before;
             if info.field_on {
-                sum.deform_steps += 1;
+                sum.deform_steps += steps;
                 sum.deform_seconds += dt;
             } else {
-                sum.static_steps += 1;
+                sum.static_steps += steps;
                 sum.static_seconds += dt;
             }
             sum.final_loss = info.loss;

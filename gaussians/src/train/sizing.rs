@@ -25,6 +25,10 @@
 //! - **Gaussians**: each Gaussian's blending weight `Σ α·T` summed over the train views
 //!   ranks them; a binary search on the count finds the fewest most-contributing
 //!   Gaussians whose renders stay within tolerance, and the rest are dropped.
+//!
+//! The field's width is not chosen here (the train views always prefer the widest
+//! field); `field_probe.rs` can choose it at the field's switch from views held out of
+//! training (opt-in, `field_probe`).
 
 use super::judge::{Candidate, Judge, at_time, gather_deltas, middle_time, posed_deltas};
 use super::sh_refit::refit_sh;
@@ -69,6 +73,14 @@ pub struct SizeSettings {
     pub sh_degree: bool,
     /// Prune Gaussians by contribution.
     pub prune: bool,
+    /// The field's width probe (`field_probe.rs`): iterations each candidate width trains
+    /// from the field's switch on the train views less every fourth (0 = no probe: the
+    /// width is `field.width`). Off by default: on the 9-frame presets its two held-out
+    /// frames chose wrongly on one `nonrigid` seed in two (−0.4 dB); 600 is the length
+    /// that told widths apart at all (BENCHMARKS.md).
+    pub field_probe: u32,
+    /// Candidate widths: `field.width` and this many halvings of it (none below 8).
+    pub field_halvings: u32,
 }
 
 impl Default for SizeSettings {
@@ -82,6 +94,8 @@ impl Default for SizeSettings {
             split_max_px: 2.0,
             sh_degree: true,
             prune: true,
+            field_probe: 0,
+            field_halvings: 1,
         }
     }
 }

@@ -1,0 +1,208 @@
+//! The deformation field's width per scene (issue #17 item 1; DESIGN.md "Right-sizing"):
+//! at the field's switch a short probe trains the model with each candidate width (the
+//! configured one and its halvings) on the train views less a few held out, and keeps
+//! the narrowest width whose held-out PSNR is within `size.tolerance_db` of the best; the
+//! warm-up goes on from that candidate's probe, with every view again.
+//!
+//! The train views cannot choose the width: a wider field always fits them better, by
+//! each Gaussian's own sub-pixel motion per view, whether or not the in-between times
+//! gain from it (BENCHMARKS.md, "The field's width per scene"). Frames the field never
+//! trained on might, once the fields have trained long enough to differ: after 200
+//! iterations the two held-out frames of the 9-frame presets scored 64 and 32 within
+//! 0.05 dB on every preset and seed; after 600 they parted by up to 1.6 dB, but chose
+//! against the test frames on one `nonrigid` seed of two (BENCHMARKS.md, "The field's
+//! width chosen by held-out frames"). So the probe is off by default (`size.field_probe
+//! = 0`); a recording with more frames holds out more. The probe costs the losing candidates'
+//! iterations; a narrower field makes every later iteration cheaper (the field's `gemm`
+//! is a third of a warm-up).
+
+use super::judge::{Candidate, Judge};
+use super::{Trainer, View};
+use crate::Rasterizer;
+use serde::Serialize;
+
+/// Hold out every this-many-th view (in time order) for the probe.
+pub const HOLD_OUT_EVERY: usize = 4;
+/// No probe with fewer train views than this (too few to spare any).
+pub const MIN_VIEWS: usize = 8;
+/// Narrowest field the probe tries.
+pub const MIN_WIDTH: usize = 8;
+/// No probe shorter than this many iterations (a field that has barely moved ranks
+/// nothing).
+pub const MIN_PROBE_ITERATIONS: u32 = 50;
+
+/// What the probe measured and chose (for `report.json`).
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct FieldProbeSummary {
+    /// Iteration of the field's switch, where the probe started.
+    pub iteration: u32,
+    /// Iterations each candidate trained.
+    pub probe_iterations: u32,
+    /// Indices of the held-out train views.
+    pub held_out: Vec<usize>,
+    /// Candidate widths, widest first, and the mean PSNR of each on the held-out views.
+    pub widths: Vec<usize>,
+    pub held_out_psnr: Vec<f64>,
+    /// The width kept.
+    pub width: usize,
+    pub seconds: f64,
+}
+
+/// The views held out of the probe's training: in time order, positions 2, 2 + `every`,
+/// 2 + 2·`every`, … short of the last (the first and last views in time stay in training,
+/// so the probe judges in-between times, not extrapolation). Ascending indices; empty
+/// when there are fewer than [`MIN_VIEWS`] views.
+pub fn held_out_views(times: &[f32], every: usize) -> Vec<usize> {
+    let n = times.len();
+    if n < MIN_VIEWS || every < 2 {
+        return Vec::new();
+    }
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by(|&a, &b| times[a].total_cmp(&times[b]).then(a.cmp(&b)));
+    let mut out: Vec<usize> = (2..n - 1).step_by(every).map(|p| order[p]).collect();
+    out.sort_unstable();
+    out
+}
+
+/// Candidate widths: `width`, then halvings while at least [`MIN_WIDTH`], `halvings` of
+/// them at most.
+pub fn candidate_widths(width: usize, halvings: u32) -> Vec<usize> {
+    let mut out = vec![width];
+    let mut w = width;
+    for _ in 0..halvings {
+        w /= 2;
+        if w < MIN_WIDTH {
+            break;
+        }
+        out.push(w);
+    }
+    out
+}
+
+/// Index of the narrowest candidate whose score is within `tolerance_db` of the best
+/// (`widths` widest first, as [`candidate_widths`]); NaN scores never win.
+pub fn choose(widths: &[usize], psnr: &[f64], tolerance_db: f64) -> usize {
+    let best = psnr
+        .iter()
+        .copied()
+        .filter(|p| !p.is_nan())
+        .fold(f64::NEG_INFINITY, f64::max);
+    (0..widths.len())
+        .filter(|&k| psnr[k] >= best - tolerance_db)
+        .min_by_key(|&k| widths[k])
+        .unwrap_or(0)
+}
+
+impl Trainer {
+    /// The probe's length from the field's switch: `size.field_probe`, cut short of the
+    /// static/dynamic split, the sizing and the end of the run (`None`: no probe in this
+    /// run).
+    pub fn field_probe_iterations(&self) -> Option<u32> {
+        let s = &self.settings;
+        if !s.deform || s.size.tolerance_db <= 0.0 || s.size.field_probe == 0 {
+            return None;
+        }
+        if candidate_widths(s.field.width, s.size.field_halvings).len() < 2 {
+            return None;
+        }
+        let start = s.static_iterations;
+        let limit = [self.static_split_iteration(), self.sizing_iteration()]
+            .into_iter()
+            .flatten()
+            .fold(s.iterations, u32::min);
+        let k = s.size.field_probe.min(limit.saturating_sub(start + 1));
+        (k >= MIN_PROBE_ITERATIONS).then_some(k)
+    }
+
+    /// Run the probe when the field is switched on (module docs): the model goes on
+    /// from the chosen candidate, `iteration` advanced by the probe's length.
+    pub fn probe_field_if_due<R: Rasterizer>(&mut self, r: &R, views: &[View])
+    where
+        R::State: Send + 'static,
+    {
+        if self.field_probe.is_some() || self.iteration != self.settings.static_iterations {
+            return;
+        }
+        let Some(k) = self.field_probe_iterations() else {
+            return;
+        };
+        let times: Vec<f32> = views.iter().map(|v| v.time).collect();
+        let held_out = held_out_views(&times, HOLD_OUT_EVERY);
+        if held_out.is_empty() {
+            return;
+        }
+        let start = std::time::Instant::now();
+        let (train, held): (Vec<View>, Vec<View>) = {
+            let (mut a, mut b) = (Vec::new(), Vec::new());
+            for (i, v) in views.iter().enumerate() {
+                if held_out.binary_search(&i).is_ok() {
+                    b.push(v.clone());
+                } else {
+                    a.push(v.clone());
+                }
+            }
+            (a, b)
+        };
+        let widths = candidate_widths(self.settings.field.width, self.settings.size.field_halvings);
+        let mut scores = Vec::new();
+        let mut probes = Vec::new();
+        for &w in &widths {
+            let mut p = self.fork_with_field_width(w);
+            for _ in 0..k {
+                p.step(r, &train);
+            }
+            let mut judge = Judge {
+                r,
+                views: &held,
+                background: p.settings.background,
+                evaluations: 0,
+            };
+            scores.push(judge.psnr(&Candidate {
+                splats: &p.splats,
+                field: Some(&p.field),
+                dynamic_only: p.settings.dynamic_only,
+                sh_degree: p.sh_degree(),
+                deltas: None,
+            }));
+            probes.push(p);
+        }
+        let pick = choose(&widths, &scores, self.settings.size.tolerance_db);
+        let chosen = probes.swap_remove(pick);
+        self.adopt_probe(chosen);
+        self.field_probe = Some(FieldProbeSummary {
+            iteration: self.settings.static_iterations,
+            probe_iterations: k,
+            held_out,
+            widths: widths.clone(),
+            held_out_psnr: scores,
+            width: widths[pick],
+            seconds: start.elapsed().as_secs_f64(),
+        });
+    }
+
+    /// A copy of the training state with a fresh field of `width` (no probe of its own).
+    fn fork_with_field_width(&self, width: usize) -> Trainer {
+        let mut settings = self.settings.clone();
+        settings.field.width = width;
+        settings.size.field_probe = 0;
+        let mut t = Trainer::new(settings, self.splats.clone(), self.extent);
+        t.adam = self.adam.clone();
+        t.stats = self.stats.clone();
+        t.iteration = self.iteration;
+        t.split = self.split;
+        t
+    }
+
+    /// Go on from a probe's state (its Gaussians, field, optimiser and iteration).
+    fn adopt_probe(&mut self, p: Trainer) {
+        self.settings.field = p.settings.field;
+        self.splats = p.splats;
+        self.field = p.field;
+        self.adam = p.adam;
+        self.field_adam = p.field_adam;
+        self.stats = p.stats;
+        self.iteration = p.iteration;
+        // Buffers sized for the old field.
+        self.clear_spare();
+    }
+}
