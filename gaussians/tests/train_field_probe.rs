@@ -74,6 +74,17 @@ fn moving_views(truth: &Splats) -> Vec<View> {
         .collect()
 }
 
+/// `n` random Gaussians of DC colour only, a unit spread.
+fn scene_kind(n: usize) -> SceneKind {
+    SceneKind {
+        n,
+        spread: 1.0,
+        log_scale: (-2.3, -1.5),
+        logit: (0.0, 3.0),
+        sh_rest: 0.0,
+    }
+}
+
 fn probing_trainer(model: Splats, probe: u32) -> Trainer {
     let mut s = TrainSettings {
         iterations: 400,
@@ -116,13 +127,7 @@ fn held_out_psnr(tr: &Trainer, views: &[View]) -> f64 {
 
 #[test]
 fn the_probe_trains_each_width_and_goes_on_from_the_one_kept() {
-    let kind = SceneKind {
-        n: 40,
-        spread: 1.0,
-        log_scale: (-2.3, -1.5),
-        logit: (0.0, 3.0),
-        sh_rest: 0.0,
-    };
+    let kind = scene_kind(40);
     let truth = random_splats(&mut Rng(31), kind);
     let views = moving_views(&truth);
     let start = random_splats(&mut Rng(32), kind);
@@ -160,14 +165,7 @@ fn the_probe_trains_each_width_and_goes_on_from_the_one_kept() {
 
 #[test]
 fn the_probe_stops_short_of_the_sizing_and_can_be_turned_off() {
-    let kind = SceneKind {
-        n: 10,
-        spread: 1.0,
-        log_scale: (-2.3, -1.5),
-        logit: (0.0, 3.0),
-        sh_rest: 0.0,
-    };
-    let s = random_splats(&mut Rng(3), kind);
+    let s = random_splats(&mut Rng(3), scene_kind(10));
     // Sizing at 300: a probe of 1000 is cut to 279 (it ends before the sizing's step).
     assert_eq!(
         probing_trainer(s.clone(), 1000).field_probe_iterations(),
