@@ -97,14 +97,13 @@ pub struct DeformSettings {
     pub assoc: assoc::AssocSettings,
     /// Continue densification as in the warm-up (within its `until_iter`).
     pub densify: bool,
-    /// Let that densification grow the model back up to the warm-up's per-pixel cap
-    /// (`max_gaussians_per_pixel`) instead of the count the warm-up's sizing chose from
-    /// the frames alone: the events need Gaussians the frames did not (`nonrigid` 64²,
-    /// warm-up 1500: +0.46 / +0.22 dB at 8 / 4 fps; BENCHMARKS.md). Only a warm-up that
-    /// stops before the end of densification leaves the joint training any to do. The
-    /// joint training cannot tell the sized count from an absolute
-    /// `densify.max_gaussians` set for the warm-up: both are replaced (limit the joint
-    /// model with `max_gaussians_per_pixel`, or switch this off).
+    /// Let that densification grow the model back up to the warm-up's cap before its
+    /// sizing (the per-pixel cap `max_gaussians_per_pixel`, or an absolute
+    /// `densify.max_gaussians` given to the warm-up; `model.json`'s
+    /// `gaussian_cap_before_sizing`) instead of the count the sizing chose from the
+    /// frames alone: the events need Gaussians the frames did not (`nonrigid` 64², warm-up
+    /// 1500: +0.46 / +0.22 dB at 8 / 4 fps; BENCHMARKS.md). Only a warm-up that stops
+    /// before the end of densification leaves the joint training any to do.
     pub regrow: bool,
     /// Record the losses every this many iterations in the report.
     pub log_every: u32,

@@ -348,9 +348,11 @@ fn duplicate_frame_times_are_refused_by_the_cli_and_survived_by_the_trainer() {
 }
 
 /// A warm-up sized before the end of densification leaves its count as the cap; the
-/// joint training lifts it back to the per-pixel cap (`regrow`, the default) or keeps it.
+/// joint training lifts it back to the cap before the sizing (`regrow`, the default):
+/// the one `model.json` records (the per-pixel cap, or an absolute cap the warm-up was
+/// given), the per-pixel cap for a model that does not say; or keeps the sized count.
 #[test]
-fn the_joint_training_may_regrow_a_sized_warm_up_to_the_per_pixel_cap() {
+fn the_joint_training_may_regrow_a_sized_warm_up_to_its_cap_before_sizing() {
     let fx = build(Variant::Normal);
     let settings: DeformSettings = scene::cli::settings::parse(SETTINGS, Path::new("x")).unwrap();
     assert!(settings.regrow, "regrow is the default");
@@ -359,10 +361,15 @@ fn the_joint_training_may_regrow_a_sized_warm_up_to_the_per_pixel_cap() {
     let mut per_pixel = d.warmup.clone();
     per_pixel.densify.max_gaussians = 0;
     let cap = per_pixel.gaussian_cap(pixels);
-    let sized = 7;
-    assert!(cap > sized);
+    let (sized, given) = (7, 123);
+    assert!(cap > given && given > sized);
     d.warmup.densify.max_gaussians = sized;
-    for (regrow, want) in [(true, cap), (false, sized)] {
+    for (regrow, before_sizing, want) in [
+        (true, None, cap),
+        (true, Some(given), given),
+        (false, Some(given), sized),
+    ] {
+        d.model.info.gaussian_cap_before_sizing = before_sizing;
         let s = DeformSettings {
             regrow,
             ..settings.clone()
@@ -371,7 +378,7 @@ fn the_joint_training_may_regrow_a_sized_warm_up_to_the_per_pixel_cap() {
         tr.step(&TileRasterizer, &d);
         assert_eq!(
             tr.inner.settings.densify.max_gaussians, want,
-            "regrow {regrow}"
+            "regrow {regrow}, cap before sizing {before_sizing:?}"
         );
     }
 }

@@ -190,6 +190,11 @@ fn trains_writes_every_output_and_reloads_identically() {
     // the automatic Gaussian cap (2 per pixel of 40×40, at least the 2000 initial
     // Gaussians: 3200, `sizing.gaussians_before`) became the sized count
     assert_eq!(r.settings.densify.max_gaussians, r.gaussians);
+    // …and the model keeps the cap before it, for the joint training's regrow
+    let info: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("model.json")).unwrap()).unwrap();
+    assert_eq!(info["gaussian_cap_before_sizing"], 3200);
+    assert_eq!(report["sizing"]["gaussian_cap_before"], 3200);
 
     // the saved model renders exactly as the trained one
     let back = Model::load(&out).unwrap();

@@ -129,8 +129,9 @@ impl JointTrainer {
             warm.densify.until_iter = 0;
         }
         if settings.regrow {
-            // 0: the per-pixel cap, set from the views when the trainer starts.
-            warm.densify.max_gaussians = 0;
+            // The warm-up's cap before its sizing; a model from before that was kept:
+            // 0, the per-pixel cap, set from the views when the trainer starts.
+            warm.densify.max_gaussians = d.model.info.gaussian_cap_before_sizing.unwrap_or(0);
         }
         let cams: Vec<Camera> = d.views.iter().map(|v| v.camera).collect();
         let extent = gaussians::stage::scene_extent(&warm, &cams);

@@ -74,18 +74,8 @@ pub fn matmul<T: Real>(
         return;
     }
     use rayon::prelude::*;
-    const BLOCK: usize = 2048;
     if !a.transposed && m >= 2 * BLOCK {
-        // rayon over row blocks of a (and dst), one single-threaded gemm each
-        dst[..(m - 1) * dst_stride + n]
-            .par_chunks_mut(BLOCK * dst_stride)
-            .enumerate()
-            .for_each(|(blk, d)| {
-                let r0 = blk * BLOCK;
-                let rows = BLOCK.min(m - r0);
-                let sub = View::new(&a.data[r0 * a.stride..], rows, a.cols, a.stride);
-                gemm_raw(d, dst_stride, sub, b, accumulate);
-            });
+        matmul_rows_with(dst, dst_stride, a, b, accumulate, |_, _| {}, |_, _| {});
         return;
     }
     if a.transposed && !b.transposed && k >= 2 * BLOCK {
@@ -118,6 +108,59 @@ pub fn matmul<T: Real>(
         return;
     }
     gemm_raw(dst, dst_stride, a, b, accumulate);
+}
+
+/// Rows per task of the row-parallel products.
+const BLOCK: usize = 2048;
+
+/// [`matmul`] of a non-transposed `a` by blocks of rows, with `before(first_row, rows)`
+/// run on each block of `dst` just before its product and `after(first_row, rows)` just
+/// after, while the block is in cache (a bias written before an accumulating product, an
+/// activation or mask after it: one pass over memory instead of three). `rows` holds the
+/// block's rows of `dst` (row stride `dst_stride`). The products are those of `matmul`,
+/// block for block, so the values are the same bit for bit.
+pub fn matmul_rows_with<T: Real>(
+    dst: &mut [T],
+    dst_stride: usize,
+    a: View<'_, T>,
+    b: View<'_, T>,
+    accumulate: bool,
+    before: impl Fn(usize, &mut [T]) + Sync,
+    after: impl Fn(usize, &mut [T]) + Sync,
+) {
+    use rayon::prelude::*;
+    assert!(!a.transposed, "matmul_rows_with: a must not be transposed");
+    let (m, k) = a.shape();
+    let (k2, n) = b.shape();
+    assert_eq!(k, k2, "matmul inner dimensions");
+    if m == 0 || n == 0 {
+        return;
+    }
+    let used = (m - 1) * dst_stride + n;
+    assert!(dst.len() >= used);
+    // `rows` rows of dst from row `r0`: before, the product, after.
+    let run = |r0: usize, rows: usize, d: &mut [T]| {
+        before(r0, d);
+        if k > 0 {
+            let sub = View::new(&a.data[r0 * a.stride..], rows, a.cols, a.stride);
+            gemm_raw(d, dst_stride, sub, b, accumulate);
+        } else if !accumulate {
+            for r in 0..rows {
+                d[r * dst_stride..r * dst_stride + n].fill(T::ZERO);
+            }
+        }
+        after(r0, d);
+    };
+    if m >= 2 * BLOCK {
+        // rayon over row blocks of a (and dst), one single-threaded gemm each
+        dst[..used]
+            .par_chunks_mut(BLOCK * dst_stride)
+            .enumerate()
+            .for_each(|(blk, d)| run(blk * BLOCK, BLOCK.min(m - blk * BLOCK), d));
+    } else {
+        // one block, as `matmul` computes it
+        run(0, m, &mut dst[..used]);
+    }
 }
 
 /// Single-threaded gemm call on views whose shapes were checked by the caller.

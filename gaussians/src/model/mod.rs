@@ -48,6 +48,10 @@ pub struct ModelInfo {
     /// it every Gaussian counts as dynamic.
     #[serde(default)]
     pub has_dynamic_flags: bool,
+    /// The Gaussian cap before the warm-up's sizing made its count the cap (absent: not
+    /// sized); the joint training's `regrow` restores it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gaussian_cap_before_sizing: Option<usize>,
 }
 
 impl Default for ModelInfo {
@@ -61,6 +65,7 @@ impl Default for ModelInfo {
             has_field: false,
             iterations: 0,
             has_dynamic_flags: false,
+            gaussian_cap_before_sizing: None,
         }
     }
 }
@@ -97,6 +102,7 @@ impl Model {
                 gaussians: n,
                 has_field: field.is_some(),
                 iterations: tr.iteration,
+                gaussian_cap_before_sizing: tr.sizing.as_ref().map(|s| s.gaussian_cap_before),
                 ..ModelInfo::default()
             },
             field,

@@ -149,6 +149,9 @@ pub struct SizingSummary {
     pub train_psnr_by_sh_degree: Vec<f64>,
     pub gaussians_before: usize,
     pub gaussians: usize,
+    /// The Gaussian cap of the settings before the sizing made `gaussians` the cap
+    /// (the per-pixel cap resolved, or the absolute `densify.max_gaussians` given).
+    pub gaussian_cap_before: usize,
     /// Gaussians with no weight in any train view (dropped at no cost).
     pub gaussians_without_weight: usize,
     /// Passes over the train views the sizing took, and its wall seconds.
@@ -314,6 +317,7 @@ impl Trainer {
             sh_degree_before: sh_before,
             sh_degree: sh_before,
             gaussians_before: self.splats.len(),
+            gaussian_cap_before: self.settings.densify.max_gaussians,
             ..SizingSummary::default()
         };
         let mut target = target;
