@@ -77,6 +77,37 @@ fn gradients_match_finite_differences_shallow() {
     fd_check(2, 10);
 }
 
+/// Past 4 096 rows the products run by blocks of 2 048 with the bias, ReLU and ReLU mask
+/// applied per block: the forward and backward of 5 000 rows equal those of their two
+/// halves (each one block) — outputs row for row, parameter gradients summed — so every
+/// block's rows meet their own activations (f64, rounding only).
+#[test]
+fn row_blocks_compute_what_the_halves_compute() {
+    let mlp = Mlp::<f64>::new(small(4, 16), 5);
+    let n = 5000;
+    let x = points(n);
+    let t: Vec<f64> = (0..n).map(|i| (i % 97) as f64 / 97.0).collect();
+    let w = weights(n);
+    let (out, cache) = mlp.forward(&x, &t);
+    let g = mlp.backward(&cache, &w);
+    let h = 2500;
+    let o = field::HEAD_OUT;
+    let (out_a, cache_a) = mlp.forward(&x[..h], &t[..h]);
+    let (out_b, cache_b) = mlp.forward(&x[h..], &t[h..]);
+    let ga = mlp.backward(&cache_a, &w[..h * o]);
+    let gb = mlp.backward(&cache_b, &w[h * o..]);
+    assert_eq!(out[..h * o], out_a[..]);
+    assert_eq!(out[h * o..], out_b[..]);
+    let scale = g.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    assert!(scale > 1.0, "gradients too small to compare: {scale}");
+    for (p, (&whole, (&a, &b))) in g.iter().zip(ga.iter().zip(&gb)).enumerate() {
+        assert!(
+            (whole - (a + b)).abs() <= 1e-9 * scale,
+            "param {p}: {whole} against {a} + {b}"
+        );
+    }
+}
+
 #[test]
 fn layout_matches_deform_gs_sizes() {
     let s = FieldSettings {

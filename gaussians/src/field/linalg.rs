@@ -282,3 +282,56 @@ mod block_tests {
         }
     }
 }
+
+#[cfg(test)]
+mod hook_tests {
+    use super::*;
+
+    /// `matmul_rows_with` runs `before` on each block of rows ahead of its product and
+    /// `after` behind it, with the block's first row: a bias written before an
+    /// accumulating product and a ReLU after it give `max(bias + a·b, 0)` on every row, on
+    /// the row-block path (5 000 rows) and the single-block one (300), bit for bit what
+    /// `matmul` gives with the bias and ReLU as passes of their own.
+    #[test]
+    fn hooks_see_each_block_and_the_product_is_matmuls() {
+        let (k, n) = (5, 4);
+        let bias = [0.25f32, -0.5, 0.0, 1.0];
+        for m in [300usize, 5000] {
+            let a: Vec<f32> = (0..m * k)
+                .map(|i| ((i * 37 % 101) as f32) * 0.01 - 0.5)
+                .collect();
+            let b: Vec<f32> = (0..k * n).map(|i| (i as f32) * 0.1 - 1.0).collect();
+            let (va, vb) = (View::new(&a, m, k, k), View::new(&b, k, n, n));
+            let mut want: Vec<f32> = (0..m).flat_map(|_| bias).collect();
+            matmul(&mut want, n, va, vb, true);
+            want.iter_mut().for_each(|v| *v = v.max(0.0));
+            let firsts = std::sync::Mutex::new(Vec::new());
+            let mut got = vec![f32::NAN; m * n];
+            matmul_rows_with(
+                &mut got,
+                n,
+                va,
+                vb,
+                true,
+                |_, rows| rows.chunks_mut(n).for_each(|r| r.copy_from_slice(&bias)),
+                |r0, rows| {
+                    firsts.lock().unwrap().push((r0, rows.len() / n));
+                    rows.iter_mut().for_each(|v| *v = v.max(0.0));
+                },
+            );
+            assert_eq!(got, want, "m = {m}");
+            let mut blocks = firsts.into_inner().unwrap();
+            blocks.sort_unstable();
+            let expect: Vec<(usize, usize)> = if m >= 2 * BLOCK {
+                (0..m.div_ceil(BLOCK))
+                    .map(|b| (b * BLOCK, BLOCK.min(m - b * BLOCK)))
+                    .collect()
+            } else {
+                vec![(0, m)]
+            };
+            assert_eq!(blocks, expect, "m = {m}");
+            // …and the bias and ReLU did something: some zeros, some positive values
+            assert!(got.contains(&0.0) && got.iter().any(|&v| v > 0.0));
+        }
+    }
+}
