@@ -6,15 +6,17 @@
 //!
 //! The train views cannot choose the width: a wider field always fits them better, by
 //! each Gaussian's own sub-pixel motion per view, whether or not the in-between times
-//! gain from it (BENCHMARKS.md, "The field's width per scene"). Frames the field never
-//! trained on might, once the fields have trained long enough to differ: after 200
-//! iterations the two held-out frames of the 9-frame presets scored 64 and 32 within
-//! 0.05 dB on every preset and seed; after 600 they parted by up to 1.6 dB, but chose
+//! gain from it (BENCHMARKS.md, "The field's width per scene"). Nor, measured, can a
+//! short probe on held-out frames: after 200 iterations the two held-out frames of the
+//! 9-frame presets scored 64 and 32 within 0.05 dB everywhere; after 600 they chose
 //! against the test frames on one `nonrigid` seed of two (BENCHMARKS.md, "The field's
-//! width chosen by held-out frames"). So the probe is off by default (`size.field_probe
-//! = 0`); a recording with more frames holds out more. The probe costs the losing candidates'
-//! iterations; a narrower field makes every later iteration cheaper (the field's `gemm`
-//! is a third of a warm-up).
+//! width chosen by held-out frames"); with 25 train frames (6 held out) it chose 32 on
+//! every scene tried, where 64 tested 0.8–1.2 dB better ("The field's width probe with
+//! 25 train frames"): early on the narrower field has learnt as much (it converges
+//! faster), the wider one's lead comes later. So the probe is off by default
+//! (`size.field_probe = 0`) and kept as an experiment's setting, not a recommendation.
+//! It costs the losing candidates' iterations; a narrower field makes every later
+//! iteration cheaper (the field's `gemm` is a third of a warm-up).
 
 use super::judge::{Candidate, Judge};
 use super::{Trainer, View};

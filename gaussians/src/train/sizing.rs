@@ -75,9 +75,10 @@ pub struct SizeSettings {
     pub prune: bool,
     /// The field's width probe (`field_probe.rs`): iterations each candidate width trains
     /// from the field's switch on the train views less every fourth (0 = no probe: the
-    /// width is `field.width`). Off by default: on the 9-frame presets its two held-out
-    /// frames chose wrongly on one `nonrigid` seed in two (−0.4 dB); 600 is the length
-    /// that told widths apart at all (BENCHMARKS.md).
+    /// width is `field.width`). Off by default, and not a recommendation: it favours the
+    /// narrower field, which learns faster early; on the 9-frame presets it chose wrongly
+    /// on one `nonrigid` seed in two (−0.4 dB), with 25 train frames on every scene tried
+    /// (−0.8 to −1.2 dB; BENCHMARKS.md).
     pub field_probe: u32,
     /// Candidate widths: `field.width` and this many halvings of it (none below 8).
     pub field_halvings: u32,
