@@ -77,10 +77,10 @@ fn gradients_match_finite_differences_shallow() {
     fd_check(2, 10);
 }
 
-/// Past 4 096 rows the products run by blocks of 2 048 with the bias, ReLU and ReLU mask
-/// applied per block: the forward and backward of 5 000 rows equal those of their two
-/// halves (each one block) — outputs row for row, parameter gradients summed — so every
-/// block's rows meet their own activations (f64, rounding only).
+/// Past 4 096 rows the products run by blocks of 2 048 rows (and the weight gradients
+/// as sums of per-block partial products): the forward and backward of 5 000 rows equal
+/// those of their two halves (one block each) — outputs row for row, parameter gradients
+/// summed (f64, rounding only).
 #[test]
 fn row_blocks_compute_what_the_halves_compute() {
     let mlp = Mlp::<f64>::new(small(4, 16), 5);

@@ -74,8 +74,18 @@ pub fn matmul<T: Real>(
         return;
     }
     use rayon::prelude::*;
+    const BLOCK: usize = 2048;
     if !a.transposed && m >= 2 * BLOCK {
-        matmul_rows_with(dst, dst_stride, a, b, accumulate, |_, _| {}, |_, _| {});
+        // rayon over row blocks of a (and dst), one single-threaded gemm each
+        dst[..(m - 1) * dst_stride + n]
+            .par_chunks_mut(BLOCK * dst_stride)
+            .enumerate()
+            .for_each(|(blk, d)| {
+                let r0 = blk * BLOCK;
+                let rows = BLOCK.min(m - r0);
+                let sub = View::new(&a.data[r0 * a.stride..], rows, a.cols, a.stride);
+                gemm_raw(d, dst_stride, sub, b, accumulate);
+            });
         return;
     }
     if a.transposed && !b.transposed && k >= 2 * BLOCK {
@@ -108,59 +118,6 @@ pub fn matmul<T: Real>(
         return;
     }
     gemm_raw(dst, dst_stride, a, b, accumulate);
-}
-
-/// Rows per task of the row-parallel products.
-const BLOCK: usize = 2048;
-
-/// [`matmul`] of a non-transposed `a` by blocks of rows, with `before(first_row, rows)`
-/// run on each block of `dst` just before its product and `after(first_row, rows)` just
-/// after, while the block is in cache (a bias written before an accumulating product, an
-/// activation or mask after it: one pass over memory instead of three). `rows` holds the
-/// block's rows of `dst` (row stride `dst_stride`). The products are those of `matmul`,
-/// block for block, so the values are the same bit for bit.
-pub fn matmul_rows_with<T: Real>(
-    dst: &mut [T],
-    dst_stride: usize,
-    a: View<'_, T>,
-    b: View<'_, T>,
-    accumulate: bool,
-    before: impl Fn(usize, &mut [T]) + Sync,
-    after: impl Fn(usize, &mut [T]) + Sync,
-) {
-    use rayon::prelude::*;
-    assert!(!a.transposed, "matmul_rows_with: a must not be transposed");
-    let (m, k) = a.shape();
-    let (k2, n) = b.shape();
-    assert_eq!(k, k2, "matmul inner dimensions");
-    if m == 0 || n == 0 {
-        return;
-    }
-    let used = (m - 1) * dst_stride + n;
-    assert!(dst.len() >= used);
-    // `rows` rows of dst from row `r0`: before, the product, after.
-    let run = |r0: usize, rows: usize, d: &mut [T]| {
-        before(r0, d);
-        if k > 0 {
-            let sub = View::new(&a.data[r0 * a.stride..], rows, a.cols, a.stride);
-            gemm_raw(d, dst_stride, sub, b, accumulate);
-        } else if !accumulate {
-            for r in 0..rows {
-                d[r * dst_stride..r * dst_stride + n].fill(T::ZERO);
-            }
-        }
-        after(r0, d);
-    };
-    if m >= 2 * BLOCK {
-        // rayon over row blocks of a (and dst), one single-threaded gemm each
-        dst[..used]
-            .par_chunks_mut(BLOCK * dst_stride)
-            .enumerate()
-            .for_each(|(blk, d)| run(blk * BLOCK, BLOCK.min(m - blk * BLOCK), d));
-    } else {
-        // one block, as `matmul` computes it
-        run(0, m, &mut dst[..used]);
-    }
 }
 
 /// Single-threaded gemm call on views whose shapes were checked by the caller.
@@ -279,59 +236,6 @@ mod block_tests {
                 let want: f64 = 1.0 + (0..m).map(|r| a[r * k + i] * c[r * n + j]).sum::<f64>();
                 assert!((g[i * n + j] - want).abs() < 1e-6 * want.abs().max(1.0));
             }
-        }
-    }
-}
-
-#[cfg(test)]
-mod hook_tests {
-    use super::*;
-
-    /// `matmul_rows_with` runs `before` on each block of rows ahead of its product and
-    /// `after` behind it, with the block's first row: a bias written before an
-    /// accumulating product and a ReLU after it give `max(bias + a·b, 0)` on every row, on
-    /// the row-block path (5 000 rows) and the single-block one (300), bit for bit what
-    /// `matmul` gives with the bias and ReLU as passes of their own.
-    #[test]
-    fn hooks_see_each_block_and_the_product_is_matmuls() {
-        let (k, n) = (5, 4);
-        let bias = [0.25f32, -0.5, 0.0, 1.0];
-        for m in [300usize, 5000] {
-            let a: Vec<f32> = (0..m * k)
-                .map(|i| ((i * 37 % 101) as f32) * 0.01 - 0.5)
-                .collect();
-            let b: Vec<f32> = (0..k * n).map(|i| (i as f32) * 0.1 - 1.0).collect();
-            let (va, vb) = (View::new(&a, m, k, k), View::new(&b, k, n, n));
-            let mut want: Vec<f32> = (0..m).flat_map(|_| bias).collect();
-            matmul(&mut want, n, va, vb, true);
-            want.iter_mut().for_each(|v| *v = v.max(0.0));
-            let firsts = std::sync::Mutex::new(Vec::new());
-            let mut got = vec![f32::NAN; m * n];
-            matmul_rows_with(
-                &mut got,
-                n,
-                va,
-                vb,
-                true,
-                |_, rows| rows.chunks_mut(n).for_each(|r| r.copy_from_slice(&bias)),
-                |r0, rows| {
-                    firsts.lock().unwrap().push((r0, rows.len() / n));
-                    rows.iter_mut().for_each(|v| *v = v.max(0.0));
-                },
-            );
-            assert_eq!(got, want, "m = {m}");
-            let mut blocks = firsts.into_inner().unwrap();
-            blocks.sort_unstable();
-            let expect: Vec<(usize, usize)> = if m >= 2 * BLOCK {
-                (0..m.div_ceil(BLOCK))
-                    .map(|b| (b * BLOCK, BLOCK.min(m - b * BLOCK)))
-                    .collect()
-            } else {
-                vec![(0, m)]
-            };
-            assert_eq!(blocks, expect, "m = {m}");
-            // …and the bias and ReLU did something: some zeros, some positive values
-            assert!(got.contains(&0.0) && got.iter().any(|&v| v > 0.0));
         }
     }
 }

@@ -4,7 +4,7 @@
 //! `D / 2` when `D ≥ 5` (Deform-GS: after layer 4 of 8), one linear head of 10 outputs
 //! (δx 3, δq 4, δs 3; equal to three separate heads), no output activation.
 
-use super::linalg::{Real, View, matmul, matmul_rows_with};
+use super::linalg::{Real, View, matmul};
 use super::settings::FieldSettings;
 use rand::{RngExt, SeedableRng};
 
@@ -205,7 +205,8 @@ impl<T: Real> Mlp<T> {
                 &done[i - 1]
             };
             let z = &mut rest[0];
-            self.linear(a, n, l, z, true);
+            self.linear(a, n, l, z);
+            relu_inplace(z);
         }
         let head = *self.layers.last().expect("head layer");
         let last: &[T] = cache
@@ -213,36 +214,26 @@ impl<T: Real> Mlp<T> {
             .last()
             .map(|h| h.as_slice())
             .unwrap_or(&cache.input);
-        self.linear(last, n, &head, out, false);
+        self.linear(last, n, &head, out);
     }
 
-    /// `z = a · W + b` into `z` (resized), then `z = max(z, 0)` when `relu`; the bias and
-    /// the ReLU on each block of rows while the product has it in cache.
-    fn linear(&self, a: &[T], n: usize, l: &LayerLayout, z: &mut Vec<T>, relu: bool) {
+    /// `z = a · W + b` into `z` (resized).
+    fn linear(&self, a: &[T], n: usize, l: &LayerLayout, z: &mut Vec<T>) {
+        use rayon::prelude::*;
         fit(z, n * l.fan_out);
         let bias = &self.params[l.bias..l.bias + l.fan_out];
+        z.par_chunks_mut(l.fan_out * 1024).for_each(|rows| {
+            for row in rows.chunks_mut(l.fan_out) {
+                row.copy_from_slice(bias);
+            }
+        });
         let w = View::new(
             &self.params[l.weight..l.bias],
             l.fan_in,
             l.fan_out,
             l.fan_out,
         );
-        matmul_rows_with(
-            z,
-            l.fan_out,
-            View::new(a, n, l.fan_in, l.fan_in),
-            w,
-            true,
-            |_, rows| {
-                rows.chunks_mut(l.fan_out)
-                    .for_each(|r| r.copy_from_slice(bias))
-            },
-            |_, rows| {
-                if relu {
-                    relu_slice(rows);
-                }
-            },
-        );
+        matmul(z, l.fan_out, View::new(a, n, l.fan_in, l.fan_in), w, true);
     }
 
     /// Backward pass: `grad_out` is `n × 10`; returns the gradient of every parameter
@@ -280,12 +271,18 @@ impl<T: Real> Mlp<T> {
         let MlpScratch { dz, da, cat } = scratch;
         dz.clear();
         dz.extend_from_slice(grad_out);
-        let mask = |i: usize| (i > 0).then(|| cache.hidden[i - 1].as_slice());
-        self.linear_backward(last, dz, n, &head, grads, mask(s.depth), da);
+        self.linear_backward(last, dz, n, &head, grads, s.depth > 0, da);
         for i in (0..s.depth).rev() {
             let l = self.layers[i];
-            // dz = da ⊙ [h > 0] (the mask applied as `da` was computed)
+            // dz = da ⊙ [h > 0]
             std::mem::swap(dz, da);
+            dz.par_chunks_mut(1 << 14)
+                .zip(cache.hidden[i].par_chunks(1 << 14))
+                .for_each(|(g, h)| {
+                    for (g, &h) in g.iter_mut().zip(h) {
+                        *g = if h > T::ZERO { *g } else { T::ZERO };
+                    }
+                });
             let a: &[T] = if i == 0 {
                 &cache.input
             } else if Some(i - 1) == skip {
@@ -294,7 +291,8 @@ impl<T: Real> Mlp<T> {
             } else {
                 &cache.hidden[i - 1]
             };
-            self.linear_backward(a, dz, n, &l, grads, mask(i), da);
+            let need_da = i > 0;
+            self.linear_backward(a, dz, n, &l, grads, need_da, da);
             if i > 0 && Some(i - 1) == skip {
                 // keep only the hidden part of the concatenated input's gradient
                 let w = l.fan_in;
@@ -311,10 +309,7 @@ impl<T: Real> Mlp<T> {
         }
     }
 
-    /// Accumulate dW = aᵀ dz and db = Σ dz into `grads`; with `mask` (the hidden
-    /// activations `h` the layer's input ends with, `width` columns), also
-    /// da = (dz Wᵀ) ⊙ [h > 0] on those columns (the gradient of the layer below's
-    /// pre-activation; any columns before them, the skip's encoded input, unmasked).
+    /// Accumulate dW = aᵀ dz and db = Σ dz into `grads`; da = dz Wᵀ into `da` if asked.
     #[allow(clippy::too_many_arguments)]
     fn linear_backward(
         &self,
@@ -323,16 +318,16 @@ impl<T: Real> Mlp<T> {
         n: usize,
         l: &LayerLayout,
         grads: &mut [T],
-        mask: Option<&[T]>,
+        need_da: bool,
         da: &mut Vec<T>,
     ) {
         let va = View::new(a, n, l.fan_in, l.fan_in);
         let vdz = View::new(dz, n, l.fan_out, l.fan_out);
         matmul(&mut grads[l.weight..l.bias], l.fan_out, va.t(), vdz, true);
         column_sums(dz, l.fan_out, &mut grads[l.bias..l.bias + l.fan_out]);
-        let Some(h) = mask else {
+        if !need_da {
             return;
-        };
+        }
         fit(da, n * l.fan_in);
         let w = View::new(
             &self.params[l.weight..l.bias],
@@ -340,17 +335,7 @@ impl<T: Real> Mlp<T> {
             l.fan_out,
             l.fan_out,
         );
-        let width = self.settings.width;
-        let hidden_from = l.fan_in - width;
-        let mask_rows = |r0: usize, rows: &mut [T]| {
-            for (k, g) in rows.chunks_mut(l.fan_in).enumerate() {
-                let hr = &h[(r0 + k) * width..(r0 + k + 1) * width];
-                for (g, &h) in g[hidden_from..].iter_mut().zip(hr) {
-                    *g = if h > T::ZERO { *g } else { T::ZERO };
-                }
-            }
-        };
-        matmul_rows_with(da, l.fan_in, vdz, w.t(), false, |_, _| {}, mask_rows);
+        matmul(da, l.fan_in, vdz, w.t(), false);
     }
 }
 
@@ -384,11 +369,14 @@ fn column_sums<T: Real>(m: &[T], cols: usize, acc: &mut [T]) {
     });
 }
 
-fn relu_slice<T: Real>(z: &mut [T]) {
-    for v in z {
-        // select form, so it vectorises
-        *v = if *v > T::ZERO { *v } else { T::ZERO };
-    }
+fn relu_inplace<T: Real>(z: &mut [T]) {
+    use rayon::prelude::*;
+    z.par_chunks_mut(1 << 14).for_each(|c| {
+        for v in c {
+            // select form, so it vectorises
+            *v = if *v > T::ZERO { *v } else { T::ZERO };
+        }
+    });
 }
 
 fn concat_rows<T: Real>(a: &[T], wa: usize, b: &[T], wb: usize, n: usize, out: &mut Vec<T>) {
