@@ -26,6 +26,9 @@ struct Cli {
     /// Output directory (appears complete or not at all).
     #[arg(long)]
     out: PathBuf,
+    /// Replace an earlier output of `assoc` at OUT (never a folder holding an input).
+    #[arg(long)]
+    force: bool,
     /// Settings file (TOML with the keys below); flags override it.
     #[arg(long)]
     config: Option<PathBuf>,
@@ -59,10 +62,17 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         s.min_alpha = cli.min_alpha.unwrap_or(s.min_alpha);
     })?;
     let mut progress = Progress::new("frame", 0);
-    let report = assoc::stage::run(&cli.scene, &cli.model, &cli.out, &s, |done, total| {
-        progress.set_length(total as u64);
-        progress.set(done as u64, String::new);
-    })?;
+    let report = assoc::stage::run(
+        &cli.scene,
+        &cli.model,
+        &cli.out,
+        &s,
+        cli.force,
+        |done, total| {
+            progress.set_length(total as u64);
+            progress.set(done as u64, String::new);
+        },
+    )?;
     progress.finish();
     eprintln!(
         "assoc: {} frames, {:.0}% of {} Gaussians bound on average, {:.2} s -> {}",

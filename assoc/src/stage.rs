@@ -15,7 +15,7 @@ use serde::Serialize;
 use crate::frame::{FrameStats, associate_frame};
 use crate::{AssocSettings, Bindings, FrameBindings, write_assoc};
 use gaussians::model::Model;
-use scene::atomic::{AtomicDir, write_json_atomic};
+use scene::atomic::{AtomicDir, OutputRule, write_json_atomic};
 use scene::cli::{Settings, settings::write_resolved};
 use scene::image_io::{Image, read_exr_depth, read_image, write_png};
 use scene::report::{Phases, peak_rss_mib};
@@ -51,6 +51,7 @@ pub fn run(
     model_dir: &Path,
     out_dir: &Path,
     settings: &AssocSettings,
+    force: bool,
     mut progress: impl FnMut(usize, usize),
 ) -> Result<AssocReport> {
     let start = Instant::now();
@@ -58,6 +59,11 @@ pub fn run(
     settings
         .validate()
         .map_err(|e| Error::Other(format!("assoc settings: {e}")))?;
+    let rule = OutputRule::new("assoc")
+        .force(force)
+        .source(scene_dir)
+        .source(model_dir);
+    rule.check(out_dir)?;
     phases.start("load");
     let scene = Scene::open(scene_dir)?;
     let events_file = scene.events_path().ok_or_else(|| {
@@ -71,7 +77,7 @@ pub fn run(
     if model.splats.is_empty() {
         return Err(Error::invalid(model_dir, "the model has no Gaussians"));
     }
-    let out = AtomicDir::new(out_dir)?;
+    let out = AtomicDir::new(out_dir, &rule)?;
     std::fs::create_dir_all(out.path().join("preview"))
         .map_err(|e| Error::io(out.path().join("preview"), e))?;
     let frames = &scene.train.frames;

@@ -84,8 +84,10 @@ fn stage_writes_the_library_bindings_for_every_frame_and_rejects_bad_depth() {
     let settings = AssocSettings::default();
     let out = tmp.path().join("assoc");
     let mut calls = 0;
-    let report =
-        assoc::stage::run(&scene_dir, &model_dir, &out, &settings, |_, _| calls += 1).unwrap();
+    let report = assoc::stage::run(&scene_dir, &model_dir, &out, &settings, false, |_, _| {
+        calls += 1
+    })
+    .unwrap();
     let n_frames = scene.train.frames.len();
     assert_eq!(calls, n_frames);
     assert_eq!(report.frames.len(), n_frames);
@@ -129,7 +131,7 @@ fn stage_writes_the_library_bindings_for_every_frame_and_rejects_bad_depth() {
     let bad = assoc::stage::depth_path(&model_dir, 1);
     write_exr_depth(&bad, 32, 32, &[1.0; 32 * 32]).unwrap();
     let out2 = tmp.path().join("assoc2");
-    let err = assoc::stage::run(&scene_dir, &model_dir, &out2, &settings, |_, _| {})
+    let err = assoc::stage::run(&scene_dir, &model_dir, &out2, &settings, false, |_, _| {})
         .unwrap_err()
         .to_string();
     assert!(err.contains("0001.exr") && err.contains("32x32"), "{err}");
@@ -143,7 +145,7 @@ fn stage_writes_the_library_bindings_for_every_frame_and_rejects_bad_depth() {
 
     // A missing depth map names the file too.
     std::fs::remove_file(&bad).unwrap();
-    let err = assoc::stage::run(&scene_dir, &model_dir, &out2, &settings, |_, _| {})
+    let err = assoc::stage::run(&scene_dir, &model_dir, &out2, &settings, false, |_, _| {})
         .unwrap_err()
         .to_string();
     assert!(err.contains("0001.exr"), "{err}");
@@ -157,7 +159,7 @@ fn stage_writes_the_library_bindings_for_every_frame_and_rejects_bad_depth() {
     }
     .save(&empty_dir)
     .unwrap();
-    let err = assoc::stage::run(&scene_dir, &empty_dir, &out2, &settings, |_, _| {})
+    let err = assoc::stage::run(&scene_dir, &empty_dir, &out2, &settings, false, |_, _| {})
         .unwrap_err()
         .to_string();
     // The message itself, naming the model's PLY (the directory's name alone would not

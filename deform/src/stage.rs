@@ -31,7 +31,7 @@ use gaussians::TileRasterizer;
 use gaussians::model::Model;
 use gaussians::stage::{Evaluation, evaluate, evaluate_novel, write_depths};
 use safetensors::{Dtype, tensor::TensorView};
-use scene::atomic::{AtomicDir, write_bytes_atomic, write_json_atomic};
+use scene::atomic::{AtomicDir, OutputRule, write_bytes_atomic, write_json_atomic};
 use scene::error::{Error, Result};
 use scene::report::{Phases, peak_rss_mib};
 use serde::Serialize;
@@ -56,6 +56,10 @@ pub struct TrainArgs {
     /// Output directory (written under a temporary name, renamed when complete)
     #[arg(long)]
     pub out: PathBuf,
+    /// Replace an earlier output of `deform train` at OUT (never a folder that holds an
+    /// input, nor one some other program wrote)
+    #[arg(long)]
+    pub force: bool,
     /// settings.toml with any DeformSettings (flags below override it)
     #[arg(long)]
     pub config: Option<PathBuf>,
@@ -172,6 +176,13 @@ pub fn train(
     let mut phases = Phases::new();
     phases.start("load");
     let settings = resolve_settings(args)?;
+    let rule = OutputRule::new("deform train")
+        .force(args.force)
+        .source(&args.scene)
+        .source(&args.model)
+        .source(&args.flows)
+        .source(&args.assoc);
+    rule.check(&args.out)?;
     let d = Inputs::load(
         &args.scene,
         &args.model,
@@ -179,7 +190,7 @@ pub fn train(
         &args.assoc,
         &settings,
     )?;
-    let out = AtomicDir::new(&args.out)?;
+    let out = AtomicDir::new(&args.out, &rule)?;
     phases.start("train");
     let mut tr = JointTrainer::new(&d, settings.clone());
     let warmup_iterations = tr.inner.iteration;

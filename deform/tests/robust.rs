@@ -341,7 +341,7 @@ fn duplicate_frame_times_are_refused_by_the_cli_and_survived_by_the_trainer() {
     assert!(
         err.starts_with("deform: error: ")
             && err.contains("transforms_train.json")
-            && err.contains("timestamps not increasing"),
+            && err.contains("is not after frame"),
         "{err}"
     );
     assert!(!out.exists());

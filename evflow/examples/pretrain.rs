@@ -15,7 +15,7 @@ fn main() -> anyhow::Result<()> {
     let settings: PretrainSettings = resolve((cfg != "-").then_some(Path::new(cfg)), |_| {})?;
     let start = Instant::now();
     let mut avg = 0.0;
-    let report = run(&settings, Path::new(out), &mut |k, n, loss| {
+    let report = run(&settings, Path::new(out), false, &mut |k, n, loss| {
         avg += loss;
         if k % 25 == 0 || k == n {
             eprintln!(

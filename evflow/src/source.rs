@@ -264,6 +264,11 @@ impl Source {
             ));
         }
         let events = scene.load_events()?;
+        // Events off the frames' clock: one error up front, not a warning per window.
+        let findings = scene::check::check_frames(&scene.train.frames, &[], Some(&events.t));
+        if let Some(e) = scene::check::first_error(&events_path, &findings) {
+            return Err(e);
+        }
         let times: Vec<f64> = scene.train.frames.iter().map(|f| f.timestamp).collect();
         let windows = if frame_window > 0.0 {
             windows_around(&events, &times, frame_window)

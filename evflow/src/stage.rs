@@ -121,12 +121,32 @@ pub fn run(
     s: &FlowSettings,
     train: bool,
     adapter: Option<&Path>,
+    force: bool,
     on: impl FnMut(Event),
 ) -> Result<StageReport> {
     let on = std::cell::RefCell::new(on);
     let emit = |e: Event| (on.borrow_mut())(e);
     s.validate()
         .map_err(|e| Error::Other(format!("settings: {e}")))?;
+    let command = if train {
+        "evflow finetune"
+    } else {
+        "evflow predict"
+    };
+    let mut rule = scene::atomic::OutputRule::new(command).force(force);
+    match input {
+        Input::Scene(d) => rule = rule.source(d),
+        Input::Events { path, calib, .. } => {
+            rule = rule.source(path);
+            if let Some(c) = calib {
+                rule = rule.source(c);
+            }
+        }
+    }
+    for p in adapter.into_iter().chain(s.weights.as_deref()) {
+        rule = rule.source(p);
+    }
+    rule.check(out)?;
     let start = std::time::Instant::now();
     let mut phases = scene::report::Phases::new();
     phases.start("load");
@@ -162,7 +182,7 @@ pub fn run(
         Some(d) => crate::predict::scene_gt(d)?,
         None => None,
     };
-    let dir = scene::atomic::AtomicDir::new(out)?;
+    let dir = scene::atomic::AtomicDir::new(out, &rule)?;
     let mut ft = FinetuneReport {
         mode: Mode::None,
         ..Default::default()

@@ -122,11 +122,19 @@ fn several_subsampled_windows_give_one_warning() {
         ..FlowSettings::default()
     };
     let mut warnings = Vec::new();
-    let r = evflow::stage::run(&input, &tmp.path().join("out"), &s, true, None, |e| {
-        if let Event::Warning(w) = e {
-            warnings.push(w.to_string());
-        }
-    })
+    let r = evflow::stage::run(
+        &input,
+        &tmp.path().join("out"),
+        &s,
+        true,
+        None,
+        false,
+        |e| {
+            if let Event::Warning(w) = e {
+                warnings.push(w.to_string());
+            }
+        },
+    )
     .unwrap();
     // Windows of 1000 events each (boundaries half-way between events).
     assert_eq!(r.windows, 3);
@@ -143,11 +151,19 @@ fn several_subsampled_windows_give_one_warning() {
         ..s
     };
     warnings.clear();
-    let r = evflow::stage::run(&input, &tmp.path().join("out2"), &s, true, None, |e| {
-        if let Event::Warning(w) = e {
-            warnings.push(w.to_string());
-        }
-    })
+    let r = evflow::stage::run(
+        &input,
+        &tmp.path().join("out2"),
+        &s,
+        true,
+        None,
+        false,
+        |e| {
+            if let Event::Warning(w) = e {
+                warnings.push(w.to_string());
+            }
+        },
+    )
     .unwrap();
     assert!(warnings.is_empty() && r.finetune.cm_subsampled_windows.is_empty());
 }

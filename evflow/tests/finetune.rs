@@ -69,6 +69,7 @@ fn lora_finetune_lowers_the_cm_loss_and_writes_the_stage_outputs() {
         &settings(&w, Mode::Lora),
         true,
         None,
+        false,
         |e| {
             if let Event::Step(s) = e {
                 assert!(s.loss.is_finite());
@@ -138,6 +139,7 @@ fn lora_finetune_lowers_the_cm_loss_and_writes_the_stage_outputs() {
         &s,
         false,
         Some(&out.join("adapter.safetensors")),
+        false,
         |_| {},
     )
     .unwrap();
@@ -211,11 +213,19 @@ fn empty_window_gives_zero_flow_and_a_warning() {
         },
     };
     let mut warnings = Vec::new();
-    let r = evflow::stage::run(&input, &out, &settings(&w, Mode::Lora), true, None, |e| {
-        if let Event::Warning(m) = e {
-            warnings.push(m.to_string());
-        }
-    })
+    let r = evflow::stage::run(
+        &input,
+        &out,
+        &settings(&w, Mode::Lora),
+        true,
+        None,
+        false,
+        |e| {
+            if let Event::Warning(m) = e {
+                warnings.push(m.to_string());
+            }
+        },
+    )
     .unwrap();
     assert_eq!(r.predict.empty_windows, vec![1]);
     assert_eq!(warnings.len(), 1, "{warnings:?}");
@@ -245,6 +255,7 @@ fn single_frame_scene_and_corrupt_weights_give_clear_errors() {
         &settings(&bad, Mode::Lora),
         true,
         None,
+        false,
         |_| {},
     )
     .unwrap_err()
@@ -258,6 +269,7 @@ fn single_frame_scene_and_corrupt_weights_give_clear_errors() {
         &settings(&tmp.path().join("nope.safetensors"), Mode::Lora),
         true,
         None,
+        false,
         |_| {},
     )
     .unwrap_err()

@@ -38,6 +38,9 @@ enum Verb {
         /// Which frames of the scene to render
         #[arg(long, value_enum, default_value_t = Split::Test)]
         split: Split,
+        /// Replace an earlier output of `gaussians render` at OUT
+        #[arg(long)]
+        force: bool,
     },
     /// Write an RGB-only synthetic scene (no events), for tests and benchmarks.
     #[command(hide = true)]
@@ -75,13 +78,19 @@ fn run(verb: Verb) -> scene::Result<ExitCode> {
             let novel = r.novel.as_ref().map_or(String::new(), |n| {
                 format!(", novel views {:.2} dB / {:.4}", n.psnr_mean, n.ssim_mean)
             });
+            let test = if r.test.frames == 0 {
+                "no test frames to score".to_string()
+            } else {
+                format!(
+                    "test PSNR {:.2} dB, SSIM {:.4}",
+                    r.test.psnr_mean, r.test.ssim_mean
+                )
+            };
             eprintln!(
-                "{}: {} iterations, {} Gaussians, test PSNR {:.2} dB, SSIM {:.4}{novel}{}",
+                "{}: {} iterations, {} Gaussians, {test}{novel}{}",
                 o.out.display(),
                 r.iterations,
                 r.gaussians,
-                r.test.psnr_mean,
-                r.test.ssim_mean,
                 if r.interrupted { " (interrupted)" } else { "" }
             );
             Ok(if r.interrupted {
@@ -95,8 +104,9 @@ fn run(verb: Verb) -> scene::Result<ExitCode> {
             scene,
             out,
             split,
+            force,
         } => {
-            let r = stage::render(&model, &scene, &out, split)?;
+            let r = stage::render(&model, &scene, &out, split, force)?;
             eprintln!(
                 "{}: {} frames, PSNR {:.2} dB, SSIM {:.4}",
                 out.display(),

@@ -14,7 +14,7 @@ use crate::raster::TileRasterizer;
 use crate::splats::Splats;
 use crate::train::settings::Init;
 use crate::train::{StepInfo, TrainSettings, Trainer, View, init};
-use scene::atomic::{AtomicDir, write_json_atomic};
+use scene::atomic::{AtomicDir, OutputRule, write_json_atomic};
 use scene::cli::settings::{resolve, write_resolved};
 use scene::error::{Error, Result};
 use scene::image_io::{read_image, write_exr_depth, write_png};
@@ -34,6 +34,10 @@ pub struct TrainArgs {
     /// Output directory (written under a temporary name, renamed when complete)
     #[arg(long)]
     pub out: PathBuf,
+    /// Replace an earlier output of this command at OUT (never a folder that holds an
+    /// input, nor one some other program wrote)
+    #[arg(long)]
+    pub force: bool,
     /// settings.toml with any TrainSettings (flags below override it; the resolved
     /// settings are written to OUT/settings.toml)
     #[arg(long)]
@@ -368,6 +372,13 @@ pub fn train(
     let mut phases = Phases::new();
     phases.start("load");
     let settings = resolve_settings(args)?;
+    let mut rule = OutputRule::new("gaussians train")
+        .force(args.force)
+        .source(&args.scene);
+    if let Some(p) = &args.init_ply {
+        rule = rule.source(p);
+    }
+    rule.check(&args.out)?;
     let scene = Scene::open(&args.scene)?;
     let views = load_views(&scene, &scene.train)?;
     let test_views = load_views(&scene, &scene.test)?;
@@ -377,7 +388,7 @@ pub fn train(
         initial_splats(&settings, &views, args.init_ply.as_deref())?;
     let cams: Vec<_> = views.iter().map(|v| v.camera).collect();
     let extent = scene_extent(&settings, &cams);
-    let out = AtomicDir::new(&args.out)?;
+    let out = AtomicDir::new(&args.out, &rule)?;
 
     phases.start("train");
     let mut trainer = Trainer::new(settings, splats, extent);
@@ -470,7 +481,13 @@ pub fn render(
     scene_dir: &Path,
     out_dir: &Path,
     split: Split,
+    force: bool,
 ) -> Result<RenderReport> {
+    let rule = OutputRule::new("gaussians render")
+        .force(force)
+        .source(model_dir)
+        .source(scene_dir);
+    rule.check(out_dir)?;
     let mut phases = Phases::new();
     phases.start("load");
     let model = Model::load(model_dir)?;
@@ -480,14 +497,19 @@ pub fn render(
         Split::Train => (&scene.train, "train"),
         Split::Novel => (&scene.novel, "novel"),
     };
-    if split == Split::Novel && m.frames.is_empty() {
+    if m.frames.is_empty() {
+        let file = match split {
+            Split::Test => scene::manifest::TEST_FILE,
+            Split::Train => scene::manifest::TRAIN_FILE,
+            Split::Novel => scene::manifest::NOVEL_FILE,
+        };
         return Err(Error::invalid(
-            scene.root.join(scene::manifest::NOVEL_FILE),
-            "the scene has no novel-view split to render",
+            scene.root.join(file),
+            format!("the scene has no {name} frames to render"),
         ));
     }
     let views = load_views(&scene, m)?;
-    let out = AtomicDir::new(out_dir)?;
+    let out = AtomicDir::new(out_dir, &rule)?;
     phases.start("render");
     let evaluation = evaluate(&model, &views, name, Some(&out.path().join("renders")))?;
     write_depths(&model, &views, &out.path().join("depth"))?;

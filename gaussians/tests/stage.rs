@@ -209,7 +209,7 @@ fn trains_writes_every_output_and_reloads_identically() {
 
     // `render` reproduces the reported test PSNR
     let rendered = tmp.path().join("rendered");
-    let rr = stage::render(&out, &scene_dir, &rendered, Split::Test).unwrap();
+    let rr = stage::render(&out, &scene_dir, &rendered, Split::Test, false).unwrap();
     assert_eq!(rr.evaluation.psnr, r.test.psnr);
     assert!(rendered.join("renders/0002.png").is_file());
 
@@ -231,7 +231,7 @@ fn trains_writes_every_output_and_reloads_identically() {
     }
     assert!(!out.join("renders/0003.png").exists());
     let rendered = tmp.path().join("rendered-novel");
-    let rn = stage::render(&out, &scene_dir, &rendered, Split::Novel).unwrap();
+    let rn = stage::render(&out, &scene_dir, &rendered, Split::Novel, false).unwrap();
     assert_eq!(rn.evaluation.psnr, novel.psnr);
     assert_ne!(rn.evaluation.psnr, r.test.psnr);
     let inputs = report["inputs"].as_array().unwrap();
@@ -267,11 +267,11 @@ fn without_a_novel_split_the_report_has_no_novel_section() {
     assert!(report.get("novel").is_none(), "{}", report["novel"]);
     assert_eq!(report["test"]["frames"], 3);
     assert!(!out.join("renders/novel").exists());
-    let e = stage::render(&out, &scene_dir, &tmp.path().join("r"), Split::Novel)
+    let e = stage::render(&out, &scene_dir, &tmp.path().join("r"), Split::Novel, false)
         .unwrap_err()
         .to_string();
     assert!(
-        e.contains("transforms_novel.json") && e.contains("no novel-view split"),
+        e.contains("transforms_novel.json") && e.contains("no novel frames"),
         "{e}"
     );
 }

@@ -71,6 +71,8 @@ pub struct TimeMap {
     pub duration: f64,
     /// Whether offset and duration were both given (else taken from the events' span).
     pub given: bool,
+    /// Which of the two came from the events (for the warning).
+    pub guessed: &'static str,
 }
 
 impl TimeMap {
@@ -89,6 +91,12 @@ impl TimeMap {
             offset,
             duration,
             given: o.time_offset.is_some() && o.duration.is_some(),
+            guessed: match (o.time_offset.is_some(), o.duration.is_some()) {
+                (false, false) => "the events' first timestamp and span",
+                (true, false) => "--time-offset, and the events' span as the duration",
+                (false, true) => "the events' first timestamp as the offset, and --duration",
+                (true, true) => "",
+            },
         })
     }
 
@@ -96,13 +104,16 @@ impl TimeMap {
         self.offset + normalised * self.duration
     }
 
-    /// The warning to give when `n` frames were placed by a guessed map (none if given).
-    pub fn warning(&self, n: usize, events: &EventStream) -> Option<String> {
-        let (e0, e1) = span(events);
+    /// The warning to give when `n` frames were placed by a guessed map (none if given):
+    /// where they went, and from what.
+    pub fn warning(&self, n: usize) -> Option<String> {
         (n > 0 && !self.given).then(|| {
             format!(
-                "{n} frames have only a normalised time: placed on the events' span {e0} … {e1} s \
-                 (pass --time-offset and --duration if the frames span another interval)"
+                "{n} frames have only a normalised time: placed on {} … {} s from {} \
+                 (pass --time-offset and --duration if the frames span another interval)",
+                self.offset,
+                self.seconds(1.0),
+                self.guessed
             )
         })
     }

@@ -18,7 +18,7 @@
 use crate::aligned::{EventsAlignment, TimeMap, event_file, read_for_sensor};
 use crate::recording::{FrameImage, Recording, SourceFrame};
 use scene::Scene;
-use scene::atomic::{AtomicDir, write_bytes_atomic, write_json_atomic};
+use scene::atomic::{AtomicDir, OutputRule, write_bytes_atomic, write_json_atomic};
 use scene::error::{Error, Result};
 use scene::manifest::{FrameEncoding, Manifest, TEST_FILE, TRAIN_FILE};
 use std::path::Path;
@@ -64,6 +64,7 @@ pub fn read_blender(src: &Path, o: &EventsAlignment) -> Result<Recording> {
                 normalised_only += 1;
                 times.seconds(f.time)
             };
+
             let mut image = src.join(&f.file_path);
             if image.extension().is_none() {
                 image.set_extension("png");
@@ -78,7 +79,7 @@ pub fn read_blender(src: &Path, o: &EventsAlignment) -> Result<Recording> {
             ));
         }
     }
-    warnings.extend(times.warning(normalised_only, &events));
+    warnings.extend(times.warning(normalised_only));
     frames.sort_by(|a, b| a.1.timestamp.total_cmp(&b.1.timestamp));
     let held_out = frames.iter().map(|f| f.0).collect();
     Ok(Recording {
@@ -97,7 +98,7 @@ pub fn read_blender(src: &Path, o: &EventsAlignment) -> Result<Recording> {
 /// the normalised `time = (timestamp − offset) / duration`, the events as `events.evs`.
 /// For tests of the normalised-time mapping.
 pub fn export_blender(scene: &Scene, offset: f64, duration: f64, out: &Path) -> Result<()> {
-    let dir = AtomicDir::new(out)?;
+    let dir = AtomicDir::new(out, &OutputRule::new("export"))?;
     let root = dir.path();
     let cam = &scene.train.camera;
     for (name, m, split) in [

@@ -23,7 +23,7 @@ use crate::convention::{opencv_to_opengl, opengl_to_opencv};
 use crate::recording::{FrameImage, Recording, SourceFrame};
 use crate::table::{check_increasing, number, read_text, rows};
 use glam::{DQuat, DVec3};
-use scene::atomic::{AtomicDir, write_bytes_atomic};
+use scene::atomic::{AtomicDir, OutputRule, write_bytes_atomic};
 use scene::error::{Error, IoContext, Result};
 use scene::formats::ReadOptions;
 use scene::manifest::FrameEncoding;
@@ -253,7 +253,7 @@ pub fn read_groundtruth(path: &Path) -> Result<Trajectory> {
 /// `extra_poses` (camera-to-world, manifest axes; those at a frame's time are skipped).
 /// The inverse of [`read_ecd`] for tests and for handing scenes to ECD tools.
 pub fn export_ecd(scene: &Scene, extra_poses: &[(f64, Pose)], out: &Path) -> Result<()> {
-    let dir = AtomicDir::new(out)?;
+    let dir = AtomicDir::new(out, &OutputRule::new("export"))?;
     let root = dir.path();
     let frames = crate::recording::frames_by_time(scene);
     let mut images = String::from("# timestamp filename\n");

@@ -17,7 +17,7 @@
 use crate::ecd::calib_or_guess;
 use crate::recording::{FrameImage, Recording, SourceFrame};
 use crate::table::{check_increasing, number, read_text, rows};
-use scene::atomic::{AtomicDir, write_bytes_atomic};
+use scene::atomic::{AtomicDir, OutputRule, write_bytes_atomic};
 use scene::error::{Error, IoContext, Result};
 use scene::events::EventStream;
 use scene::formats::{ReadOptions, read_npz, write_npz};
@@ -27,6 +27,52 @@ use std::path::{Path, PathBuf};
 
 /// HS-ERGB stores event coordinates multiplied by this.
 pub const COORD_SCALE: f64 = 32.0;
+
+/// Events whose coordinates were read raw, in pixels of the `(w, h)` frames: divided by
+/// [`COORD_SCALE`] as HS-ERGB stores them, unless their range shows plain pixels (all
+/// below the frame size, and beyond what ×32 data could reach there), which are kept
+/// with a warning. Coordinates that fit neither are an error naming the folder.
+fn pixel_coordinates(
+    mut ev: EventStream,
+    (w, h): (u32, u32),
+    dir: &Path,
+    warnings: &mut Vec<String>,
+) -> Result<EventStream> {
+    let max = |v: &[u16]| v.iter().copied().max().map_or(0, u32::from);
+    let (mx, my) = (max(&ev.x), max(&ev.y));
+    let s = COORD_SCALE;
+    let plain =
+        mx < w && my < h && (f64::from(mx) > f64::from(w) / s || f64::from(my) > f64::from(h) / s);
+    if plain {
+        warnings.push(format!(
+            "{}: the npz coordinates span 0..{mx} × 0..{my}, within the frames' {w}×{h}: \
+             read as plain pixels, not ×32 as HS-ERGB stores them",
+            dir.display()
+        ));
+    } else {
+        let scale = |v: &mut Vec<u16>, size: u32, axis: &str| -> Result<()> {
+            for c in v.iter_mut() {
+                let px = (f64::from(*c) / s).round();
+                if px >= f64::from(size) {
+                    return Err(Error::invalid(
+                        dir,
+                        format!(
+                            "an event's {axis} = {c} (÷ 32 = {px}) is outside the frames' \
+                             {w}×{h}: neither ×32 nor plain pixels"
+                        ),
+                    ));
+                }
+                *c = px as u16;
+            }
+            Ok(())
+        };
+        scale(&mut ev.x, w, "x")?;
+        scale(&mut ev.y, h, "y")?;
+    }
+    ev.width = w;
+    ev.height = h;
+    Ok(ev)
+}
 
 /// The first of `names` that is a directory under `src`.
 fn find_dir(src: &Path, names: &[&str]) -> Result<PathBuf> {
@@ -99,11 +145,13 @@ pub fn read_hsergb(src: &Path, calib: Option<&Path>) -> Result<Recording> {
     }
     let (w, h) = image::image_dimensions(&images[0])
         .map_err(|e| Error::invalid(&images[0], format!("cannot read image header: {e}")))?;
+    // The raw coordinates first: whether they are ×32 is read off their range.
+    let s = COORD_SCALE as u32;
     let opts = ReadOptions {
-        sensor: Some((w, h)),
-        coord_scale: Some(COORD_SCALE),
+        sensor: Some((w * s, h * s)),
+        coord_scale: None,
     };
-    let mut events = EventStream::new(w, h);
+    let mut events = EventStream::new(w * s, h * s);
     let mut warnings = Vec::new();
     let npz = files(&ev_dir, "npz")?;
     if npz.is_empty() {
@@ -128,6 +176,7 @@ pub fn read_hsergb(src: &Path, calib: Option<&Path>) -> Result<Recording> {
         events.y.extend_from_slice(&part.y);
         events.p.extend_from_slice(&part.p);
     }
+    let events = pixel_coordinates(events, (w, h), &ev_dir, &mut warnings)?;
     let unit = timestamp_unit(&times, &events);
     let times: Vec<f64> = times.iter().map(|t| t * unit).collect();
     if unit != 1.0 {
@@ -189,7 +238,7 @@ pub fn export_hsergb(scene: &Scene, out: &Path) -> Result<()> {
             cam.width, cam.height
         )));
     }
-    let dir = AtomicDir::new(out)?;
+    let dir = AtomicDir::new(out, &OutputRule::new("export"))?;
     let root = dir.path();
     let frames = crate::recording::frames_by_time(scene);
     let mut ts = String::new();

@@ -61,6 +61,13 @@ pub fn import(
     opts: &ImportOptions,
     out: &Path,
 ) -> Result<ImportSummary> {
+    let mut rule = scene::atomic::OutputRule::new(recording::IMPORT_COMMAND)
+        .force(opts.force)
+        .source(src);
+    for p in opts.calib.iter().chain(&opts.alignment.events) {
+        rule = rule.source(p);
+    }
+    rule.check(out)?;
     let rec = match layout {
         Layout::Ecd => ecd::read_ecd(src)?,
         Layout::Hsergb => hsergb::read_hsergb(src, opts.calib.as_deref())?,
@@ -70,5 +77,5 @@ pub fn import(
             aedat4::read_aedat4_recording(src, opts.calib.as_deref(), opts.static_camera)?
         }
     };
-    write_scene(&rec, opts, out)
+    recording::write_scene_with(&rec, opts, out, &rule)
 }

@@ -26,7 +26,7 @@ use crate::aligned::{EventsAlignment, TimeMap, event_file, read_for_sensor};
 use crate::convention::{opencv_to_opengl, opengl_to_opencv};
 use crate::recording::{FrameImage, Recording, SourceFrame};
 use glam::{DMat3, DQuat, DVec3};
-use scene::atomic::{AtomicDir, write_bytes_atomic, write_json_atomic};
+use scene::atomic::{AtomicDir, OutputRule, write_bytes_atomic, write_json_atomic};
 use scene::error::{Error, IoContext, Result};
 use scene::manifest::FrameEncoding;
 use scene::{Distortion, Intrinsics, Pose, Scene};
@@ -242,7 +242,7 @@ pub fn read_nerfies(src: &Path, o: &EventsAlignment, downscale: Option<u32>) -> 
     let events_path = event_file(src, o, None, &dataset_path)?;
     let events = read_for_sensor(&events_path, cam.width, cam.height)?;
     let times = TimeMap::new(o, &events)?;
-    let mut warnings: Vec<String> = times.warning(frames.len(), &events).into_iter().collect();
+    let mut warnings: Vec<String> = times.warning(frames.len()).into_iter().collect();
     if dataset.val_ids.is_empty() {
         warnings.push("dataset.json has no val_ids: no test frames unless --test-every".into());
     }
@@ -285,7 +285,7 @@ pub struct NerfiesExport {
 /// Write `scene` in the nerfies layout at `out` (frames in rgb/1x, train frames in
 /// train_ids, test frames in val_ids, events as events.evs). For the round-trip tests.
 pub fn export_nerfies(scene: &Scene, x: &NerfiesExport, out: &Path) -> Result<()> {
-    let dir = AtomicDir::new(out)?;
+    let dir = AtomicDir::new(out, &OutputRule::new("export"))?;
     let root = dir.path();
     let cam = scene.train.camera;
     let d = cam.distortion.unwrap_or_default();

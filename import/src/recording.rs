@@ -3,7 +3,7 @@
 //! ([`write_scene`]), choosing the train and test frames ([`split_frames`]).
 
 use crate::aligned::EventsAlignment;
-use scene::atomic::{AtomicDir, write_json_atomic};
+use scene::atomic::{AtomicDir, OutputRule, write_json_atomic};
 use scene::error::{Error, IoContext, Result};
 use scene::events::EventStream;
 use scene::image_io::{Image, write_png};
@@ -76,6 +76,8 @@ pub struct ImportOptions {
     pub alignment: EventsAlignment,
     /// Nerfies: read the frames of `rgb/{N}x/` (default: 1, else the smallest there).
     pub downscale: Option<u32>,
+    /// Replace an earlier output of `degs import` at the output folder.
+    pub force: bool,
 }
 
 impl Default for ImportOptions {
@@ -89,6 +91,7 @@ impl Default for ImportOptions {
             calib: None,
             alignment: Default::default(),
             downscale: None,
+            force: false,
         }
     }
 }
@@ -255,11 +258,31 @@ pub fn frames_by_time(scene: &scene::Scene) -> Vec<&scene::manifest::Frame> {
     frames
 }
 
-/// Write `rec` as a scene directory at `out` (atomically; an existing one is replaced):
+/// The command whose outputs [`write_scene`] marks.
+pub const IMPORT_COMMAND: &str = "degs import";
+
+/// Write `rec` as a scene directory at `out` (atomically; an earlier import there is
+/// replaced only under `opts.force`, anything else there is refused):
 /// `transforms_train.json`, `transforms_test.json`, `images/{train,test}_NNNN.*`,
 /// `events.evs`, `import.json` (the summary). Frame `time` is the timestamp normalised
 /// over the first and last frame.
 pub fn write_scene(rec: &Recording, opts: &ImportOptions, out: &Path) -> Result<ImportSummary> {
+    write_scene_with(
+        rec,
+        opts,
+        out,
+        &OutputRule::new(IMPORT_COMMAND).force(opts.force),
+    )
+}
+
+/// [`write_scene`] under `rule` (which names the source files the output must not hold).
+pub fn write_scene_with(
+    rec: &Recording,
+    opts: &ImportOptions,
+    out: &Path,
+    rule: &OutputRule,
+) -> Result<ImportSummary> {
+    rule.check(out)?;
     check_recording(rec)?;
     let c = opts.contrast_threshold;
     if !(c.is_finite() && c > 0.0) {
@@ -277,7 +300,7 @@ pub fn write_scene(rec: &Recording, opts: &ImportOptions, out: &Path) -> Result<
     let span = t1 - t0;
     let encoding = opts.frame_encoding.unwrap_or(rec.frame_encoding);
 
-    let dir = AtomicDir::new(out)?;
+    let dir = AtomicDir::new(out, rule)?;
     let root = dir.path().to_path_buf();
     let write_split = |name: &str, idx: &[usize]| -> Result<Vec<Frame>> {
         let mut frames = Vec::with_capacity(idx.len());
@@ -311,6 +334,18 @@ pub fn write_scene(rec: &Recording, opts: &ImportOptions, out: &Path) -> Result<
         events: None,
         ..train.clone()
     };
+    // Findings that make the scene meaningless refuse it; the others go in the summary.
+    let findings = scene::check::check_frames(&train.frames, &test.frames, Some(&rec.events.t));
+    if let Some(e) = scene::check::first_error(out, &findings) {
+        return Err(e);
+    }
+    let mut warnings = rec.warnings.clone();
+    warnings.extend(
+        findings
+            .into_iter()
+            .filter(|f| f.level == scene::check::Level::Warning)
+            .map(|f| f.message),
+    );
     scene::formats::write_evs(root.join(EVENTS_FILE), &rec.events)?;
     train.write(root.join(TRAIN_FILE))?;
     test.write(root.join(TEST_FILE))?;
@@ -334,7 +369,7 @@ pub fn write_scene(rec: &Recording, opts: &ImportOptions, out: &Path) -> Result<
         events_per_interval: interval_counts(ev, &times),
         frame_encoding: encoding,
         contrast_threshold: c,
-        warnings: rec.warnings.clone(),
+        warnings,
     };
     write_json_atomic(&root.join("import.json"), &summary)?;
     dir.commit()?;
@@ -356,13 +391,48 @@ fn check_recording(rec: &Recording) -> Result<()> {
             rec.layout, rec.events.width, rec.events.height, cam.width, cam.height
         )));
     }
+    // Times increase within each split; a layout's own test split may share times with
+    // its train split (D-NeRF: other cameras at the train times).
+    let name = |i: usize| match &rec.frames[i].image {
+        FrameImage::File(p) => format!("frame {i} ({})", p.display()),
+        FrameImage::Pixels { .. } => format!("frame {i}"),
+    };
+    let mut last: [Option<usize>; 2] = [None, None];
     for (i, f) in rec.frames.iter().enumerate() {
-        if !f.timestamp.is_finite() || (i > 0 && f.timestamp <= rec.frames[i - 1].timestamp) {
+        if !f.timestamp.is_finite() {
             return Err(Error::Other(format!(
-                "{} recording: frame {i}: timestamp {} is not finite or not after the previous",
-                rec.layout, f.timestamp
+                "{} recording: {}: timestamp {} is not finite",
+                rec.layout,
+                name(i),
+                f.timestamp
             )));
         }
+        let split = usize::from(
+            rec.held_out
+                .as_ref()
+                .is_some_and(|h| h.get(i) == Some(&true)),
+        );
+        let prev = if rec.held_out.is_some() {
+            last[split]
+        } else {
+            i.checked_sub(1)
+        };
+        if let Some(j) = prev.filter(|&j| f.timestamp <= rec.frames[j].timestamp) {
+            let which = match (&rec.held_out, split) {
+                (None, _) => "",
+                (Some(_), 0) => " in the train split",
+                (Some(_), _) => " in the test split",
+            };
+            return Err(Error::Other(format!(
+                "{} recording: {} at {} s is not after {} at {} s{which}",
+                rec.layout,
+                name(i),
+                f.timestamp,
+                name(j),
+                rec.frames[j].timestamp
+            )));
+        }
+        last[split] = Some(i);
         let size = match &f.image {
             FrameImage::File(p) => image::image_dimensions(p)
                 .map_err(|e| Error::invalid(p, format!("cannot read image header: {e}")))?,
@@ -388,6 +458,10 @@ fn write_image(root: &Path, stem: &str, image: &FrameImage) -> Result<String> {
                 .unwrap_or_else(|| "png".into());
             let rel = format!("{stem}.{ext}");
             let bytes = std::fs::read(src).at(src)?;
+            // Decoded whole, so that a truncated or corrupt frame fails here, not in a
+            // stage minutes later.
+            image::load_from_memory(&bytes)
+                .map_err(|e| Error::invalid(src, format!("cannot decode the frame: {e}")))?;
             scene::atomic::write_bytes_atomic(&root.join(&rel), &bytes)?;
             Ok(rel)
         }

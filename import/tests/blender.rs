@@ -90,3 +90,99 @@ fn synthetic_scene_round_trips_through_the_blender_layout() {
         "{e}"
     );
 }
+
+/// Frames placed off the events' clock (`--time-offset 5` for events over 0–0.5 s) are
+/// refused, naming both spans; a partial overlap imports with a warning that says where
+/// the frames were placed and from what (not "the events' span" when an offset was given).
+#[test]
+fn frames_placed_off_the_events_clock_are_refused_or_warned() {
+    let dir = tempfile::tempdir().unwrap();
+    let (orig, _) = tiny_scene(dir.path(), "synth");
+    let src = dir.path().join("dnerf");
+    export_blender(&orig, 0.0, 0.5, &src).unwrap();
+    let at = |offset: f64| ImportOptions {
+        alignment: EventsAlignment {
+            events: None,
+            time_offset: Some(offset),
+            duration: None,
+        },
+        ..Default::default()
+    };
+    let out = dir.path().join("off");
+    let e = import(Layout::Blender, &src, &at(5.0), &out)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("none of the") && e.contains("one clock"), "{e}");
+    assert!(!out.exists());
+    // Half the frames' span without events: imported, and said so.
+    let ev = orig.load_events().unwrap();
+    let span = ev.t[ev.len() - 1] - ev.t[0];
+    let s = import(
+        Layout::Blender,
+        &src,
+        &at(ev.t[0] + span / 2.0),
+        &dir.path().join("half"),
+    )
+    .unwrap();
+    let w = s.warnings.join("\n");
+    assert!(
+        w.contains("from --time-offset, and the events' span"),
+        "{w}"
+    );
+    assert!(w.contains("cover 50 %"), "{w}");
+}
+
+/// D-NeRF's own split puts test cameras at the train times: accepted (other cameras, so
+/// a fair test); two frames of one split at one time are refused, naming the split file
+/// and both frames.
+#[test]
+fn test_views_at_train_times_are_accepted_and_equal_times_in_a_split_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let (orig, _) = tiny_scene(dir.path(), "synth");
+    let src = dir.path().join("dnerf");
+    export_blender(&orig, 0.0, 0.5, &src).unwrap();
+    let edit = |file: &str, f: &dyn Fn(&mut Vec<serde_json::Value>)| {
+        let p = src.join(file);
+        let mut j: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&p).unwrap()).unwrap();
+        f(j["frames"].as_array_mut().unwrap());
+        std::fs::write(&p, serde_json::to_string(&j).unwrap()).unwrap();
+    };
+    let train: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(src.join("transforms_train.json")).unwrap())
+            .unwrap();
+    let train_times: Vec<f64> = train["frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f["time"].as_f64().unwrap())
+        .collect();
+    // Test views (their own cameras, half a frame later on the path) at train times.
+    edit("transforms_test.json", &|frames| {
+        for (f, t) in frames.iter_mut().zip(&train_times) {
+            f["time"] = (*t).into();
+        }
+    });
+    let opts = ImportOptions {
+        alignment: EventsAlignment {
+            events: None,
+            time_offset: Some(0.0),
+            duration: Some(0.5),
+        },
+        ..Default::default()
+    };
+    let s = import(Layout::Blender, &src, &opts, &dir.path().join("ok")).unwrap();
+    assert_eq!((s.train_frames, s.test_frames), (5, 4));
+    // Two train frames at one time.
+    edit("transforms_train.json", &|frames| {
+        let t = frames[1]["time"].clone();
+        frames[2]["time"] = t;
+    });
+    let e = import(Layout::Blender, &src, &opts, &dir.path().join("bad"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("transforms_train.json") && e.contains("frame 2") && e.contains("frame 1"),
+        "{e}"
+    );
+}

@@ -167,3 +167,85 @@ fn timestamps_in_microseconds_are_detected() {
         }
     }
 }
+
+/// HS-ERGB npz store coordinates ×32; a folder of npz in plain pixels (as other tools
+/// write them) is read as pixels, with a warning, instead of every event landing in a
+/// (W/32)×(H/32) corner.
+#[test]
+fn npz_in_plain_pixels_are_detected_from_their_range() {
+    let dir = tempfile::tempdir().unwrap();
+    let (orig, _) = write_scene(dir.path(), "synth", &tiny_static_config());
+    let src = dir.path().join("hsergb");
+    export_hsergb(&orig, &src).unwrap();
+    for e in std::fs::read_dir(src.join("events_aligned")).unwrap() {
+        let p = e.unwrap().path();
+        let opts = scene::ReadOptions {
+            sensor: Some((32, 24)),
+            coord_scale: Some(32.0),
+        };
+        let ev = scene::formats::read_npz(&p, &opts).unwrap();
+        scene::formats::write_npz(&p, &ev).unwrap(); // now in plain pixels
+    }
+    let opts = ImportOptions {
+        test_every: Some(2),
+        calib: Some(src.join("calib.txt")),
+        ..Default::default()
+    };
+    let out = dir.path().join("back");
+    let s = import(Layout::Hsergb, &src, &opts, &out).unwrap();
+    assert!(
+        s.warnings.iter().any(|w| w.contains("plain pixels")),
+        "{:?}",
+        s.warnings
+    );
+    let (ea, eb) = (
+        orig.load_events().unwrap(),
+        Scene::open(&out).unwrap().load_events().unwrap(),
+    );
+    assert!(ea.len() > 100);
+    assert_eq!((&ea.x, &ea.y, &ea.p), (&eb.x, &eb.y, &eb.p));
+    // The layout's own ×32 files still import without that warning.
+    let src2 = dir.path().join("hsergb2");
+    export_hsergb(&orig, &src2).unwrap();
+    let opts = ImportOptions {
+        calib: Some(src2.join("calib.txt")),
+        ..opts
+    };
+    let s = import(Layout::Hsergb, &src2, &opts, &dir.path().join("back2")).unwrap();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+}
+
+/// A PNG cut short after an intact header is refused at import, naming the file.
+#[test]
+fn a_truncated_frame_is_refused_at_import() {
+    let dir = tempfile::tempdir().unwrap();
+    let (orig, _) = write_scene(dir.path(), "synth", &tiny_static_config());
+    let src = dir.path().join("hsergb");
+    export_hsergb(&orig, &src).unwrap();
+    let mut pngs: Vec<_> = std::fs::read_dir(src.join("images_corrected"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "png"))
+        .collect();
+    pngs.sort();
+    let victim = &pngs[3];
+    let bytes = std::fs::read(victim).unwrap();
+    std::fs::write(victim, &bytes[..bytes.len() * 2 / 3]).unwrap();
+    assert!(
+        image::image_dimensions(victim).is_ok(),
+        "the header is intact"
+    );
+    let opts = ImportOptions {
+        calib: Some(src.join("calib.txt")),
+        ..Default::default()
+    };
+    let out = dir.path().join("back");
+    let e = import(Layout::Hsergb, &src, &opts, &out)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains(victim.to_str().unwrap()) && e.contains("decode"),
+        "{e}"
+    );
+    assert!(!out.exists());
+}

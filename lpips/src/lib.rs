@@ -91,34 +91,8 @@ impl Lpips {
 
     /// Per tap: the distance map and its (w, h).
     fn maps(&self, a: Rgb, b: Rgb) -> Result<Vec<TapMap>> {
+        check_pair(self.variant(), a, b)?;
         let (w, h) = (a.width, a.height);
-        if (b.width, b.height) != (w, h) {
-            return Err(Error::Other(format!(
-                "LPIPS of images of different sizes: {w}x{h} and {}x{}",
-                b.width, b.height
-            )));
-        }
-        for img in [a, b] {
-            if img.data.len() != w * h * 3 {
-                return Err(Error::Other(format!(
-                    "an RGB image of {w}x{h} has {} values, not {}",
-                    img.data.len(),
-                    w * h * 3
-                )));
-            }
-        }
-        // AlexNet's first conv (11×11, stride 4) and two 3×3 pools need ≥ 31 px;
-        // VGG's four 2×2 pools need ≥ 16 px.
-        let min = match self.variant() {
-            Variant::Alex => 31,
-            Variant::Vgg => 16,
-        };
-        if w < min || h < min {
-            return Err(Error::Other(format!(
-                "LPIPS ({}) needs images of at least {min}x{min} px, got {w}x{h}",
-                self.variant().name()
-            )));
-        }
         let taps = self.net.features(&[a.data, b.data], w, h);
         Ok(taps
             .iter()
@@ -133,4 +107,38 @@ type TapMap = (Vec<f64>, (usize, usize));
 
 fn mean(v: &[f64]) -> f64 {
     v.iter().sum::<f64>() / v.len().max(1) as f64
+}
+
+/// Whether `a` and `b` can be compared by the `v` network: the same size, `w · h · 3`
+/// values each, and at least the network's smallest input (no weights needed).
+pub fn check_pair(v: Variant, a: Rgb, b: Rgb) -> Result<()> {
+    let (w, h) = (a.width, a.height);
+    if (b.width, b.height) != (w, h) {
+        return Err(Error::Other(format!(
+            "LPIPS of images of different sizes: {w}x{h} and {}x{}",
+            b.width, b.height
+        )));
+    }
+    for img in [a, b] {
+        if img.data.len() != w * h * 3 {
+            return Err(Error::Other(format!(
+                "an RGB image of {w}x{h} has {} values, not {}",
+                img.data.len(),
+                w * h * 3
+            )));
+        }
+    }
+    // AlexNet's first conv (11×11, stride 4) and two 3×3 pools need ≥ 31 px;
+    // VGG's four 2×2 pools need ≥ 16 px.
+    let min = match v {
+        Variant::Alex => 31,
+        Variant::Vgg => 16,
+    };
+    if w < min || h < min {
+        return Err(Error::Other(format!(
+            "LPIPS ({}) needs images of at least {min}x{min} px, got {w}x{h}",
+            v.name()
+        )));
+    }
+    Ok(())
 }

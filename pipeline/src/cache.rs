@@ -3,7 +3,7 @@
 //! ```text
 //! <root>/cache/<stage>/<key>/                 a finished stage output, never rewritten
 //! <root>/cache/<stage>/<key>/.degs-entry.json blake3, size and mtime of every output file
-//! <root>/cache/<stage>/<key>.tmp-<pid>/       a stage being written (removed when stale)
+//! <root>/cache/<stage>/<key>.degs-tmp-<pid>/       a stage being written (removed when stale)
 //! <root>/cache/.binary-hashes.json            hashes of stage binaries by (size, mtime, inode)
 //! <root>/runs/<name>/run.json                 which entries a run used, times, memory
 //! <root>/runs/<name>/<stage>.log              the stage's command, exit status, output tail
@@ -38,8 +38,11 @@ impl Cache {
     }
     /// Where a stage writes while it runs (our pid, so a dead runner's dir is stale).
     pub fn temp_entry(&self, stage: &str, key: &str) -> PathBuf {
-        self.stage_dir(stage)
-            .join(format!("{key}.tmp-{}", std::process::id()))
+        self.stage_dir(stage).join(format!(
+            "{key}{}{}",
+            scene::atomic::TEMP_SUFFIX,
+            std::process::id()
+        ))
     }
     pub fn run_dir(&self, name: &str) -> PathBuf {
         self.root.join("runs").join(name)
@@ -82,7 +85,7 @@ impl Cache {
             };
             for k in keys.flatten().filter(|k| k.path().is_dir()) {
                 let key = k.file_name().to_string_lossy().to_string();
-                if !key.contains(".tmp-") {
+                if !key.contains(scene::atomic::TEMP_SUFFIX) {
                     out.push((stage.clone(), key, k.path()));
                 }
             }

@@ -151,9 +151,13 @@ pub enum Command {
         // Help: "Override a setting, e.g. … [novel_angle_deg default: …]".
         #[arg(long = "set", value_name = "KEY=VALUE", help = synth_set_help())]
         set: Vec<String>,
-        /// Output scene directory (replaced atomically)
+        /// Output scene directory: new, empty, or (with --force) an earlier `degs synth`
+        /// output, replaced atomically; any other folder is refused
         #[arg(long)]
         out: PathBuf,
+        /// Replace an earlier `degs synth` output at OUT
+        #[arg(long)]
+        force: bool,
     },
     /// Each stage of an experiment: cached / stale (and what changed) / missing /
     /// failed (with its error) / tampered / not available.
@@ -347,8 +351,13 @@ pub struct ImportArgs {
     pub layout: ImportLayout,
     /// The recording: a folder (ecd) or a file (aedat4)
     pub src: PathBuf,
-    /// Output scene directory (written atomically; an existing one is replaced)
+    /// Output scene directory: new, empty, or (with --force) an earlier `degs import`
+    /// output, replaced atomically; a folder that holds the recording, or any other
+    /// folder, is refused
     pub out: PathBuf,
+    /// Replace an earlier `degs import` output at OUT
+    #[arg(long)]
+    pub force: bool,
     /// Hold out every N-th frame (the N-th, 2N-th, …) as a test frame
     #[arg(long, value_name = "N")]
     pub test_every: Option<usize>,

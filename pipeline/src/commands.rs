@@ -43,7 +43,8 @@ pub fn execute(command: Command) -> Result<()> {
             config,
             set,
             out,
-        } => synth_scene(&preset, config.as_deref(), &set, &out),
+            force,
+        } => synth_scene(&preset, config.as_deref(), &set, &out, force),
         Command::Status {
             experiment,
             place,
@@ -301,9 +302,19 @@ fn chart_runs(runs: &[String], place: &Where) -> Result<Vec<crate::record::RunRe
     Ok(out)
 }
 
-fn synth_scene(preset: &str, config: Option<&Path>, set: &[String], out: &Path) -> Result<()> {
+fn synth_scene(
+    preset: &str,
+    config: Option<&Path>,
+    set: &[String],
+    out: &Path,
+    force: bool,
+) -> Result<()> {
+    let mut rule = scene::atomic::OutputRule::new(::synth::SYNTH_COMMAND).force(force);
+    if let Some(c) = config {
+        rule = rule.source(c);
+    }
     let cfg = synth::load_config(config, Some(preset), set)?;
-    let s = synth::write_scene(&cfg, out)?;
+    let s = synth::write_scene(&cfg, out, &rule)?;
     eprintln!(
         "[degs] synth: {} {}x{}, {} train + {} test frames + {} novel views, {} events in {:.2} s → {}",
         s.preset,
@@ -386,6 +397,7 @@ fn import_recording(a: &ImportArgs) -> Result<()> {
             duration: a.duration,
         },
         downscale: a.downscale,
+        force: a.force,
     };
     let summary = import::import(a.layout.layout(), &a.src, &opts, &a.out)?;
     print!("{summary}");

@@ -149,8 +149,8 @@ impl Experiment {
 
     /// Parse experiment text; `path` names it in errors and anchors relative `dir`s.
     pub fn parse(text: &str, path: &Path) -> Result<Experiment> {
-        let raw: RawExperiment =
-            toml::from_str(text).map_err(|e| anyhow!("{}: {}", path.display(), one_line(&e)))?;
+        let raw: RawExperiment = toml::from_str(text)
+            .map_err(|e| anyhow!("{}: {}", path.display(), one_line(text, &e)))?;
         check_name(&raw.name).map_err(|e| anyhow!("{}: {e}", path.display()))?;
         let scene = match (raw.scene.dir, raw.scene.synth, raw.scene.settings) {
             (Some(dir), None, None) => {
@@ -210,7 +210,35 @@ impl Experiment {
     pub fn load_checked(path: &Path) -> Result<Experiment> {
         let exp = Self::load(path)?;
         exp.check_stage_settings()?;
+        for w in exp.check_scene()? {
+            eprintln!("[degs] warning: {w}");
+        }
         Ok(exp)
+    }
+
+    /// The scene checks ([`scene::check`]) on a scene directory, before any stage runs:
+    /// an error names the experiment file and the scene; the warnings are returned. A
+    /// synthetic scene's settings were checked when it was parsed (a test time on a
+    /// train time is an error there).
+    pub fn check_scene(&self) -> Result<Vec<String>> {
+        let SceneSource::Dir(dir) = &self.scene else {
+            return Ok(Vec::new());
+        };
+        let file = self
+            .file
+            .as_deref()
+            .map(|f| format!("{}: ", f.display()))
+            .unwrap_or_default();
+        let scene = scene::Scene::open(dir).map_err(|e| anyhow!("{file}scene: {e}"))?;
+        let findings =
+            scene::check::check_scene(&scene).map_err(|e| anyhow!("{file}scene: {e}"))?;
+        if let Some(e) = scene::check::first_error(dir, &findings) {
+            bail!("{file}scene {e}");
+        }
+        Ok(findings
+            .into_iter()
+            .map(|f| format!("{file}scene {}: {}", dir.display(), f.message))
+            .collect())
     }
 
     /// Check every stage table against its stage's settings type, so that a typo in
@@ -288,12 +316,8 @@ fn check_name(name: &str) -> std::result::Result<(), String> {
 
 /// toml errors span several lines (with a caret excerpt); keep the message readable
 /// on one line.
-fn one_line(e: &toml::de::Error) -> String {
-    let msg = e.message().trim().to_string();
-    match e.span() {
-        Some(span) => format!("{msg} (at byte {})", span.start),
-        None => msg,
-    }
+fn one_line(text: &str, e: &toml::de::Error) -> String {
+    scene::cli::settings::toml_error(text, e)
 }
 
 /// The preset `preset` with `overrides` merged in (nested tables merge, other values

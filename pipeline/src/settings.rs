@@ -5,7 +5,6 @@ use crate::canon;
 use crate::overrides::merge;
 use scene::cli::Settings;
 use serde::Serialize;
-use serde::de::DeserializeOwned;
 use toml::{Table, Value};
 
 /// The settings type of a stage whose library this build links.
@@ -33,13 +32,23 @@ fn defaults_of<T: Serialize + Default>() -> Table {
     to_table(&T::default()).unwrap_or_default()
 }
 
-fn check_as<T: Serialize + DeserializeOwned + Default>(settings: &Table) -> Result<(), String> {
+/// The stage's own check: the table over the defaults, read as the binary reads its
+/// `--config` (a wrong type names the key), then the type's [`Settings::validate`].
+fn check_as<T: Settings>(settings: &Table) -> Result<(), String> {
     let mut full = defaults_of::<T>();
     merge(&mut full, settings);
     let text = toml::to_string(&full).map_err(|e| e.to_string())?;
-    toml::from_str::<T>(&text)
-        .map(drop)
-        .map_err(|e| e.message().trim().to_string())
+    let s = toml::from_str::<T>(&text).map_err(|e| {
+        let msg = e.message().trim().replace('\n', " ");
+        match e
+            .span()
+            .and_then(|sp| scene::cli::settings::key_at(&text, sp.start))
+        {
+            Some(key) => format!("key `{key}`: {msg}"),
+            None => msg,
+        }
+    })?;
+    s.validate()
 }
 
 /// `settings` as a TOML table, through TOML text: the text writer prints an `f32`

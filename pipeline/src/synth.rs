@@ -31,7 +31,11 @@ pub fn load_config(
     }
 }
 
-/// Write the scene of `cfg` to `out` (atomically; an existing directory is replaced).
-pub fn write_scene(cfg: &SynthConfig, out: &Path) -> Result<synth::Summary> {
-    Ok(synth::write_synthetic_scene(cfg, out)?)
+/// Write the scene of `cfg` to `out` (atomically) under `rule`: what may be there.
+pub fn write_scene(
+    cfg: &SynthConfig,
+    out: &Path,
+    rule: &scene::atomic::OutputRule,
+) -> Result<synth::Summary> {
+    Ok(synth::write_synthetic_scene_with(cfg, out, rule)?)
 }

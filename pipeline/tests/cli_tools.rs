@@ -322,3 +322,25 @@ fn import_prints_what_it_found_and_refuses_an_aedat4_without_poses() {
         text(&o)
     );
 }
+
+/// `degs … | head`: a closed stdout ends `degs` quietly (killed by SIGPIPE as any Unix
+/// tool; no panic, nothing on stderr), not with exit 101. The pipe's read end is closed
+/// before `degs` starts, so its first print meets a closed pipe.
+#[test]
+fn a_closed_stdout_ends_degs_quietly() {
+    use std::os::unix::process::ExitStatusExt;
+    let d = tempfile::tempdir().unwrap();
+    let exp = d.path().join("e.toml");
+    fs::write(&exp, "name = \"e\"\n[scene]\nsynth = \"rigid\"\n").unwrap();
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let o = Command::new(env!("CARGO_BIN_EXE_degs"))
+        .args(["config", "show", exp.to_str().unwrap()])
+        .stdout(writer)
+        .output()
+        .unwrap();
+    let err = text(&o);
+    assert!(err.is_empty(), "{err}");
+    const SIGPIPE: i32 = 13; // Linux
+    assert_eq!(o.status.signal(), Some(SIGPIPE), "{:?}", o.status);
+}

@@ -1,7 +1,8 @@
 //! Atomic outputs (DESIGN §3): a file or directory appears complete or not at all.
 //!
-//! Files are written to `name.tmp-<pid>` next to the target, fsynced, then renamed.
-//! Stage output directories are built under `name.tmp-<pid>` and renamed at the end.
+//! Files are written to `name.degs-tmp-<pid>` next to the target, fsynced, then renamed.
+//! Output directories are built under `name.degs-tmp-<pid>` and renamed at the end; an
+//! [`OutputRule`] says what an existing one may be (never an input, nor a user's folder).
 //! A writer that fails (or a process that is killed) leaves only the temp name, which
 //! [`remove_stale_temps`] cleans up.
 
@@ -10,10 +11,13 @@ use std::fs::{self, File};
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
-/// `path` with `.tmp-<pid>` appended to its file name.
+/// The suffix of every temp name degs writes, before the writer's pid.
+pub const TEMP_SUFFIX: &str = ".degs-tmp-";
+
+/// `path` with `.degs-tmp-<pid>` appended to its file name.
 pub fn temp_path(path: &Path) -> PathBuf {
     let mut name = path.file_name().unwrap_or_default().to_os_string();
-    name.push(format!(".tmp-{}", std::process::id()));
+    name.push(format!("{TEMP_SUFFIX}{}", std::process::id()));
     path.with_file_name(name)
 }
 
@@ -56,28 +60,44 @@ pub fn write_json_atomic<T: serde::Serialize>(path: &Path, value: &T) -> Result<
 
 /// A directory under construction: everything goes into a temp directory that
 /// [`AtomicDir::commit`] renames to the final name. Dropping it uncommitted removes it.
+///
+/// What an existing target may be is the [`OutputRule`]'s to say: nothing that holds a
+/// source, nothing that is not an earlier output of the same command, and an earlier
+/// output only when forced (DESIGN §3, "Outputs never destroy inputs").
 pub struct AtomicDir {
     tmp: PathBuf,
     target: PathBuf,
+    rule: OutputRule,
     committed: bool,
 }
 
 impl AtomicDir {
-    /// Start building `target` (which must not exist yet unless `replace` is set when
-    /// committing). Stale temp dirs of dead processes are removed first.
-    pub fn new(target: &Path) -> Result<Self> {
+    /// Start building `target` under the rule's checks (made again at commit). Stale
+    /// temp dirs of dead processes beside it are removed first.
+    pub fn new(target: &Path, rule: &OutputRule) -> Result<Self> {
+        rule.check(target)?;
         if let Some(parent) = target.parent().filter(|d| !d.as_os_str().is_empty()) {
             fs::create_dir_all(parent).at(parent)?;
             remove_stale_temps(parent)?;
         }
         let tmp = temp_path(target);
         if tmp.exists() {
+            // Only a temp dir this process left (same pid) can be here: one we marked.
+            if !is_output_of(&tmp, &rule.command) {
+                return Err(Error::invalid(
+                    &tmp,
+                    "exists and is not a temp folder of degs; move it away",
+                ));
+            }
             fs::remove_dir_all(&tmp).at(&tmp)?;
         }
         fs::create_dir_all(&tmp).at(&tmp)?;
+        fs::write(tmp.join(OUTPUT_MARKER), format!("{}\n", rule.command))
+            .at(tmp.join(OUTPUT_MARKER))?;
         Ok(AtomicDir {
             tmp,
             target: target.to_path_buf(),
+            rule: rule.clone(),
             committed: false,
         })
     }
@@ -87,12 +107,20 @@ impl AtomicDir {
         &self.tmp
     }
 
-    /// Rename the temp directory to the target. An existing target is replaced.
+    /// Rename the temp directory to the target. An earlier output there (allowed by the
+    /// rule, checked again now) is moved aside first and removed after.
     pub fn commit(mut self) -> Result<PathBuf> {
+        self.rule.check(&self.target)?;
         if self.target.exists() {
-            fs::remove_dir_all(&self.target).at(&self.target)?;
+            let mut old = self.target.as_os_str().to_os_string();
+            old.push(".old");
+            let old = temp_path(Path::new(&old));
+            fs::rename(&self.target, &old).at(&self.target)?;
+            fs::rename(&self.tmp, &self.target).at(&self.target)?;
+            fs::remove_dir_all(&old).at(&old)?;
+        } else {
+            fs::rename(&self.tmp, &self.target).at(&self.target)?;
         }
-        fs::rename(&self.tmp, &self.target).at(&self.target)?;
         self.committed = true;
         Ok(self.target.clone())
     }
@@ -106,7 +134,132 @@ impl Drop for AtomicDir {
     }
 }
 
-/// Remove `*.tmp-<pid>` entries in `dir` whose process no longer runs.
+/// The file every output directory of degs holds: the command that wrote it.
+pub const OUTPUT_MARKER: &str = ".degs-output";
+
+/// Whether `dir` is an output of `command` (its marker names it).
+pub fn is_output_of(dir: &Path, command: &str) -> bool {
+    fs::read_to_string(dir.join(OUTPUT_MARKER)).is_ok_and(|s| s.trim() == command)
+}
+
+/// What an output directory may replace: the command writing it (recorded in the
+/// output's [`OUTPUT_MARKER`]), whether an earlier output of it may be replaced
+/// (`--force`), and the inputs it must never hold.
+#[derive(Clone, Debug)]
+pub struct OutputRule {
+    command: String,
+    force: bool,
+    sources: Vec<PathBuf>,
+}
+
+impl OutputRule {
+    /// The rule for `command` (e.g. `"degs import"`): no replacing, no sources yet.
+    pub fn new(command: impl Into<String>) -> Self {
+        OutputRule {
+            command: command.into(),
+            force: false,
+            sources: Vec::new(),
+        }
+    }
+
+    /// Allow replacing an earlier output of the same command.
+    pub fn force(mut self, force: bool) -> Self {
+        self.force = force;
+        self
+    }
+
+    /// An input the output must never be, nor hold.
+    pub fn source(mut self, path: impl AsRef<Path>) -> Self {
+        self.sources.push(path.as_ref().to_path_buf());
+        self
+    }
+
+    /// Refuse a `target` that is or holds a source, that exists and is not a folder,
+    /// that holds files and is not an earlier output of this command, or that is an
+    /// earlier output while not forced. An empty folder is fine.
+    pub fn check(&self, target: &Path) -> Result<()> {
+        let t = resolved(target);
+        for s in &self.sources {
+            let s = resolved(s);
+            if s.starts_with(&t) {
+                let what = if s == t { "is" } else { "holds" };
+                return Err(Error::invalid(
+                    target,
+                    format!(
+                        "{what} the input {}; the output folder must lie elsewhere \
+                         (it is replaced as a whole)",
+                        s.display()
+                    ),
+                ));
+            }
+        }
+        let meta = match fs::symlink_metadata(target) {
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+            Err(e) => return Err(Error::io(target, e)),
+            Ok(m) => m,
+        };
+        if !meta.is_dir() {
+            return Err(Error::invalid(
+                target,
+                "exists and is not a folder; choose a new output folder",
+            ));
+        }
+        let first = fs::read_dir(target)
+            .at(target)?
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .next();
+        let Some(first) = first else {
+            return Ok(()); // an empty folder
+        };
+        if !is_output_of(target, &self.command) {
+            return Err(Error::invalid(
+                target,
+                format!(
+                    "exists and is not an output of `{}` (it holds {first}, …); \
+                     choose a new or empty output folder",
+                    self.command
+                ),
+            ));
+        }
+        if !self.force {
+            return Err(Error::invalid(
+                target,
+                format!(
+                    "holds an earlier output of `{}`; pass --force to replace it",
+                    self.command
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// `path` made absolute, symlinks of its existing part resolved (the rest appended).
+fn resolved(path: &Path) -> PathBuf {
+    let abs = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    let mut existing = abs.as_path();
+    let mut rest = Vec::new();
+    loop {
+        if let Ok(c) = fs::canonicalize(existing) {
+            let mut out = c;
+            for part in rest.iter().rev() {
+                out.push(part);
+            }
+            return out;
+        }
+        match (existing.parent(), existing.file_name()) {
+            (Some(p), Some(name)) => {
+                rest.push(name.to_os_string());
+                existing = p;
+            }
+            _ => return abs,
+        }
+    }
+}
+
+/// Remove `*.degs-tmp-<pid>` entries in `dir` whose process no longer runs (nothing
+/// else: a user's `notes.tmp-12` is not ours).
 pub fn remove_stale_temps(dir: &Path) -> Result<()> {
     let Ok(entries) = fs::read_dir(dir) else {
         return Ok(());
@@ -114,10 +267,10 @@ pub fn remove_stale_temps(dir: &Path) -> Result<()> {
     for entry in entries.flatten() {
         let name = entry.file_name();
         let name = name.to_string_lossy();
-        let Some(pos) = name.rfind(".tmp-") else {
+        let Some(pos) = name.rfind(TEMP_SUFFIX) else {
             continue;
         };
-        let Ok(pid) = name[pos + 5..].parse::<u32>() else {
+        let Ok(pid) = name[pos + TEMP_SUFFIX.len()..].parse::<u32>() else {
             continue;
         };
         if pid != std::process::id() && !process_alive(pid) {

@@ -6,6 +6,7 @@
 
 pub mod atomic;
 pub mod camera;
+pub mod check;
 pub mod cli;
 pub mod error;
 pub mod events;

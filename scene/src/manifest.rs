@@ -166,7 +166,7 @@ impl Manifest {
         let dir = path.parent().unwrap_or(Path::new(""));
         let bad = |msg: String| Error::invalid(path, msg);
 
-        let mut frames = Vec::with_capacity(raw.frames.len());
+        let mut frames: Vec<Frame> = Vec::with_capacity(raw.frames.len());
         for (i, f) in raw.frames.iter().enumerate() {
             let timestamp = f.timestamp.unwrap_or(f.time);
             if !timestamp.is_finite() {
@@ -177,11 +177,16 @@ impl Manifest {
             if !(0.0..=1.0).contains(&f.time) {
                 return Err(bad(format!("frame {i}: time {} is outside [0, 1]", f.time)));
             }
-            if let Some(prev) = frames.last().map(|p: &Frame| p.timestamp)
-                && timestamp <= prev
+            if let Some(prev) = frames.last()
+                && timestamp <= prev.timestamp
             {
                 return Err(bad(format!(
-                    "frame {i}: timestamps not increasing ({timestamp} after {prev})"
+                    "frame {i} ({}) at {timestamp} s is not after frame {} ({}) at {} s: \
+                     the times of one split must increase",
+                    f.file_path,
+                    i - 1,
+                    prev.file_path,
+                    prev.timestamp
                 )));
             }
             let m = DMat4::from_cols_array_2d(&f.transform_matrix).transpose();

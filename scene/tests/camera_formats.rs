@@ -191,10 +191,26 @@ fn hostile_raw_files() {
     wide.push(0.0, 4000, 0, 1);
     let p = dir.path().join("w.raw");
     assert!(err_text(write_raw(&p, &wide, RawEncoding::Evt2)).contains("2048x2048"));
-    let mut late = EventStream::new(4, 4);
-    late.push(20.0, 0, 0, 1); // 20 s > one EVT 3.0 period before the first time-high
-    assert!(err_text(write_raw(&p, &late, RawEncoding::Evt3)).contains("full time period"));
     assert!(!p.exists());
+    // A stream that starts periods into the clock, and gaps of whole periods (EVT 3.0:
+    // 2²⁴ µs ≈ 16.8 s; EVT 2.0: 2³⁴ µs ≈ 4.8 h), read back to the microsecond.
+    let mut late = EventStream::new(4, 4);
+    for (t, x) in [
+        (20.0, 0),
+        (20.5, 1),
+        (60.25, 2),
+        (60.25, 3),
+        (61.0, 0),
+        (40_000.0, 1),
+    ] {
+        late.push(t, x, 1, 1);
+    }
+    late.push(40_000.000_001, 2, 3, -1);
+    for enc in [RawEncoding::Evt3, RawEncoding::Evt2] {
+        write_raw(&p, &late, enc).unwrap();
+        let back = read_raw(&p, &ReadOptions::default()).unwrap();
+        assert_eq!(back, late, "{enc:?}");
+    }
 }
 
 #[test]

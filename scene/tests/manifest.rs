@@ -223,7 +223,10 @@ fn unsorted_timestamps_name_the_frame() {
         e.contains("transforms_train.json") && e.contains("frame 2"),
         "{e}"
     );
-    assert!(e.contains("not increasing"), "{e}");
+    assert!(
+        e.contains("frame 2 (c.png) at 2 s is not after frame 1 (b.png) at 2 s"),
+        "{e}"
+    );
 }
 
 #[test]

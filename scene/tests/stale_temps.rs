@@ -1,6 +1,6 @@
 //! Temp outputs of dead processes are removed; a killed process whose zombie nobody
 //! reaps counts as dead (regression: found by `tests/tests/kill_resume.rs`, where the
-//! killed runner's stage left `KEY.tmp-RUNNER.tmp-STAGE` behind for good because the
+//! killed runner's stage left `KEY.degs-tmp-RUNNER.degs-tmp-STAGE` behind for good because the
 //! container's init did not reap it).
 
 use scene::atomic::remove_stale_temps;
@@ -24,13 +24,18 @@ fn temps_of_zombies_and_dead_processes_are_removed_and_live_ones_kept() {
         std::thread::sleep(std::time::Duration::from_millis(5));
     }
     let mine = std::process::id();
-    let zombie_temp = dir.path().join(format!("key.tmp-{mine}.tmp-{zpid}"));
-    let live_temp = dir.path().join("live.tmp-1"); // init
-    let dead_temp = dir.path().join("other.tmp-4194304"); // above Linux's pid_max
-    for d in [&zombie_temp, &live_temp, &dead_temp] {
+    let zombie_temp = dir
+        .path()
+        .join(format!("key.degs-tmp-{mine}.degs-tmp-{zpid}"));
+    let live_temp = dir.path().join("live.degs-tmp-1"); // init
+    let dead_temp = dir.path().join("other.degs-tmp-4194304"); // above Linux's pid_max
+    // A user's own file that merely looks like a temp name is not ours to remove.
+    let users = dir.path().join("notes.tmp-4194304");
+    for d in [&zombie_temp, &live_temp, &dead_temp, &users] {
         fs::create_dir_all(d).unwrap();
     }
     remove_stale_temps(dir.path()).unwrap();
+    assert!(users.exists());
     assert!(!zombie_temp.exists());
     assert!(!dead_temp.exists());
     assert!(live_temp.exists());

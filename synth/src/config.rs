@@ -246,6 +246,9 @@ impl scene::cli::Settings for SynthConfig {
                 "blur_subframes must be ≥ 1, supersample and frame_supersample in 1..=8".into(),
             );
         }
+        if let Some(msg) = self.test_on_train() {
+            return Err(msg);
+        }
         if self.render_rate_hz * self.duration > 1e6 {
             return Err("render_rate_hz × duration exceeds 10⁶ internal frames".into());
         }
@@ -310,6 +313,35 @@ impl SynthConfig {
     pub fn train_times(&self) -> Vec<f64> {
         let n = (self.duration * self.train_fps + 1e-9).floor() as usize;
         (0..=n).map(|k| k as f64 / self.train_fps).collect()
+    }
+
+    /// Why the test split would hold train frames (a test time on a train time: the same
+    /// camera and image, scored as if held out), with a `test_frames` that avoids it.
+    fn test_on_train(&self) -> Option<String> {
+        let on_train = |n: usize| {
+            let c = SynthConfig {
+                test_frames: n,
+                ..self.clone()
+            };
+            let train = c.train_times();
+            c.test_times()
+                .into_iter()
+                .filter(|t| train.iter().any(|s| (s - t).abs() < 1e-9))
+                .count()
+        };
+        let k = on_train(self.test_frames);
+        if k == 0 {
+            return None;
+        }
+        let n = self.test_frames;
+        let better = (1..=2 * n.max(1))
+            .flat_map(|d| [n + d, n.saturating_sub(d)])
+            .find(|&m| m > 0 && on_train(m) == 0);
+        Some(format!(
+            "test_frames = {n}: {k} of the {n} test times (k + ½)·duration/test_frames fall \
+             on train times (k / train_fps), so those test frames are train frames{}",
+            better.map_or(String::new(), |m| format!(" (test_frames = {m} avoids it)"))
+        ))
     }
 
     /// Times of the test frames: `(k + ½)·duration / test_frames`.

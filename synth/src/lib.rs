@@ -29,6 +29,8 @@ pub mod world;
 pub use config::{CameraPath, Deform, Motion, ObjectSpec, Pattern, Shape, SynthConfig, Texture};
 pub use presets::PRESETS;
 pub use rgb::write_rgb_synthetic_scene;
-pub use scene_dir::{Summary, simulate_scene, write_synthetic_scene};
+pub use scene_dir::{
+    SYNTH_COMMAND, Summary, simulate_scene, write_synthetic_scene, write_synthetic_scene_with,
+};
 pub use sim::{SimConfig, Simulator, luminance};
 pub use world::{Hit, Render, SynthWorld};

@@ -4,7 +4,7 @@
 
 use crate::config::SynthConfig;
 use crate::world::SynthWorld;
-use scene::atomic::AtomicDir;
+use scene::atomic::{AtomicDir, OutputRule};
 use scene::error::{Error, Result};
 use scene::image_io::{Image, write_png};
 use scene::manifest::{Frame, FrameEncoding, Manifest, NOVEL_FILE, TEST_FILE, TRAIN_FILE};
@@ -18,7 +18,7 @@ use std::path::Path;
 pub fn write_rgb_synthetic_scene(cfg: &SynthConfig, out: &Path) -> Result<()> {
     let world =
         SynthWorld::new(cfg).map_err(|e| Error::Other(format!("synthetic scene settings: {e}")))?;
-    let dir = AtomicDir::new(out)?;
+    let dir = AtomicDir::new(out, &OutputRule::new("gaussians synth-rgb"))?;
     for (split, times, file) in [
         ("train", cfg.train_times(), TRAIN_FILE),
         ("test", cfg.test_times(), TEST_FILE),

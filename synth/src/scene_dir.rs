@@ -37,7 +37,7 @@ use crate::config::SynthConfig;
 use crate::gt::{EventFlowGt, NOISE_ID, write_event_flow_gt, write_object_png};
 use crate::sim::{Simulator, luminance};
 use crate::world::{Render, SynthWorld};
-use scene::atomic::{AtomicDir, write_json_atomic};
+use scene::atomic::{AtomicDir, OutputRule, write_json_atomic};
 use scene::cli::Settings;
 use scene::error::{Error, Result};
 use scene::events::EventStream;
@@ -202,12 +202,26 @@ fn write_split(world: &SynthWorld, root: &Path, split: &str, times: &[f64]) -> R
 }
 
 /// Write the synthetic scene of `cfg` to `out_dir` (layout in the module doc). The
-/// directory appears complete or not at all; an existing one is replaced.
+/// directory appears complete or not at all; it must not exist yet, or be empty.
 pub fn write_synthetic_scene(cfg: &SynthConfig, out_dir: &Path) -> Result<Summary> {
+    write_synthetic_scene_with(cfg, out_dir, &OutputRule::new(SYNTH_COMMAND))
+}
+
+/// The command whose outputs [`write_synthetic_scene`] marks (an earlier one may be
+/// replaced under `--force`).
+pub const SYNTH_COMMAND: &str = "degs synth";
+
+/// [`write_synthetic_scene`] under `rule` (e.g. forced: an earlier scene is replaced).
+pub fn write_synthetic_scene_with(
+    cfg: &SynthConfig,
+    out_dir: &Path,
+    rule: &OutputRule,
+) -> Result<Summary> {
     let start = Instant::now();
+    rule.check(out_dir)?;
     let world =
         SynthWorld::new(cfg).map_err(|e| Error::Other(format!("synthetic scene settings: {e}")))?;
-    let dir = AtomicDir::new(out_dir)?;
+    let dir = AtomicDir::new(out_dir, rule)?;
     let root = dir.path().to_path_buf();
 
     let t_sim = Instant::now();

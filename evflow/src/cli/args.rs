@@ -67,6 +67,10 @@ pub struct CommonArgs {
     /// Output directory (appears complete or not at all).
     #[arg(long)]
     pub out: PathBuf,
+    /// Replace an earlier output of the same command at OUT (never a folder that holds
+    /// an input, nor one some other program wrote).
+    #[arg(long)]
+    pub force: bool,
     /// Settings file (TOML, keys of FlowSettings); flags override it.
     #[arg(long)]
     pub config: Option<PathBuf>,

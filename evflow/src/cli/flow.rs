@@ -66,7 +66,14 @@ impl FinetuneArgs {
             s.rank = self.rank.unwrap_or(s.rank);
             s.seed = self.seed.unwrap_or(s.seed);
         })?;
-        run_stage(&self.input.input()?, &self.common.out, &s, true, None)
+        run_stage(
+            &self.input.input()?,
+            &self.common.out,
+            &s,
+            true,
+            None,
+            self.common.force,
+        )
     }
 }
 
@@ -92,6 +99,7 @@ impl PredictArgs {
             &s,
             false,
             self.adapter.as_deref(),
+            self.common.force,
         )
     }
 }
@@ -148,10 +156,11 @@ fn run_stage(
     s: &FlowSettings,
     train: bool,
     adapter: Option<&Path>,
+    force: bool,
 ) -> anyhow::Result<()> {
     let mut phase = String::new();
     let mut bar: Option<Progress> = None;
-    let report = crate::stage::run(input, out, s, train, adapter, |e| match e {
+    let report = crate::stage::run(input, out, s, train, adapter, force, |e| match e {
         Event::Phase(p) => {
             if let Some(b) = bar.take() {
                 b.finish();

@@ -12,6 +12,9 @@ pub struct PretrainArgs {
     /// Output directory.
     #[arg(long)]
     pub out: PathBuf,
+    /// Replace an earlier output of `evflow pretrain` at OUT.
+    #[arg(long)]
+    pub force: bool,
     /// Settings (TOML, keys of evflow::pretrain::PretrainSettings).
     #[arg(long)]
     pub config: Option<PathBuf>,
@@ -37,7 +40,7 @@ impl PretrainArgs {
             s.iterations = self.iterations.unwrap_or(s.iterations);
         })?;
         let progress = Progress::new("pretrain", s.iterations as u64);
-        let r = crate::pretrain::run(&s, out, &mut |k, _, loss| {
+        let r = crate::pretrain::run(&s, out, self.force, &mut |k, _, loss| {
             progress.set(k as u64, || format!("loss {loss:.4}"));
         })?;
         progress.finish();

@@ -158,8 +158,11 @@ pub fn evaluate(
 pub fn run(
     settings: &PretrainSettings,
     out_dir: &Path,
+    force: bool,
     progress: &mut dyn FnMut(usize, usize, f64),
 ) -> Result<PretrainReport> {
+    let rule = scene::atomic::OutputRule::new("evflow pretrain").force(force);
+    rule.check(out_dir)?;
     settings
         .validate()
         .map_err(|e| Error::Other(format!("pretrain settings: {e}")))?;
@@ -280,7 +283,7 @@ pub fn run(
     if !held.is_empty() {
         held_out.push(evaluate(&inf, &held, s, s.iterations)?);
     }
-    let dir = scene::atomic::AtomicDir::new(out_dir)?;
+    let dir = scene::atomic::AtomicDir::new(out_dir, &rule)?;
     let trained_by = format!(
         "evflow pretrain (evflow::pretrain::run) with settings {}",
         serde_json::to_string(s).unwrap_or_default()

@@ -190,7 +190,7 @@ fn larger_training_scenes_are_cropped_and_settings_checked() {
     assert_eq!(train[1].name, "fast/1@48");
     assert!(held.iter().all(|d| d.events.width == 32));
     let dir = tempfile::tempdir().unwrap();
-    let r = run(&s, &dir.path().join("o"), &mut |_, _, _| {}).unwrap();
+    let r = run(&s, &dir.path().join("o"), false, &mut |_, _, _| {}).unwrap();
     assert!(r.loss_curve.iter().all(|l| l.is_finite()));
     for bad in [
         PretrainSettings {
@@ -211,7 +211,7 @@ fn a_tiny_run_writes_loadable_weights_and_a_report() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("pre");
     let mut calls = 0;
-    let r = run(&tiny(), &out, &mut |k, n, l| {
+    let r = run(&tiny(), &out, false, &mut |k, n, l| {
         calls += 1;
         assert!(k <= n && l.is_finite());
     })
@@ -230,7 +230,7 @@ fn a_tiny_run_writes_loadable_weights_and_a_report() {
         lr: -1.0,
         ..tiny()
     };
-    let e = run(&bad, &dir.path().join("bad"), &mut |_, _, _| {}).unwrap_err();
+    let e = run(&bad, &dir.path().join("bad"), false, &mut |_, _, _| {}).unwrap_err();
     assert!(e.to_string().contains("lr"), "{e}");
     assert!(!dir.path().join("bad").exists());
 }

@@ -135,8 +135,8 @@ pub fn finish_message(action: Action, rec: &StageRecord) -> String {
 fn commit_entry(tmp: &Path, entry: &Path) -> Result<()> {
     if entry.exists() {
         let mut old = entry.as_os_str().to_os_string();
-        old.push(format!(".old.tmp-{}", std::process::id()));
-        let old = PathBuf::from(old);
+        old.push(".old");
+        let old = scene::atomic::temp_path(&PathBuf::from(old));
         fs::rename(entry, &old)?;
         fs::rename(tmp, entry)?;
         let _ = fs::remove_dir_all(&old);

@@ -65,7 +65,12 @@ pub fn transformed_scene(
         return Ok((entry.clone(), summary_of(&entry)?));
     }
     let started = std::time::Instant::now();
-    let dir = scene::atomic::AtomicDir::new(&entry)?;
+    if entry.exists() {
+        // An unsealed entry of the cache (ours to replace): a partial or tampered one.
+        std::fs::remove_dir_all(&entry)
+            .with_context(|| format!("{}: cannot remove", entry.display()))?;
+    }
+    let dir = scene::atomic::AtomicDir::new(&entry, &scene::atomic::OutputRule::new(STAGE))?;
     let summary = transform::apply(base, dir.path(), t)?;
     crate::cache::seal(
         dir.path(),

@@ -13,11 +13,18 @@ pub use settings::Settings;
 use std::process::ExitCode;
 
 /// Run a binary's body; on error print one line `BINARY: error: …` (the whole chain of
-/// causes, `{:#}`) to stderr and exit with status 1.
+/// causes, `{:#}`) to stderr and exit with status 1. A closed stdout (`degs plan | head`)
+/// ends the process quietly, as it ends any Unix tool, not with a panic.
 pub fn exit_on_error<E: std::fmt::Display>(
     binary: &str,
     body: impl FnOnce() -> Result<ExitCode, E>,
 ) -> ExitCode {
+    // Rust ignores SIGPIPE, so a print to a closed pipe panics; the default disposition
+    // ends the process silently instead.
+    // SAFETY: setting a signal's disposition to SIG_DFL has no preconditions.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     match body() {
         Ok(code) => code,
         Err(e) => {

@@ -15,9 +15,49 @@ pub trait Settings: Serialize + DeserializeOwned + Default {
     fn validate(&self) -> std::result::Result<(), String>;
 }
 
-/// Parse settings from TOML text; errors name `origin` and the offending key.
+/// Parse settings from TOML text; errors name `origin`, the line and the offending key.
 pub fn parse<S: Settings>(text: &str, origin: &Path) -> Result<S> {
-    toml::from_str(text).map_err(|e| Error::invalid(origin, e.message().trim()))
+    toml::from_str(text).map_err(|e| Error::invalid(origin, toml_error(text, &e)))
+}
+
+/// A TOML error in `text` as one line: where (`line L, column C`, and the key there as
+/// `table.key` when the line holds one) and what.
+pub fn toml_error(text: &str, e: &toml::de::Error) -> String {
+    let msg = e.message().trim().replace('\n', " ");
+    let Some(span) = e.span() else {
+        return msg;
+    };
+    let at = span.start.min(text.len());
+    let line_start = text[..at].rfind('\n').map_or(0, |i| i + 1);
+    let line_no = text[..at].matches('\n').count() + 1;
+    let column = text[line_start..at].chars().count() + 1;
+    match key_at(text, at) {
+        Some(key) => format!("line {line_no}, column {column}, key `{key}`: {msg}"),
+        None => format!("line {line_no}, column {column}: {msg}"),
+    }
+}
+
+/// The dotted key (`table.key`) of the `key = value` line holding byte `at` of `text`,
+/// with the `[table]` header above it.
+pub fn key_at(text: &str, at: usize) -> Option<String> {
+    let at = at.min(text.len());
+    let start = text[..at].rfind('\n').map_or(0, |i| i + 1);
+    let end = text[at..].find('\n').map_or(text.len(), |i| at + i);
+    let line = &text[start..end];
+    let key = line.split_once('=')?.0.trim().trim_matches('"');
+    if key.is_empty() || key.starts_with('[') || key.starts_with('#') {
+        return None;
+    }
+    let table = text[..start]
+        .lines()
+        .rev()
+        .map(str::trim)
+        .find(|l| l.starts_with('['))
+        .map(|l| l.trim_matches(|c| c == '[' || c == ']').trim().to_string());
+    Some(match table {
+        Some(t) if !t.is_empty() => format!("{t}.{key}"),
+        _ => key.to_string(),
+    })
 }
 
 /// Settings read from the file `path` (e.g. the resolved `settings.toml` an earlier
@@ -32,9 +72,15 @@ pub fn read_file<S: Settings>(path: &Path) -> Result<S> {
 /// Settings from a TOML table (a file's keys with `--set key=value` overrides merged
 /// in), then [`Settings::validate`]; errors name `origin`.
 pub fn from_table<S: Settings>(table: toml::Table, origin: &Path) -> Result<S> {
-    let s: S = toml::Value::Table(table)
-        .try_into()
-        .map_err(|e: toml::de::Error| Error::invalid(origin, e.message().trim()))?;
+    // Through text, so that an error can name the line's key.
+    let text = toml::to_string(&table).map_err(|e| Error::invalid(origin, e.to_string()))?;
+    let s: S = toml::from_str(&text).map_err(|e| {
+        let msg = e.message().trim().replace('\n', " ");
+        match e.span().and_then(|sp| key_at(&text, sp.start)) {
+            Some(key) => Error::invalid(origin, format!("key `{key}`: {msg}")),
+            None => Error::invalid(origin, msg),
+        }
+    })?;
     s.validate().map_err(|e| Error::invalid(origin, e))?;
     Ok(s)
 }

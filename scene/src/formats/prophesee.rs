@@ -29,7 +29,9 @@
 //! passed before it started). Events must come out sorted (checked like every reader).
 //!
 //! [`write_raw`] writes either encoding (events only, no vectors in EVT 3.0), timestamps
-//! rounded to whole microseconds: for tests and for handing streams to Metavision.
+//! rounded to whole microseconds: for tests and for handing streams to Metavision. The
+//! periods before the first event and any gap of a whole period are written as explicit
+//! wraps (time-high words that go down), so every stream our reader produces reads back.
 
 use super::{ReadOptions, check, resolve_sensor};
 use crate::atomic::write_atomic;
@@ -265,34 +267,50 @@ fn decode_evt3(data: &[u8], ev: &mut EventStream) -> Decoded {
     Ok(())
 }
 
-/// Whole microseconds of each event (rounded), checked to be representable: not
-/// negative, the first inside the first time-high period, and no gap of a full period
-/// (a reader could not see the wrap).
-fn microseconds(path: &Path, ev: &EventStream, period_bits: u32) -> Result<Vec<u64>> {
-    let period = 1u64 << period_bits;
-    let mut out = Vec::with_capacity(ev.len());
-    for (i, &t) in ev.t.iter().enumerate() {
-        let us = (t * 1e6).round();
-        if !(0.0..1.8e19).contains(&us) {
-            return Err(Error::invalid(
-                path,
-                format!("event {i}: timestamp {t} s cannot be stored"),
-            ));
+/// Whole microseconds of each event (rounded), checked to be representable.
+fn microseconds(path: &Path, ev: &EventStream) -> Result<Vec<u64>> {
+    ev.t.iter()
+        .enumerate()
+        .map(|(i, &t)| {
+            let us = (t * 1e6).round();
+            if (0.0..1.8e19).contains(&us) {
+                Ok(us as u64)
+            } else {
+                Err(Error::invalid(
+                    path,
+                    format!("event {i}: timestamp {t} s cannot be stored"),
+                ))
+            }
+        })
+        .collect()
+}
+
+/// The time-high words that bring a reader (module doc: a smaller time high starts a
+/// new period) from `state` = (period, high) to period `epoch` and high `h`: one
+/// `1, 0` or `0` per period to pass (so a recording that starts hours into the clock,
+/// or a gap of a full period, reads back), then `h` (always for the first event, as
+/// Metavision writes one before any event). `emit(high)` writes one word.
+fn time_high_words(state: &mut WriterTime, epoch: u64, h: u64, mut emit: impl FnMut(u64)) {
+    while state.epoch < epoch {
+        if state.high == 0 {
+            emit(1);
         }
-        let us = us as u64;
-        let limit = out.last().map_or(period, |&prev: &u64| prev + period);
-        if us >= limit {
-            return Err(Error::invalid(
-                path,
-                format!(
-                    "event {i}: timestamp {t} s is a full time period ({} s) after the previous one (or the start): its wrap could not be read back",
-                    period as f64 / 1e6
-                ),
-            ));
-        }
-        out.push(us);
+        emit(0);
+        (state.epoch, state.high, state.any) = (state.epoch + 1, 0, true);
     }
-    Ok(out)
+    if state.high != h || !state.any {
+        emit(h);
+        (state.high, state.any) = (h, true);
+    }
+}
+
+/// What a reader of the words written so far holds: its period and time high (both 0
+/// at the start), and whether any time-high word was written.
+#[derive(Clone, Copy, Default, PartialEq)]
+struct WriterTime {
+    epoch: u64,
+    high: u64,
+    any: bool,
 }
 
 /// Write `ev` as a `.raw` file in `encoding` (atomic; module doc).
@@ -308,21 +326,20 @@ pub fn write_raw(path: impl AsRef<Path>, ev: &EventStream, encoding: RawEncoding
             ),
         ));
     }
-    let (name, evt, bits) = match encoding {
-        RawEncoding::Evt2 => ("EVT2", "2.0", 34),
-        RawEncoding::Evt3 => ("EVT3", "3.0", 24),
+    let (name, evt) = match encoding {
+        RawEncoding::Evt2 => ("EVT2", "2.0"),
+        RawEncoding::Evt3 => ("EVT3", "3.0"),
     };
-    let us = microseconds(path, ev, bits)?;
+    let us = microseconds(path, ev)?;
     let mut body: Vec<u8> = Vec::with_capacity(ev.len() * 6);
     match encoding {
         RawEncoding::Evt2 => {
-            let mut high = None;
+            let mut state = WriterTime::default();
             for (i, &us) in us.iter().enumerate() {
-                let h = (us >> 6) & 0x0FFF_FFFF;
-                if high != Some(h) {
-                    body.extend_from_slice(&((0x8u32 << 28) | h as u32).to_le_bytes());
-                    high = Some(h);
-                }
+                let (epoch, h) = (us >> 34, (us >> 6) & 0x0FFF_FFFF);
+                time_high_words(&mut state, epoch, h, |h| {
+                    body.extend_from_slice(&((0x8u32 << 28) | h as u32).to_le_bytes())
+                });
                 let w = (u32::from(ev.p[i] > 0) << 28)
                     | (((us & 0x3F) as u32) << 22)
                     | ((ev.x[i] as u32) << 11)
@@ -331,13 +348,13 @@ pub fn write_raw(path: impl AsRef<Path>, ev: &EventStream, encoding: RawEncoding
             }
         }
         RawEncoding::Evt3 => {
-            let (mut high, mut low, mut row) = (None, None, None);
+            let (mut state, mut low, mut row) = (WriterTime::default(), None, None);
             let mut word = |w: u16| body.extend_from_slice(&w.to_le_bytes());
             for (i, &us) in us.iter().enumerate() {
-                let (h, l) = ((us >> 12) & 0xFFF, us & 0xFFF);
-                if high != Some(h) {
-                    word(0x8000 | h as u16);
-                    high = Some(h);
+                let (epoch, h, l) = (us >> 24, (us >> 12) & 0xFFF, us & 0xFFF);
+                let before = state;
+                time_high_words(&mut state, epoch, h, |h| word(0x8000 | h as u16));
+                if state != before {
                     low = None;
                 }
                 if low != Some(l) {
