@@ -40,7 +40,7 @@ fn main() -> anyhow::Result<()> {
         "ecd" => (
             Input::Events {
                 path: dir.join("events.txt"),
-                sensor: (240, 180),
+                sensor: Some((240, 180)),
                 calib: Some(dir.join("calib.txt")),
                 spec: WindowSpec::default(),
             },

@@ -283,18 +283,20 @@ impl Source {
         ))
     }
 
-    /// A bare event file with the given sensor, optional calibration and windows.
+    /// A bare event file with the given sensor (None: the size the file stores, as
+    /// `.es`, `.raw` and `.aedat4` do), optional calibration and windows.
     pub fn from_events(
         path: &Path,
-        sensor: (u32, u32),
+        sensor: Option<(u32, u32)>,
         calib: Option<&Path>,
         spec: &WindowSpec,
     ) -> Result<Source> {
         let opts = scene::ReadOptions {
-            sensor: Some(sensor),
+            sensor,
             coord_scale: None,
         };
         let events = scene::read_events(path, &opts)?;
+        let sensor = (events.width, events.height);
         let intrinsics = calib.map(|c| read_calib(c, sensor)).transpose()?;
         let (first, last) = match (events.t.first(), events.t.last()) {
             (Some(&a), Some(&b)) => (a, b),

@@ -28,7 +28,8 @@ pub enum Input {
     /// A bare event file.
     Events {
         path: PathBuf,
-        sensor: (u32, u32),
+        /// None: the size the file stores.
+        sensor: Option<(u32, u32)>,
         calib: Option<PathBuf>,
         spec: WindowSpec,
     },

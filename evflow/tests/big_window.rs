@@ -108,7 +108,7 @@ fn several_subsampled_windows_give_one_warning() {
     scene::formats::evs::write_evs(&path, &ev).unwrap();
     let input = Input::Events {
         path,
-        sensor: (32, 24),
+        sensor: Some((32, 24)),
         calib: None,
         spec: WindowSpec {
             windows: vec![(0.0, 0.09995), (0.09995, 0.19995), (0.19995, 0.29995)],

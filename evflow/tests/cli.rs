@@ -91,21 +91,21 @@ fn bare_event_file_windows_and_calibration() {
         windows: vec![],
         window_length: Some(0.25),
     };
-    let s = Source::from_events(&ev, (32, 24), None, &spec).unwrap();
+    let s = Source::from_events(&ev, Some((32, 24)), None, &spec).unwrap();
     assert_eq!(s.windows.len(), 4);
     assert_eq!(s.window_events(), 100, "every event in exactly one window");
     // The CM loss of a huge window uses an even-stride subsample.
     let sub = s.cm_events(&s.windows[0], 7);
     assert!(sub.len() <= 7 && !sub.is_empty());
     assert!(sub.t.iter().all(|t| (0.0..=1.0).contains(t)));
-    let whole = Source::from_events(&ev, (32, 24), None, &WindowSpec::default()).unwrap();
+    let whole = Source::from_events(&ev, Some((32, 24)), None, &WindowSpec::default()).unwrap();
     assert_eq!(whole.windows.len(), 1);
     assert_eq!(whole.windows[0].range, 0..100);
     // Calibration: undistortion inverts the distortion model.
     let calib = tmp.path().join("calib.txt");
     std::fs::write(&calib, "30 30 15.5 11.5 -0.3 0.1 0.001 -0.002 0\n").unwrap();
     let k = read_calib(&calib, (32, 24)).unwrap();
-    let s = Source::from_events(&ev, (32, 24), Some(&calib), &WindowSpec::default()).unwrap();
+    let s = Source::from_events(&ev, Some((32, 24)), Some(&calib), &WindowSpec::default()).unwrap();
     for i in [0, 17, 99] {
         let d = k.distort_pixel(glam::DVec2::new(s.xu[i] as f64, s.yu[i] as f64));
         assert!(

@@ -205,7 +205,7 @@ fn empty_window_gives_zero_flow_and_a_warning() {
     let out = tmp.path().join("out");
     let input = Input::Events {
         path: scene.join("events.evs"),
-        sensor: (48, 40),
+        sensor: Some((48, 40)),
         calib: None,
         spec: WindowSpec {
             windows: vec![(0.1, 0.2), (50.0, 51.0)],

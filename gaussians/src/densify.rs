@@ -64,6 +64,39 @@ impl Default for DensifySettings {
     }
 }
 
+impl DensifySettings {
+    /// Why the values cannot be used, if they cannot (the message names the key).
+    pub fn validate(&self) -> Result<(), String> {
+        if self.interval == 0 {
+            return Err("densify.interval = 0: must be ≥ 1 (densification runs every `interval` iterations)".into());
+        }
+        let positive = [
+            ("densify.grad_threshold", self.grad_threshold),
+            ("densify.percent_dense", self.percent_dense),
+            ("densify.max_screen_radius", self.max_screen_radius),
+            ("densify.max_world_frac", self.max_world_frac),
+        ];
+        for (name, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!("{name} = {v} must be finite and > 0"));
+            }
+        }
+        if !(self.split_scale_div.is_finite() && self.split_scale_div > 1.0) {
+            return Err(format!(
+                "densify.split_scale_div = {} must be > 1 (split children are smaller)",
+                self.split_scale_div
+            ));
+        }
+        if !(0.0..1.0).contains(&self.min_opacity) {
+            return Err(format!(
+                "densify.min_opacity = {} must lie in [0, 1)",
+                self.min_opacity
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// Running statistics between densification steps.
 #[derive(Clone, Debug, Default)]
 pub struct GradStats {

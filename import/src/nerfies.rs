@@ -203,6 +203,12 @@ pub fn read_nerfies(src: &Path, o: &EventsAlignment, downscale: Option<u32>) -> 
         time_ids.push(t);
     }
     let max_id = time_ids.iter().copied().max().unwrap_or(0).max(1) as f64;
+    if let Some(id) = dataset.val_ids.iter().find(|v| !dataset.ids.contains(v)) {
+        return Err(Error::invalid(
+            &dataset_path,
+            format!("val_ids names {id:?}, which is not among its ids"),
+        ));
+    }
 
     let mut camera: Option<(Intrinsics, std::path::PathBuf)> = None;
     let mut frames = Vec::with_capacity(dataset.ids.len());

@@ -174,3 +174,18 @@ fn malformed_captures_are_refused_naming_the_file() {
         "{e}"
     );
 }
+
+#[test]
+fn an_unknown_val_id_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let (orig, _) = tiny_scene(dir.path(), "synth");
+    let src = dir.path().join("nerfies");
+    export_nerfies(&orig, &EXPORT, &src).unwrap();
+    edit_json(&src.join("dataset.json"), |v| {
+        v["val_ids"].as_array_mut().unwrap().push("nope_042".into());
+    });
+    let e = import(Layout::Nerfies, &src, &aligned(), &dir.path().join("o"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("dataset.json") && e.contains("nope_042"), "{e}");
+}

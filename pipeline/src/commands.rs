@@ -9,7 +9,7 @@ use crate::record::Action;
 use crate::runner::{self, RunOptions};
 use crate::sweep::Sweep;
 use crate::{chart, config_show, eval, plan, stages, status, sweep_run, synth};
-use anyhow::{Context as _, Result, anyhow};
+use anyhow::{Context as _, Result, anyhow, bail};
 use std::path::{Path, PathBuf};
 
 /// Run one parsed `degs` command.
@@ -146,6 +146,9 @@ pub fn execute(command: Command) -> Result<()> {
         Command::Eval { run, place } => {
             let dir = place.run_dir(&run)?;
             let m = eval::eval_run(&dir)?;
+            for f in &m.scene_findings {
+                eprintln!("[degs] scene {f}");
+            }
             print!(
                 "{}",
                 eval::compare_table(&[(m.experiment.clone(), m.clone())])
@@ -363,6 +366,13 @@ fn convert_events(
         sensor,
         coord_scale,
     };
+    let same = |p: &Path| std::fs::canonicalize(p).ok();
+    if output.exists() && same(input) == same(output) {
+        bail!(
+            "{}: the output is the input; write the converted events elsewhere",
+            output.display()
+        );
+    }
     let s = scene::formats::convert(input, output, &opts)?;
     eprintln!(
         "[degs] converted {} events ({}x{}, t {:.6}..{:.6} s) {} → {}: {}",

@@ -45,6 +45,10 @@ pub struct Metrics {
     pub baselines: Option<BaselineFigures>,
     #[serde(default)]
     pub baselines_note: Option<String>,
+    /// What the scene checks ([`scene::check`]) found: e.g. test frames that are train
+    /// frames, whose scores are then not held-out scores.
+    #[serde(default)]
+    pub scene_findings: Vec<String>,
     /// Mean end-point error (px/s) of the per-event flow against the scene's ground
     /// truth (`gt/event_flow.bin`), over every non-noise event of every window; when
     /// the flow files cannot be read, the figure the evflow stage reported.
@@ -266,6 +270,10 @@ pub fn eval_run_with(run_dir: &Path, lpips: crate::eval_lpips::LpipsUse) -> Resu
         .and_then(|s| s.entry.clone())
         .with_context(|| format!("{}: the run has no scene", run_dir.display()))?;
     let scene = Scene::open(&scene_dir)?;
+    let scene_findings = scene::check::check_scene(&scene)?
+        .iter()
+        .map(ToString::to_string)
+        .collect();
     let images = |m: &scene::manifest::Manifest| -> Vec<PathBuf> {
         m.frames.iter().map(|f| scene.image_path(f)).collect()
     };
@@ -303,6 +311,7 @@ pub fn eval_run_with(run_dir: &Path, lpips: crate::eval_lpips::LpipsUse) -> Resu
         novel_frames,
         baselines,
         baselines_note,
+        scene_findings,
         flow_epe: flow.as_ref().map(|f| f.epe_px_s),
         flow_err_px: flow.as_ref().and_then(|f| f.err_px),
         flow_outliers: flow.as_ref().and_then(|f| f.outliers),

@@ -344,3 +344,111 @@ fn a_closed_stdout_ends_degs_quietly() {
     const SIGPIPE: i32 = 13; // Linux
     assert_eq!(o.status.signal(), Some(SIGPIPE), "{:?}", o.status);
 }
+
+/// Settings that cannot work are refused when the experiment is loaded (`degs plan`,
+/// before any stage), by the stage's own validation, naming the file, table and key;
+/// a wrong type names the key, a TOML syntax error the line.
+#[test]
+fn plan_refuses_settings_that_cannot_work() {
+    let d = tempfile::tempdir().unwrap();
+    let cases = [
+        ("[assoc]\nk = 0\n", "[assoc]", "k = 0"),
+        (
+            "[gaussians]\nfeature_lr = -0.01\n",
+            "[gaussians]",
+            "feature_lr = -0.01",
+        ),
+        (
+            "[gaussians.densify]\ninterval = 0\n",
+            "[gaussians]",
+            "densify.interval = 0",
+        ),
+        (
+            "[gaussians]\nsh_degree = 7\n",
+            "[gaussians]",
+            "sh_degree = 7",
+        ),
+        (
+            "[gaussians.densify]\ninterval = \"often\"\n",
+            "[gaussians]",
+            "key `densify.interval`",
+        ),
+        ("[deform]\nposenet_lr = -1.0\n", "[deform]", "posenet_lr"),
+        ("[assoc]\nk = = 3\n", "line 6, column 5", ""),
+    ];
+    for (i, (table, place, key)) in cases.iter().enumerate() {
+        let exp = d.path().join(format!("e{i}.toml"));
+        fs::write(
+            &exp,
+            format!("name = \"e{i}\"\n\n[scene]\nsynth = \"rigid\"\n{table}"),
+        )
+        .unwrap();
+        let cache = d.path().join("cache");
+        let o = degs(&[
+            "plan",
+            exp.to_str().unwrap(),
+            "--cache",
+            cache.to_str().unwrap(),
+        ]);
+        let e = text(&o);
+        assert!(!o.status.success(), "{table}: accepted");
+        assert!(
+            e.contains(exp.to_str().unwrap()) && e.contains(place) && e.contains(key),
+            "{table}: {e}"
+        );
+        assert!(
+            !cache.join("runs").exists(),
+            "{table}: something was written"
+        );
+    }
+}
+
+/// A synthetic scene whose test times fall on its train times is refused at `degs synth`
+/// (and so at `plan`), with a `test_frames` that avoids it.
+#[test]
+fn synth_refuses_test_frames_on_train_frames() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("s");
+    let o = degs(&[
+        "synth",
+        "--preset",
+        "static",
+        "--set",
+        "width=16",
+        "--set",
+        "height=12",
+        "--set",
+        "duration=3",
+        "--set",
+        "train_fps=20",
+        "--set",
+        "test_frames=30",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    let e = text(&o);
+    assert!(
+        e.contains("test_frames = 30: 30 of the 30 test times") && e.contains("avoids it"),
+        "{e}"
+    );
+    assert!(!out.exists());
+}
+
+/// `degs events convert A A` is refused and A is left as it was.
+#[test]
+fn convert_onto_its_input_is_refused() {
+    let d = tempfile::tempdir().unwrap();
+    let a = d.path().join("a.txt");
+    write_events(&a, &stream(true)).unwrap();
+    let before = fs::read(&a).unwrap();
+    let o = degs(&[
+        "events",
+        "convert",
+        a.to_str().unwrap(),
+        a.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("the output is the input"), "{}", text(&o));
+    assert_eq!(fs::read(&a).unwrap(), before);
+}

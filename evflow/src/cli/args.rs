@@ -9,15 +9,17 @@ use std::path::PathBuf;
 /// Where the events come from: a scene directory, or a bare event file.
 #[derive(Args, Debug)]
 pub struct InputArgs {
-    /// Scene directory (transforms_train.json with an events entry); one window per
-    /// interval between consecutive train frames.
+    /// Scene directory (transforms_train.json with an events entry): one window around
+    /// each train frame (`frame_window` seconds wide), or with `frame_window = 0` one
+    /// per interval between consecutive train frames.
     #[arg(long, conflicts_with = "events", required_unless_present = "events")]
     pub scene: Option<PathBuf>,
-    /// Bare event file (.txt t x y p, .npz, .evs, .aedat4) instead of a scene.
-    #[arg(long, requires = "sensor")]
-    pub events: Option<PathBuf>,
-    /// Sensor size WxH of the event file, e.g. 240x180.
+    /// Bare event file (.txt t x y p, .npz, .evs, .aedat4, .raw, .es) instead of a scene.
     #[arg(long)]
+    pub events: Option<PathBuf>,
+    /// Sensor size WxH of the event file, e.g. 240x180 (files that store it, .evs,
+    /// .aedat4, .raw, .es, need none).
+    #[arg(long, requires = "events")]
     pub sensor: Option<String>,
     /// Calibration `fx fy cx cy k1 k2 p1 p2 k3` (ECD calib.txt): events are undistorted
     /// and the flow lives on the undistorted grid of the same K.
@@ -42,8 +44,12 @@ impl InputArgs {
             .events
             .clone()
             .ok_or_else(|| anyhow::anyhow!("give --scene or --events"))?;
-        let sensor =
-            parse_sensor(self.sensor.as_deref().unwrap_or_default()).map_err(anyhow::Error::msg)?;
+        let sensor = self
+            .sensor
+            .as_deref()
+            .map(parse_sensor)
+            .transpose()
+            .map_err(anyhow::Error::msg)?;
         let windows = self
             .windows
             .iter()

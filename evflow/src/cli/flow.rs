@@ -198,12 +198,18 @@ fn run_stage(
         b.finish();
     }
     let ft = &report.finetune;
+    let cm = if ft.mode == crate::finetune::Mode::None {
+        "no fine-tuning".to_string()
+    } else {
+        format!(
+            "CM loss {:.4} -> {:.4}",
+            ft.cm_loss_before, ft.cm_loss_after
+        )
+    };
     eprintln!(
-        "evflow: {} windows, {} events, CM loss {:.4} -> {:.4}, warp gain {:.3}{}, {:.1} s -> {}",
+        "evflow: {} windows, {} events, {cm}, warp gain {:.3}{}, {:.1} s -> {}",
         report.windows,
         report.events,
-        ft.cm_loss_before,
-        ft.cm_loss_after,
         report.warp_gain,
         report
             .flow_epe_px_s

@@ -150,8 +150,24 @@ impl scene::cli::Settings for TrainSettings {
             return Err("static_split_at must lie in [0, 1]".into());
         }
         if self.sh_degree > 3 {
-            return Err("sh_degree must be ≤ 3".into());
+            return Err(format!("sh_degree = {} must be ≤ 3", self.sh_degree));
         }
+        let rates = [
+            ("field_lr_init", self.field_lr_init),
+            ("field_lr_final", self.field_lr_final),
+            ("position_lr_init", self.position_lr_init),
+            ("position_lr_final", self.position_lr_final),
+            ("feature_lr", self.feature_lr),
+            ("opacity_lr", self.opacity_lr),
+            ("scaling_lr", self.scaling_lr),
+            ("rotation_lr", self.rotation_lr),
+        ];
+        for (name, v) in rates {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!("{name} = {v} must be finite and ≥ 0"));
+            }
+        }
+        self.densify.validate()?;
         if self.init_points == 0 {
             return Err("init_points must be positive".into());
         }

@@ -100,7 +100,7 @@ pub fn read_events(path: impl AsRef<Path>, opts: &ReadOptions) -> Result<EventSt
     if opts.coord_scale.is_some() && Format::from_path(path)? != Format::Npz {
         return Err(Error::invalid(
             path,
-            "coord_scale applies to .npz files only",
+            "a coordinate scale (--coord-scale, --hsergb) applies to .npz files only",
         ));
     }
     match Format::from_path(path)? {
@@ -190,7 +190,7 @@ pub(crate) fn resolve_sensor(
         }
         (None, None) => Err(Error::invalid(
             path,
-            "the file does not store the sensor size: pass it (ReadOptions.sensor / --sensor WxH)",
+            "the file does not store the sensor size: pass it with --sensor WxH",
         )),
     }
 }
