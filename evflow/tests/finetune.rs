@@ -19,7 +19,7 @@ fn tiny_scene(dir: &Path) -> PathBuf {
         height: 40,
         duration: 0.5,
         train_fps: 8.0,
-        test_frames: 1,
+        test_frames: 4, // at (k + ½)/8 s: between the train frames
         render_rate_hz: 300.0,
         ..SynthConfig::preset("rigid").unwrap()
     };

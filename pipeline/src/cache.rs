@@ -207,14 +207,42 @@ pub fn dir_fingerprint(dir: &Path) -> Result<String> {
         anyhow::bail!("{}: scene directory not found", dir.display());
     }
     let mut h = blake3::Hasher::new();
-    for rel in list_files(dir)? {
-        let m = fs::metadata(dir.join(&rel))?;
-        h.update(rel.to_string_lossy().as_bytes());
+    let mut add = |name: &Path, m: &fs::Metadata| {
+        h.update(name.to_string_lossy().as_bytes());
         h.update(&[0]);
         h.update(&m.len().to_le_bytes());
-        h.update(&mtime_ns(&m).to_le_bytes());
+        h.update(&mtime_ns(m).to_le_bytes());
+    };
+    for rel in list_files(dir)? {
+        add(&rel, &fs::metadata(dir.join(&rel))?);
+    }
+    // Files the manifests name outside the directory (an events file beside it, frames
+    // elsewhere) are part of the scene too.
+    for p in external_files(dir) {
+        let m = fs::metadata(&p).with_context(|| format!("{}: cannot read", p.display()))?;
+        add(&p, &m);
     }
     Ok(h.finalize().to_hex()[..32].to_string())
+}
+
+/// The files a scene's manifests reference outside `dir` (absolute paths), sorted; none
+/// when the scene cannot be opened (its stages will say why).
+fn external_files(dir: &Path) -> Vec<PathBuf> {
+    let Ok(scene) = scene::Scene::open(dir) else {
+        return Vec::new();
+    };
+    let inside = fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf());
+    let frames = [&scene.train, &scene.test, &scene.novel]
+        .into_iter()
+        .flat_map(|m| m.frames.iter().map(|f| scene.image_path(f)));
+    let mut out: Vec<PathBuf> = frames
+        .chain(scene.events_path())
+        .filter_map(|p| fs::canonicalize(p).ok())
+        .filter(|p| !p.starts_with(&inside))
+        .collect();
+    out.sort();
+    out.dedup();
+    out
 }
 
 /// The manifest of a finished entry.

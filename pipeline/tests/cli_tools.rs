@@ -307,11 +307,12 @@ fn import_prints_what_it_found_and_refuses_an_aedat4_without_poses() {
         serde_json::from_str(&fs::read_to_string(out.join("import.json")).unwrap()).unwrap();
     assert_eq!(summary["events"], 6676);
     // A bad flag value is refused, naming the flag.
+    let out2 = dir.path().join("davis2");
     let o = degs(&[
         "import",
         "aedat4",
         sample,
-        out.to_str().unwrap(),
+        out2.to_str().unwrap(),
         "--static-camera",
         "--test-every",
         "1",

@@ -57,7 +57,14 @@ fn experiment_reader_synthetic_scene() {
 fn experiment_reader_scene_directory() {
     let _alone = scene::testing::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
-    fs::create_dir_all(dir.path().join("scene")).unwrap();
+    // A real scene (loading the experiment checks it), small enough to read thousands
+    // of times.
+    let cfg: toml::Table = "width = 8\nheight = 6\nduration = 0.25\nrender_rate_hz = 40\n\
+                            test_frames = 2\nsupersample = 1\nframe_supersample = 1\n"
+        .parse()
+        .unwrap();
+    let cfg = pipeline::experiment::synth_config("static", &cfg).unwrap();
+    synth::write_synthetic_scene(&cfg, &dir.path().join("scene")).unwrap();
     let path = dir.path().join("real.toml");
     let text = "name = \"real-1\"\n[scene]\ndir = \"scene\"\n[assoc]\nk = 3\n[deform]\nseed = 4\n";
     fuzz(

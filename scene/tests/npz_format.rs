@@ -87,7 +87,10 @@ fn npz_hs_ergb_layout_with_coordinate_scale() {
     assert!(e.contains("event 2") && e.contains("outside"), "{e}");
     // coord_scale is refused for other formats.
     let e = err_text(read_events(ecd(), &o));
-    assert!(e.contains("coord_scale"), "{e}");
+    assert!(
+        e.contains("coordinate scale") && e.contains(".npz files only"),
+        "{e}"
+    );
 }
 
 /// `.npy` bytes of big-endian i64 (exercises npyz's general element reader).

@@ -246,11 +246,14 @@ impl scene::cli::Settings for SynthConfig {
                 "blur_subframes must be ≥ 1, supersample and frame_supersample in 1..=8".into(),
             );
         }
-        if let Some(msg) = self.test_on_train() {
-            return Err(msg);
-        }
         if self.render_rate_hz * self.duration > 1e6 {
             return Err("render_rate_hz × duration exceeds 10⁶ internal frames".into());
+        }
+        if self.test_frames > 100_000 || self.duration * self.train_fps > 1e6 {
+            return Err("test_frames ≤ 10⁵ and duration × train_fps ≤ 10⁶ required".into());
+        }
+        if let Some(msg) = self.test_on_train() {
+            return Err(msg);
         }
         if self.objects.len() >= u16::MAX as usize {
             return Err("too many objects".into());
@@ -318,15 +321,16 @@ impl SynthConfig {
     /// Why the test split would hold train frames (a test time on a train time: the same
     /// camera and image, scored as if held out), with a `test_frames` that avoids it.
     fn test_on_train(&self) -> Option<String> {
+        // Closed form (no lists: the settings may be hostile): test time t_k is train
+        // time m / fps when t_k · fps is within 1 ns · fps of a whole m ≤ the last one.
+        let last = (self.duration * self.train_fps + 1e-9).floor();
         let on_train = |n: usize| {
-            let c = SynthConfig {
-                test_frames: n,
-                ..self.clone()
-            };
-            let train = c.train_times();
-            c.test_times()
-                .into_iter()
-                .filter(|t| train.iter().any(|s| (s - t).abs() < 1e-9))
+            (0..n)
+                .filter(|&k| {
+                    let t = (k as f64 + 0.5) * self.duration / n as f64;
+                    let m = (t * self.train_fps).round();
+                    m <= last && (m / self.train_fps - t).abs() < 1e-9
+                })
                 .count()
         };
         let k = on_train(self.test_frames);
@@ -334,7 +338,7 @@ impl SynthConfig {
             return None;
         }
         let n = self.test_frames;
-        let better = (1..=2 * n.max(1))
+        let better = (1..=32)
             .flat_map(|d| [n + d, n.saturating_sub(d)])
             .find(|&m| m > 0 && on_train(m) == 0);
         Some(format!(

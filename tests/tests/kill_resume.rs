@@ -249,7 +249,10 @@ fn runs_killed_at_seeded_points_resume_to_the_uninterrupted_result() {
             .unwrap()
             .flatten()
         {
-            if e.file_name().to_string_lossy().contains(".tmp-") {
+            if e.file_name()
+                .to_string_lossy()
+                .contains(scene::atomic::TEMP_SUFFIX)
+            {
                 temps.push(e.path());
             }
         }

@@ -79,6 +79,16 @@ fi
 echo "end $stage" >> "$DEGS_FAKE_LOG"
 "#;
 
+/// The fixture's scene: 32×24, 0.25 s, train frames at k/8 s, two test frames between
+/// them (a real scene, as `degs run` checks the scene before any stage starts).
+pub fn tiny_scene_config() -> synth::SynthConfig {
+    let set: toml::Table = "width = 32\nheight = 24\nduration = 0.25\nrender_rate_hz = 200\n\
+                            test_frames = 2\nsupersample = 1\nframe_supersample = 1\n"
+        .parse()
+        .unwrap();
+    pipeline::experiment::synth_config("rigid", &set).unwrap()
+}
+
 pub struct Fixture {
     pub dir: tempfile::TempDir,
     pub stages: PathBuf,
@@ -99,8 +109,7 @@ impl Fixture {
             fs::set_permissions(&p, fs::Permissions::from_mode(0o755)).unwrap();
         }
         let scene = dir.path().join("scene");
-        fs::create_dir_all(&scene).unwrap();
-        fs::write(scene.join("transforms_train.json"), "{}").unwrap();
+        synth::write_synthetic_scene(&tiny_scene_config(), &scene).unwrap();
         Fixture {
             cache: dir.path().join("cache-root"),
             log: dir.path().join("invocations.log"),
@@ -223,12 +232,15 @@ impl Fixture {
             .collect()
     }
 
-    /// Every path under the cache root whose name contains `.tmp-`.
+    /// Every path under the cache root whose name contains `.degs-tmp-`.
     pub fn temp_paths(&self) -> Vec<PathBuf> {
         fn walk(d: &Path, out: &mut Vec<PathBuf>) {
             for e in fs::read_dir(d).into_iter().flatten().flatten() {
                 let p = e.path();
-                if e.file_name().to_string_lossy().contains(".tmp-") {
+                if e.file_name()
+                    .to_string_lossy()
+                    .contains(scene::atomic::TEMP_SUFFIX)
+                {
                     out.push(p.clone());
                 }
                 if p.is_dir() {
