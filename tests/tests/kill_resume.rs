@@ -3,12 +3,14 @@
 //! that was never interrupted (docs/DESIGN.md "Inputs that cannot hurt").
 //!
 //! The scene is the tiny synthetic one of `degs_run.rs`, smaller still. A reference run
-//! goes through uninterrupted in its own cache; then, in a second cache, runs are killed
-//! seeded fractions of the reference's wall time after their first stage started, in
-//! turn: the whole process
-//! group (the runner and its stage at once, as a lost machine would), only the running
-//! stage process (the runner records the failure), only the runner (its stage dies with
-//! it). After each kill every sealed entry must verify; the last run goes to the end.
+//! goes through uninterrupted in its own cache; then, in a second cache, one killed run
+//! per stage, in pipeline order: each waits until that stage's process runs and kills a
+//! seeded fraction (under half) of the stage's reference wall time later, in turn: the
+//! whole process group (the runner and its stage at once, as a lost machine would),
+//! only the running stage process (the runner records the failure), only the runner
+//! (its stage dies with it). After each kill the stage's entry must not be sealed (the
+//! kill landed inside it) and every sealed entry must verify; the last run goes to the
+//! end.
 
 use degs_tests::{Workspace, entry, stage_record, stderr};
 use pipeline::cache::{self, Cache, Verdict};
@@ -16,7 +18,7 @@ use std::collections::BTreeMap;
 use std::os::unix::process::CommandExt;
 use std::path::Path;
 use std::process::{Child, Command};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 const EXPERIMENT: &str = r#"
 name = "resume"
@@ -126,19 +128,6 @@ fn children(pid: u32) -> Vec<String> {
         .collect()
 }
 
-/// SIGKILL the stage the runner is running (waiting for the next one to start when
-/// the runner is between stages).
-fn kill_stage(runner: &mut Child) {
-    while runner.try_wait().unwrap().is_none() {
-        let stages = children(runner.id());
-        if !stages.is_empty() {
-            stages.iter().for_each(|p| sigkill(p));
-            return;
-        }
-        std::thread::sleep(Duration::from_millis(5));
-    }
-}
-
 /// Every sealed entry of the cache verifies against its manifest (full re-hash); the
 /// run record, when there is one, is readable.
 fn assert_consistent(w: &Workspace, when: &str) {
@@ -152,10 +141,74 @@ fn assert_consistent(w: &Workspace, when: &str) {
     }
 }
 
-/// Seeded fractions in [0, 0.3) (SplitMix64): each killed run is killed this share of
-/// [`KILL_WINDOW`] after its first stage started, so the kill lands while that stage
-/// (and every stage after it) is still to finish, whatever the machine's speed.
-const KILL_WINDOW: Duration = Duration::from_millis(100);
+/// How each stage's run is killed: the process group, the runner only (its stage dies
+/// with it), or the stage only. The stage-only kills come where the runner has nothing
+/// left to run without the killed stage (after evflow it would go on with gaussians).
+const MODES: [Kill; 5] = [
+    Kill::Group,
+    Kill::Runner,
+    Kill::Stage,
+    Kill::Group,
+    Kill::Stage,
+];
+
+#[derive(Clone, Copy, Debug)]
+enum Kill {
+    Group,
+    Runner,
+    Stage,
+}
+
+/// The stage (binary, verb) a process runs, from its command line: `degs synth`, or
+/// a stage binary.
+fn stage_of(pid: &str) -> Option<String> {
+    let cmd = std::fs::read(format!("/proc/{pid}/cmdline")).ok()?;
+    let mut args = cmd
+        .split(|&b| b == 0)
+        .map(|a| String::from_utf8_lossy(a).to_string());
+    let bin = Path::new(&args.next()?)
+        .file_name()?
+        .to_string_lossy()
+        .to_string();
+    match (bin.as_str(), args.next().as_deref()) {
+        ("degs", Some("synth")) => Some("synth".into()),
+        (b, _) if STAGES.contains(&b) => Some(b.to_string()),
+        _ => None,
+    }
+}
+
+/// Wait until the runner runs `stage` (its process a child of the runner); false when
+/// the runner ended first.
+fn wait_for_stage(runner: &mut Child, stage: &str) -> Option<String> {
+    while runner.try_wait().unwrap().is_none() {
+        if let Some(p) = children(runner.id())
+            .into_iter()
+            .find(|p| stage_of(p).as_deref() == Some(stage))
+        {
+            return Some(p);
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    None
+}
+
+/// Stop process `pid` (SIGSTOP) and say whether it is stopped: alive, inside its work.
+fn freeze(pid: &str) -> bool {
+    let _ = Command::new("kill").args(["-STOP", pid]).status();
+    for _ in 0..200 {
+        let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
+        match stat
+            .rsplit(')')
+            .next()
+            .and_then(|r| r.trim_start().chars().next())
+        {
+            Some('T' | 't') => return true,
+            Some('Z' | 'X') | None => return false,
+            _ => std::thread::sleep(Duration::from_millis(1)),
+        }
+    }
+    false
+}
 
 fn fractions(seed: u64, n: usize) -> Vec<f64> {
     let mut s = seed;
@@ -183,38 +236,44 @@ fn runs_killed_at_seeded_points_resume_to_the_uninterrupted_result() {
 
     let w = Workspace::new();
     let exp = w.experiment("resume", EXPERIMENT);
-    let mut kills = 0;
-    for (i, f) in fractions(18, 5).into_iter().enumerate() {
+    for (i, (stage, f)) in STAGES.into_iter().zip(fractions(18, 5)).enumerate() {
+        // A seeded point within the first 30 % of the stage's reference wall time.
+        let wall = stage_record(&want, stage)["wall_s"].as_f64().unwrap();
         let mut child = spawn_run(&w, &exp);
-        // From the start of its first stage (hashing binaries and cache checks come
-        // before), so the kill lands while work is left.
-        while children(child.id()).is_empty() && child.try_wait().unwrap().is_none() {
-            std::thread::sleep(Duration::from_millis(2));
-        }
-        let deadline = Instant::now() + KILL_WINDOW.mul_f64(f);
-        while Instant::now() < deadline && child.try_wait().unwrap().is_none() {
-            std::thread::sleep(Duration::from_millis(10));
-        }
-        if child.try_wait().unwrap().is_none() {
-            kills += 1;
-            match i % 3 {
-                0 => sigkill(&format!("-{}", child.id())),
-                1 => kill_stage(&mut child),
-                // the stage dies with it (PR_SET_PDEATHSIG)
-                _ => sigkill(&child.id().to_string()),
-            }
+        let pid = wait_for_stage(&mut child, stage).unwrap_or_else(|| {
+            panic!(
+                "kill {i}: the run ended before {stage} started: {}",
+                std::fs::read_to_string(w.cache.join("runs/resume/run.json")).unwrap_or_default()
+            )
+        });
+        std::thread::sleep(Duration::from_secs_f64(f * wall));
+        // Stopped first, so the kill lands inside the stage, whatever the machine's speed.
+        let when = format!(
+            "kill {i} ({:?}) in {stage} at {:.1} of {:.1} ms",
+            MODES[i],
+            1e3 * f * wall,
+            1e3 * wall
+        );
+        assert!(freeze(&pid), "{when}: {stage} had already ended");
+        match MODES[i] {
+            Kill::Group => sigkill(&format!("-{}", child.id())),
+            Kill::Stage => sigkill(&pid),
+            Kill::Runner => sigkill(&child.id().to_string()),
         }
         // The runner, when only its stage was killed, records the failure and stops.
         let status = child.wait().unwrap();
-        assert_consistent(
-            &w,
-            &format!("after kill {i} at {:.0}% ({status})", 100.0 * f),
+        let when = format!("{when} ({status})");
+        assert_consistent(&w, &when);
+        let key = stage_record(&want, stage)["key"]
+            .as_str()
+            .unwrap()
+            .to_string();
+        let sealed = w.cache.join("cache").join(stage).join(&key);
+        assert!(
+            cache::verify(&sealed, false) != Verdict::Ok,
+            "{when}: {stage} was sealed: the kill did not land inside it"
         );
     }
-    assert!(
-        kills >= 3,
-        "only {kills} of 5 runs were still running when killed"
-    );
 
     let out = w.degs(&["run", exp.to_str().unwrap(), "-j", "1", "--quiet"]);
     assert!(out.status.success(), "{}", stderr(&out));
