@@ -175,3 +175,79 @@ fn each_contrast_mode_runs_through_the_trainer() {
     let last = c["last"].as_f64().unwrap();
     assert!(last != initial && last.is_finite() && last > 0.0, "{c}");
 }
+
+/// The trainer's rebinding (on the deformed Gaussians it holds) and the `assoc` stage on
+/// the model the joint training saved (its field moved by the training) bind the same
+/// events to the same Gaussians.
+#[test]
+fn rebinding_agrees_with_the_assoc_stage_on_the_deformed_model() {
+    use deform::inputs::Inputs;
+    use deform::settings::DeformSettings;
+    use deform::trainer::JointTrainer;
+    let fx = build(Variant::Normal);
+    let (o, _, _) = train_with(
+        &fx,
+        "trained",
+        "iterations = 12\nlog_every = 1\nrebind_every = 100\nposenet_warmup = 0\n",
+        TrainArgs::default(),
+    );
+    let s = DeformSettings::default();
+    // The saved field moves the Gaussians (else this would compare canonical models).
+    let m = Model::load(&o.out).unwrap();
+    let (a, b) = (m.at(0.0), m.at(1.0));
+    let moved = a
+        .means
+        .iter()
+        .zip(&b.means)
+        .map(|(p, q)| (0..3).map(|c| (p[c] - q[c]).abs()).fold(0.0f32, f32::max))
+        .fold(0.0f32, f32::max);
+    assert!(
+        moved > 1e-6,
+        "the trained field does not move the Gaussians"
+    );
+    let stage_out = fx.dir.path().join("assoc-again");
+    assoc::stage::run(&fx.scene, &o.out, &stage_out, &s.assoc, false, |_, _| {}).unwrap();
+    let from_stage = assoc::read_assoc(&stage_out.join("assoc.bin")).unwrap();
+
+    // The saved model as a warm-up directory (the joint stage's settings.toml is its
+    // own; the trainer reads the warm-up's).
+    let as_warmup = fx.dir.path().join("as-warm-up");
+    copy_dir(&o.out, &as_warmup);
+    std::fs::copy(
+        fx.model.join("settings.toml"),
+        as_warmup.join("settings.toml"),
+    )
+    .unwrap();
+    let d = Inputs::load(&fx.scene, &as_warmup, &fx.flows, &stage_out, &s).unwrap();
+    let mut tr = JointTrainer::new(&d, s);
+    tr.bindings.clear(); // what the trainer loaded: the rebinding must make them anew
+    tr.rebind(&gaussians::TileRasterizer, &d);
+    assert_eq!(tr.bindings.len(), from_stage.len());
+    let mut bound = 0;
+    for (i, (r, f)) in tr.bindings.iter().zip(&from_stage).enumerate() {
+        let b = &f.bindings;
+        assert_eq!(r.offsets, b.offsets, "frame {i}: offsets");
+        assert_eq!(r.events, b.events, "frame {i}: events");
+        let worst = r
+            .weights
+            .iter()
+            .zip(&b.weights)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0f32, f32::max);
+        assert!(worst <= 1e-6, "frame {i}: weights differ by {worst}");
+        bound += b.bound();
+    }
+    assert!(bound > 0, "nothing bound: the comparison is empty");
+}
+
+fn copy_dir(from: &std::path::Path, to: &std::path::Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap().flatten() {
+        let p = e.path();
+        if p.is_dir() {
+            copy_dir(&p, &to.join(e.file_name()));
+        } else {
+            std::fs::copy(&p, to.join(e.file_name())).unwrap();
+        }
+    }
+}
