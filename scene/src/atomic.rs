@@ -64,6 +64,7 @@ pub fn write_json_atomic<T: serde::Serialize>(path: &Path, value: &T) -> Result<
 /// What an existing target may be is the [`OutputRule`]'s to say: nothing that holds a
 /// source, nothing that is not an earlier output of the same command, and an earlier
 /// output only when forced (DESIGN §3, "Outputs never destroy inputs").
+#[derive(Debug)]
 pub struct AtomicDir {
     tmp: PathBuf,
     target: PathBuf,

@@ -12,8 +12,7 @@ fn a_user_folder_on_the_temp_name_is_kept() {
     fs::create_dir(&tmp).unwrap();
     fs::write(tmp.join("mine.txt"), "mine").unwrap();
     let e = AtomicDir::new(&target, &OutputRule::new("t"))
-        .err()
-        .expect("refused")
+        .expect_err("refused")
         .to_string();
     assert!(e.contains("not a temp folder"), "{e}");
     assert_eq!(fs::read(tmp.join("mine.txt")).unwrap(), b"mine");
@@ -28,7 +27,7 @@ fn a_folder_that_appeared_during_the_work_is_not_replaced_at_commit() {
     fs::write(dir.path().join("a"), "new").unwrap();
     fs::create_dir(&target).unwrap();
     fs::write(target.join("theirs.txt"), "theirs").unwrap();
-    let e = dir.commit().err().expect("refused").to_string();
+    let e = dir.commit().expect_err("refused").to_string();
     assert!(e.contains("not an output of `t`"), "{e}");
     assert_eq!(fs::read(target.join("theirs.txt")).unwrap(), b"theirs");
     // The temp folder went with the refused commit.
@@ -51,8 +50,7 @@ fn an_earlier_output_is_replaced_when_forced_and_marked_with_its_command() {
     );
     // Another command's output is not this one's to replace.
     let e = AtomicDir::new(&target, &OutputRule::new("other").force(true))
-        .err()
-        .expect("refused")
+        .expect_err("refused")
         .to_string();
     assert!(e.contains("not an output of `other`"), "{e}");
     // Nothing but the output is left beside it.
@@ -72,7 +70,7 @@ fn a_source_reached_through_a_symlink_is_seen() {
     let rule = OutputRule::new("t")
         .force(true)
         .source(src.join("events.txt"));
-    let e = rule.check(&link).err().expect("refused").to_string();
+    let e = rule.check(&link).expect_err("refused").to_string();
     assert!(e.contains("holds the input"), "{e}");
     assert_eq!(fs::read(src.join("events.txt")).unwrap(), b"0 1 2 1\n");
 }
