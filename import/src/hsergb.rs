@@ -28,17 +28,33 @@ use std::path::{Path, PathBuf};
 /// HS-ERGB stores event coordinates multiplied by this.
 pub const COORD_SCALE: f64 = 32.0;
 
-/// Events whose coordinates were read raw, in pixels of the `(w, h)` frames: divided by
-/// [`COORD_SCALE`] as HS-ERGB stores them, unless their range shows plain pixels (all
-/// below the frame size, and beyond what ×32 data could reach there), which are kept
-/// with a warning. Coordinates that fit neither are an error naming the folder.
+/// Events whose coordinates were read raw (as stored, 16 bits), in pixels of the
+/// `(w, h)` frames: divided by [`COORD_SCALE`] as HS-ERGB stores them, unless their
+/// range shows plain pixels (all below the frame size, and beyond what ×32 data could
+/// reach there), which are kept with a warning. A stored value of 2¹⁵ or more is a small
+/// negative coordinate wrapped through 16 bits (the real recordings hold some: public
+/// converters subtract 65 536); those events lie off the sensor and are dropped, with a
+/// warning. Coordinates that fit neither reading are an error naming the folder.
 fn pixel_coordinates(
-    mut ev: EventStream,
+    ev: EventStream,
     (w, h): (u32, u32),
     dir: &Path,
     warnings: &mut Vec<String>,
 ) -> Result<EventStream> {
-    let max = |v: &[u16]| v.iter().copied().max().map_or(0, u32::from);
+    let wrapped = |v: u16| v >= 1 << 15;
+    let keep: Vec<usize> = (0..ev.len())
+        .filter(|&i| !wrapped(ev.x[i]) && !wrapped(ev.y[i]))
+        .collect();
+    let dropped = ev.len() - keep.len();
+    if dropped > 0 {
+        warnings.push(format!(
+            "{}: {dropped} events with negative coordinates (stored wrapped through 16 \
+             bits) lie off the sensor: dropped",
+            dir.display()
+        ));
+    }
+    let mut out = EventStream::with_capacity(w, h, keep.len());
+    let max = |v: &[u16]| keep.iter().map(|&i| u32::from(v[i])).max().unwrap_or(0);
     let (mx, my) = (max(&ev.x), max(&ev.y));
     let s = COORD_SCALE;
     let plain =
@@ -49,29 +65,30 @@ fn pixel_coordinates(
              read as plain pixels, not ×32 as HS-ERGB stores them",
             dir.display()
         ));
-    } else {
-        let scale = |v: &mut Vec<u16>, size: u32, axis: &str| -> Result<()> {
-            for c in v.iter_mut() {
-                let px = (f64::from(*c) / s).round();
-                if px >= f64::from(size) {
-                    return Err(Error::invalid(
-                        dir,
-                        format!(
-                            "an event's {axis} = {c} (÷ 32 = {px}) is outside the frames' \
-                             {w}×{h}: neither ×32 nor plain pixels"
-                        ),
-                    ));
-                }
-                *c = px as u16;
-            }
-            Ok(())
-        };
-        scale(&mut ev.x, w, "x")?;
-        scale(&mut ev.y, h, "y")?;
     }
-    ev.width = w;
-    ev.height = h;
-    Ok(ev)
+    // ×32 values round to the nearest pixel; the last column's may round up onto the
+    // frame's edge (kept on the last pixel); anything further is no HS-ERGB file.
+    let pixel = |c: u16, size: u32, axis: &str| -> Result<u16> {
+        if plain {
+            return Ok(c);
+        }
+        let px = (f64::from(c) / s).round();
+        if px > f64::from(size) {
+            return Err(Error::invalid(
+                dir,
+                format!(
+                    "an event's {axis} = {c} (÷ 32 = {px}) is outside the frames' {w}×{h}: \
+                     neither ×32 nor plain pixels"
+                ),
+            ));
+        }
+        Ok((px as u32).min(size - 1) as u16)
+    };
+    for &i in &keep {
+        let (x, y) = (pixel(ev.x[i], w, "x")?, pixel(ev.y[i], h, "y")?);
+        out.push(ev.t[i], x, y, ev.p[i]);
+    }
+    Ok(out)
 }
 
 /// The first of `names` that is a directory under `src`.
@@ -146,12 +163,12 @@ pub fn read_hsergb(src: &Path, calib: Option<&Path>) -> Result<Recording> {
     let (w, h) = image::image_dimensions(&images[0])
         .map_err(|e| Error::invalid(&images[0], format!("cannot read image header: {e}")))?;
     // The raw coordinates first: whether they are ×32 is read off their range.
-    let s = COORD_SCALE as u32;
+    // Every 16-bit value passes the reader: [`pixel_coordinates`] reads them.
     let opts = ReadOptions {
-        sensor: Some((w * s, h * s)),
+        sensor: Some((1 << 16, 1 << 16)),
         coord_scale: None,
     };
-    let mut events = EventStream::new(w * s, h * s);
+    let mut events = EventStream::new(1 << 16, 1 << 16);
     let mut warnings = Vec::new();
     let npz = files(&ev_dir, "npz")?;
     if npz.is_empty() {

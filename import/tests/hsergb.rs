@@ -249,3 +249,52 @@ fn a_truncated_frame_is_refused_at_import() {
     );
     assert!(!out.exists());
 }
+
+/// Real HS-ERGB files hold a few small negative coordinates wrapped through 16 bits
+/// (65 536 − 32·k; public converters subtract 65 536): those events lie off the sensor
+/// and are dropped with a warning; the rest import as the layout's own ×32 files do.
+#[test]
+fn wrapped_negative_coordinates_are_dropped_and_said() {
+    let dir = tempfile::tempdir().unwrap();
+    let (orig, _) = write_scene(dir.path(), "synth", &tiny_static_config());
+    let src = dir.path().join("hsergb");
+    export_hsergb(&orig, &src).unwrap();
+    let mut files: Vec<_> = std::fs::read_dir(src.join("events_aligned"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    files.sort();
+    let raw = scene::ReadOptions {
+        sensor: Some((1 << 16, 1 << 16)),
+        coord_scale: None,
+    };
+    let first = &files[0];
+    let ev = scene::formats::read_npz(first, &raw).unwrap();
+    let mut with = scene::EventStream::new(1 << 16, 1 << 16);
+    let t0 = ev.t[0];
+    with.push(t0, (-32i16) as u16, 64, 1); // x = −1 px, wrapped
+    with.push(t0, 96, (-64i16) as u16, -1); // y = −2 px
+    for i in 0..ev.len() {
+        with.push(ev.t[i], ev.x[i], ev.y[i], ev.p[i]);
+    }
+    scene::formats::write_npz(first, &with).unwrap();
+    let opts = ImportOptions {
+        test_every: Some(2),
+        calib: Some(src.join("calib.txt")),
+        ..Default::default()
+    };
+    let out = dir.path().join("back");
+    let s = import(Layout::Hsergb, &src, &opts, &out).unwrap();
+    assert!(
+        s.warnings
+            .iter()
+            .any(|w| w.contains("2 events with negative coordinates")),
+        "{:?}",
+        s.warnings
+    );
+    let (ea, eb) = (
+        orig.load_events().unwrap(),
+        Scene::open(&out).unwrap().load_events().unwrap(),
+    );
+    assert_eq!((&ea.x, &ea.y, &ea.p), (&eb.x, &eb.y, &eb.p));
+}
