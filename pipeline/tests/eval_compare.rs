@@ -473,3 +473,40 @@ fn eval_reports_lpips_beside_psnr_when_the_weights_are_there() {
     assert!(m["lpips_mean"].is_null() && m["frames"][0].get("lpips").is_none());
     assert!(m["lpips_note"].as_str().unwrap().contains("off"));
 }
+
+/// A run over a scene whose test frame is a train frame (same time and camera): `eval`
+/// still scores it and records and prints why those scores are not held-out scores.
+#[test]
+fn eval_says_when_test_frames_are_train_frames() {
+    let d = tempfile::tempdir().unwrap();
+    let root = d.path().join("cache-root");
+    let scene_dir = tiny_scene(d.path());
+    let path = scene_dir.join("transforms_test.json");
+    let train: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(scene_dir.join("transforms_train.json")).unwrap())
+            .unwrap();
+    let mut test: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(&path).unwrap()).unwrap();
+    let keep = test["frames"][0]["file_path"].clone();
+    test["frames"][0] = train["frames"][1].clone();
+    test["frames"][0]["file_path"] = keep;
+    fs::write(&path, test.to_string()).unwrap();
+    let scene = Scene::open(&scene_dir).unwrap();
+    let g = d.path().join("g");
+    renders(&g, &scene, 0.0);
+    fabricate_run(&root, "dup", &scene_dir, &g, None);
+    let run = root.join("runs/dup");
+    let o = degs(&["eval", run.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let err = String::from_utf8_lossy(&o.stderr).to_string();
+    assert!(err.contains("test frames are train frames"), "{err}");
+    let m: serde_json::Value =
+        serde_json::from_slice(&fs::read(run.join("metrics.json")).unwrap()).unwrap();
+    let findings = m["scene_findings"].as_array().unwrap();
+    assert!(
+        findings
+            .iter()
+            .any(|f| f.as_str().unwrap().starts_with("error: 1 of 2 test frames")),
+        "{findings:?}"
+    );
+}

@@ -95,7 +95,8 @@ pub fn check_frames(train: &[Frame], test: &[Frame], events_t: Option<&[f64]>) -
             (a.min(t), b.max(t))
         });
         match (t.first(), t.last()) {
-            (Some(&e0), Some(&e1)) if f0.is_finite() => {
+            // One time only (a single frame): no span to compare with.
+            (Some(&e0), Some(&e1)) if f0.is_finite() && f1 > f0 => {
                 let inside = t.partition_point(|&x| x <= f1) - t.partition_point(|&x| x < f0);
                 if inside == 0 {
                     push(
@@ -108,7 +109,7 @@ pub fn check_frames(train: &[Frame], test: &[Frame], events_t: Option<&[f64]>) -
                     );
                 } else {
                     let covered = (e1.min(f1) - e0.max(f0)) / (f1 - f0).max(f64::MIN_POSITIVE);
-                    if f1 > f0 && covered < 0.9 {
+                    if covered < 0.9 {
                         push(
                             Level::Warning,
                             format!(
@@ -203,7 +204,7 @@ mod tests {
 
     #[test]
     fn one_train_frame_and_no_test_frames_are_warnings() {
-        let f = check_frames(&[frame(0.0, 0.0)], &[], None);
+        let f = check_frames(&[frame(0.0, 0.0)], &[], Some(&[0.1, 0.2]));
         assert_eq!(levels(&f), [Level::Warning, Level::Warning]);
         assert!(f[0].message.starts_with("1 train frame:"), "{}", f[0]);
         assert!(f[1].message.starts_with("no test frames"), "{}", f[1]);
