@@ -101,6 +101,16 @@ fn bare_event_file_windows_and_calibration() {
     let whole = Source::from_events(&ev, Some((32, 24)), None, &WindowSpec::default()).unwrap();
     assert_eq!(whole.windows.len(), 1);
     assert_eq!(whole.windows[0].range, 0..100);
+    // A file that stores its sensor size needs no --sensor; one that does not says so.
+    let evs = tmp.path().join("ev.evs");
+    scene::formats::write_events(&evs, &whole.events).unwrap();
+    let stored = Source::from_events(&evs, None, None, &WindowSpec::default()).unwrap();
+    assert_eq!((stored.events.width, stored.events.height), (32, 24));
+    let e = Source::from_events(&ev, None, None, &WindowSpec::default())
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default();
+    assert!(e.contains("ev.txt") && e.contains("--sensor WxH"), "{e}");
     // Calibration: undistortion inverts the distortion model.
     let calib = tmp.path().join("calib.txt");
     std::fs::write(&calib, "30 30 15.5 11.5 -0.3 0.1 0.001 -0.002 0\n").unwrap();
