@@ -10,30 +10,18 @@
 
 mod fixture;
 
-use deform::stage::{TrainArgs, train};
+use deform::stage::TrainArgs;
 use fixture::{BUMP, Variant, build};
-use std::sync::atomic::AtomicBool;
 
 #[test]
 fn the_posenet_moves_the_camera_toward_the_true_path() {
     let fx = build(Variant::BumpedPath);
-    let cfg = fx.dir.path().join("deform.toml");
-    std::fs::write(
-        &cfg,
-        "iterations = 4000\nlog_every = 100\nrebind_every = 1000\nposenet_warmup = 100000\n\
-         densify = false\nposenet_lr = 0.01\ncontrast = \"given\"\n[schedule]\ngamma2_max = 0.0\n",
-    )
-    .unwrap();
-    let args = TrainArgs {
-        scene: fx.scene.clone(),
-        model: fx.model.clone(),
-        flows: fx.flows.clone(),
-        assoc: fx.assoc.clone(),
-        out: fx.dir.path().join("out"),
-        config: Some(cfg),
-        ..TrainArgs::default()
-    };
-    let o = train(&args, &AtomicBool::new(false), |_| {}).unwrap();
+    let settings = "iterations = 4000\nlog_every = 100\nrebind_every = 1000\n\
+                    posenet_warmup = 100000\ndensify = false\nposenet_lr = 0.01\n\
+                    contrast = \"given\"\n[schedule]\ngamma2_max = 0.0\n";
+    let (o, _) = fx
+        .train_with("out", settings, TrainArgs::default())
+        .unwrap();
     let r: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(o.out.join("report.json")).unwrap()).unwrap();
     let cam = &r["camera"];

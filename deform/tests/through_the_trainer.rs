@@ -5,34 +5,21 @@
 
 mod fixture;
 
-use deform::stage::{TrainArgs, TrainOutcome, train};
+use deform::stage::{TrainArgs, TrainOutcome};
 use deform::trainer::JointStep;
 use fixture::{Fixture, Variant, build};
 use gaussians::model::Model;
 use serde_json::Value;
-use std::sync::atomic::AtomicBool;
 
 /// `deform train` on the fixture with `settings` (TOML) and the switches of `args`,
-/// into `<dir>/<name>`.
+/// into `<dir>/<name>`; its report too.
 fn train_with(
     fx: &Fixture,
     name: &str,
     settings: &str,
     args: TrainArgs,
 ) -> (TrainOutcome, Vec<JointStep>, Value) {
-    let cfg = fx.dir.path().join(format!("{name}.toml"));
-    std::fs::write(&cfg, settings).unwrap();
-    let args = TrainArgs {
-        scene: fx.scene.clone(),
-        model: fx.model.clone(),
-        flows: fx.flows.clone(),
-        assoc: fx.assoc.clone(),
-        out: fx.dir.path().join(name),
-        config: Some(cfg),
-        ..args
-    };
-    let mut steps = Vec::new();
-    let o = train(&args, &AtomicBool::new(false), |s| steps.push(*s)).unwrap();
+    let (o, steps) = fx.train_with(name, settings, args).unwrap();
     let report: Value =
         serde_json::from_str(&std::fs::read_to_string(o.out.join("report.json")).unwrap()).unwrap();
     (o, steps, report)

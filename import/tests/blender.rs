@@ -19,14 +19,7 @@ fn synthetic_scene_round_trips_through_the_blender_layout() {
     assert!(text.contains("camera_angle_x") && !text.contains("timestamp"));
 
     let out = dir.path().join("back");
-    let opts = ImportOptions {
-        alignment: EventsAlignment {
-            events: None,
-            time_offset: Some(0.0),
-            duration: Some(0.5),
-        },
-        ..Default::default()
-    };
+    let opts = over_half_a_second();
     let s = import(Layout::Blender, &src, &opts, &out).unwrap();
     // The layout's own split is kept.
     assert_eq!((s.frames, s.train_frames, s.test_frames), (9, 5, 4));
@@ -163,14 +156,7 @@ fn test_views_at_train_times_are_accepted_and_equal_times_in_a_split_named() {
             f["time"] = (*t).into();
         }
     });
-    let opts = ImportOptions {
-        alignment: EventsAlignment {
-            events: None,
-            time_offset: Some(0.0),
-            duration: Some(0.5),
-        },
-        ..Default::default()
-    };
+    let opts = over_half_a_second();
     let s = import(Layout::Blender, &src, &opts, &dir.path().join("ok")).unwrap();
     assert_eq!((s.train_frames, s.test_frames), (5, 4));
     // Two train frames at one time.
@@ -185,4 +171,16 @@ fn test_views_at_train_times_are_accepted_and_equal_times_in_a_split_named() {
         e.contains("transforms_train.json") && e.contains("frame 2") && e.contains("frame 1"),
         "{e}"
     );
+}
+
+/// The exported frames' normalised times placed on 0–0.5 s, the events' clock.
+fn over_half_a_second() -> ImportOptions {
+    ImportOptions {
+        alignment: EventsAlignment {
+            events: None,
+            time_offset: Some(0.0),
+            duration: Some(0.5),
+        },
+        ..Default::default()
+    }
 }

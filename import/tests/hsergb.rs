@@ -173,10 +173,7 @@ fn timestamps_in_microseconds_are_detected() {
 /// (W/32)×(H/32) corner.
 #[test]
 fn npz_in_plain_pixels_are_detected_from_their_range() {
-    let dir = tempfile::tempdir().unwrap();
-    let (orig, _) = write_scene(dir.path(), "synth", &tiny_static_config());
-    let src = dir.path().join("hsergb");
-    export_hsergb(&orig, &src).unwrap();
+    let (dir, orig, src) = exported();
     for e in std::fs::read_dir(src.join("events_aligned")).unwrap() {
         let p = e.unwrap().path();
         let opts = scene::ReadOptions {
@@ -186,11 +183,7 @@ fn npz_in_plain_pixels_are_detected_from_their_range() {
         let ev = scene::formats::read_npz(&p, &opts).unwrap();
         scene::formats::write_npz(&p, &ev).unwrap(); // now in plain pixels
     }
-    let opts = ImportOptions {
-        test_every: Some(2),
-        calib: Some(src.join("calib.txt")),
-        ..Default::default()
-    };
+    let opts = with_calib(&src);
     let out = dir.path().join("back");
     let s = import(Layout::Hsergb, &src, &opts, &out).unwrap();
     assert!(
@@ -218,10 +211,7 @@ fn npz_in_plain_pixels_are_detected_from_their_range() {
 /// A PNG cut short after an intact header is refused at import, naming the file.
 #[test]
 fn a_truncated_frame_is_refused_at_import() {
-    let dir = tempfile::tempdir().unwrap();
-    let (orig, _) = write_scene(dir.path(), "synth", &tiny_static_config());
-    let src = dir.path().join("hsergb");
-    export_hsergb(&orig, &src).unwrap();
+    let (dir, _, src) = exported();
     let mut pngs: Vec<_> = std::fs::read_dir(src.join("images_corrected"))
         .unwrap()
         .map(|e| e.unwrap().path())
@@ -255,10 +245,7 @@ fn a_truncated_frame_is_refused_at_import() {
 /// and are dropped with a warning; the rest import as the layout's own ×32 files do.
 #[test]
 fn wrapped_negative_coordinates_are_dropped_and_said() {
-    let dir = tempfile::tempdir().unwrap();
-    let (orig, _) = write_scene(dir.path(), "synth", &tiny_static_config());
-    let src = dir.path().join("hsergb");
-    export_hsergb(&orig, &src).unwrap();
+    let (dir, orig, src) = exported();
     let mut files: Vec<_> = std::fs::read_dir(src.join("events_aligned"))
         .unwrap()
         .map(|e| e.unwrap().path())
@@ -278,11 +265,7 @@ fn wrapped_negative_coordinates_are_dropped_and_said() {
         with.push(ev.t[i], ev.x[i], ev.y[i], ev.p[i]);
     }
     scene::formats::write_npz(first, &with).unwrap();
-    let opts = ImportOptions {
-        test_every: Some(2),
-        calib: Some(src.join("calib.txt")),
-        ..Default::default()
-    };
+    let opts = with_calib(&src);
     let out = dir.path().join("back");
     let s = import(Layout::Hsergb, &src, &opts, &out).unwrap();
     assert!(
@@ -297,4 +280,23 @@ fn wrapped_negative_coordinates_are_dropped_and_said() {
         Scene::open(&out).unwrap().load_events().unwrap(),
     );
     assert_eq!((&ea.x, &ea.y, &ea.p), (&eb.x, &eb.y, &eb.p));
+}
+
+/// The tiny static scene exported to the HS-ERGB layout: the folder, the scene, the
+/// layout's folder.
+fn exported() -> (tempfile::TempDir, Scene, std::path::PathBuf) {
+    let dir = tempfile::tempdir().unwrap();
+    let (orig, _) = write_scene(dir.path(), "synth", &tiny_static_config());
+    let src = dir.path().join("hsergb");
+    export_hsergb(&orig, &src).unwrap();
+    (dir, orig, src)
+}
+
+/// Import options with the layout's calibration (and every other frame a test frame).
+fn with_calib(src: &std::path::Path) -> ImportOptions {
+    ImportOptions {
+        test_every: Some(2),
+        calib: Some(src.join("calib.txt")),
+        ..Default::default()
+    }
 }

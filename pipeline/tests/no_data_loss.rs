@@ -3,21 +3,12 @@
 //! earlier output of the same command; an earlier output is replaced only with
 //! `--force`. Every case checks the bytes of what must survive, file by file.
 
+mod common;
+use common::{degs, stderr};
 use std::collections::BTreeMap;
 use std::fs;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn degs(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_degs"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).to_string()
-}
+use std::process::Output;
 
 /// Every file under `dir` with its bytes.
 fn snapshot(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {

@@ -2,32 +2,18 @@
 //! test frames that are train frames and events off the frames' clock are errors naming
 //! the experiment and the scene; a single train frame and no test frames are warnings.
 
+mod common;
+use common::{degs, stderr};
 use serde_json::Value;
 use std::fs;
 use std::path::Path;
-use std::process::{Command, Output};
-
-fn degs(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_degs"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).to_string()
-}
+use std::process::Output;
 
 /// A tiny synthetic scene at `dir`, its train manifest edited by `edit`, and an
 /// experiment on it.
 fn scene_with(dir: &Path, edit: impl Fn(&mut Value, &mut Value)) -> std::path::PathBuf {
-    let set: toml::Table = "width = 16\nheight = 12\nduration = 0.25\nrender_rate_hz = 200\n\
-                            test_frames = 2\nsupersample = 1\nframe_supersample = 1\n"
-        .parse()
-        .unwrap();
-    let cfg = pipeline::experiment::synth_config("rigid", &set).unwrap();
     let scene = dir.join("scene");
-    synth::write_synthetic_scene(&cfg, &scene).unwrap();
+    synth::write_synthetic_scene(&common::tiny_scene_config(), &scene).unwrap();
     let read = |f: &str| -> Value {
         serde_json::from_str(&fs::read_to_string(scene.join(f)).unwrap()).unwrap()
     };

@@ -254,6 +254,14 @@ impl Fixture {
     }
 }
 
+/// `degs ARGS` as a user runs it (no fixture cache or stages).
+pub fn degs(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_degs"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
 pub fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).to_string()
 }
