@@ -117,7 +117,11 @@ impl AtomicDir {
             old.push(".old");
             let old = temp_path(Path::new(&old));
             fs::rename(&self.target, &old).at(&self.target)?;
-            fs::rename(&self.tmp, &self.target).at(&self.target)?;
+            if let Err(e) = fs::rename(&self.tmp, &self.target) {
+                // Put the earlier output back: nothing is lost when the swap fails.
+                let _ = fs::rename(&old, &self.target);
+                return Err(Error::io(&self.target, e));
+            }
             fs::remove_dir_all(&old).at(&old)?;
         } else {
             fs::rename(&self.tmp, &self.target).at(&self.target)?;
