@@ -154,6 +154,12 @@ pub fn execute(command: Command) -> Result<()> {
                 eval::compare_table(&[(m.experiment.clone(), m.clone())])
             );
             print!("\n{}", eval::baseline_block(&m));
+            if let Some(p) = m.novel_moving_psnr_mean {
+                println!(
+                    "  novel views, pixels of moving objects: PSNR {p:.2} dB \
+                     (where a model wrong in 3D smears)"
+                );
+            }
             let f = |v: Option<f64>| v.map_or("-".to_string(), |x| format!("{x:.4}"));
             match (&m.lpips_net, &m.lpips_note) {
                 (Some(net), _) => println!(

@@ -29,6 +29,10 @@ pub struct Metrics {
     pub novel_psnr_mean: Option<f64>,
     #[serde(default)]
     pub novel_ssim_mean: Option<f64>,
+    /// The novel views' PSNR over the pixels of moving objects (the mean over the
+    /// frames that show one; [`crate::eval_moving`]); None where the scene cannot say.
+    #[serde(default)]
+    pub novel_moving_psnr_mean: Option<f64>,
     /// Mean LPIPS of the test frames and of the novel views (network `lpips_net`);
     /// None with the reason in `lpips_note` when the weights cannot be had.
     #[serde(default)]
@@ -75,6 +79,12 @@ pub struct FrameMetrics {
     pub ssim: f64,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub lpips: Option<f64>,
+    /// Novel views: the pixels moving objects cover in the ground truth, and the PSNR
+    /// over them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub moving_pixels: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub moving_psnr: Option<f64>,
 }
 
 fn to_u8_levels(img: &Image) -> Vec<f32> {
@@ -283,6 +293,14 @@ pub fn eval_run_with(run_dir: &Path, lpips: crate::eval_lpips::LpipsUse) -> Resu
         Some(stage) => eval_novel(&entry_of, stage, &images(&scene.novel))?,
         None => Vec::new(),
     };
+    let pairs: Vec<(&Path, &Path)> = novel_frames
+        .iter()
+        .map(|f| (f.test_image.as_path(), f.render.as_path()))
+        .collect();
+    let moving = crate::eval_moving::moving_scores(&scene_dir, &pairs, PSNR_CAP)?;
+    for (f, m) in novel_frames.iter_mut().zip(&moving) {
+        (f.moving_pixels, f.moving_psnr) = (Some(m.pixels), m.psnr);
+    }
     let (lpips_net, lpips_note) = add_lpips(&mut frames, &mut novel_frames, lpips);
     let mean = |frames: &[FrameMetrics], f: &dyn Fn(&FrameMetrics) -> f64| {
         (!frames.is_empty()).then(|| frames.iter().map(f).sum::<f64>() / frames.len() as f64)
@@ -307,6 +325,10 @@ pub fn eval_run_with(run_dir: &Path, lpips: crate::eval_lpips::LpipsUse) -> Resu
         lpips_note,
         frames,
         novel_psnr_mean: mean(&novel_frames, &|f| f.psnr),
+        novel_moving_psnr_mean: {
+            let v: Vec<f64> = novel_frames.iter().filter_map(|f| f.moving_psnr).collect();
+            (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+        },
         novel_ssim_mean: mean(&novel_frames, &|f| f.ssim),
         novel_frames,
         baselines,
@@ -383,6 +405,8 @@ fn score_pairs(pairs: &[(PathBuf, PathBuf)]) -> Result<Vec<FrameMetrics>> {
                 psnr,
                 ssim,
                 lpips: None,
+                moving_pixels: None,
+                moving_psnr: None,
             })
         })
         .collect()

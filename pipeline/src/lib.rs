@@ -17,6 +17,7 @@ pub mod context;
 pub mod demo;
 pub mod eval;
 pub mod eval_lpips;
+pub mod eval_moving;
 pub mod experiment;
 pub mod graph;
 pub mod overrides;

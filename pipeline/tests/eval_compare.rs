@@ -580,3 +580,74 @@ fn eval_says_when_test_frames_are_train_frames() {
         "{findings:?}"
     );
 }
+
+/// The novel views' PSNR on moving-object pixels: a render off by `δ` levels in one value
+/// of one moving pixel scores `10·log10(255²·3M/δ²)` over the M moving pixels; one off at
+/// a still pixel leaves it at the cap.
+#[test]
+fn eval_scores_the_novel_views_on_the_pixels_of_moving_objects() {
+    let d = tempfile::tempdir().unwrap();
+    let root = d.path().join("cache-root");
+    let scene_dir = tiny_scene(d.path());
+    let scene = Scene::open(&scene_dir).unwrap();
+    let cfg: synth::SynthConfig =
+        serde_json::from_str(&fs::read_to_string(scene_dir.join("synth.json")).unwrap()).unwrap();
+    let moving: Vec<u16> = (0..cfg.objects.len())
+        .filter(|&k| cfg.objects[k].moves())
+        .map(|k| k as u16 + 1)
+        .collect();
+    assert!(!moving.is_empty());
+    let g = d.path().join("g");
+    renders(&g, &scene, 0.0);
+    copies(&g.join("renders/novel"), &scene, &scene.novel.frames, 0.0);
+    let delta = 40.0f32;
+    let mut want = Vec::new();
+    for k in 0..scene.novel.frames.len() {
+        let (_, _, ids) =
+            synth::gt::read_object_png(scene_dir.join(format!("gt/novel/object_{k:04}.png")))
+                .unwrap();
+        let m = ids.iter().filter(|o| moving.contains(o)).count();
+        // Frame 0: one value of a moving pixel; frame 1: one of a still pixel.
+        let pick = ids
+            .iter()
+            .position(|o| moving.contains(o) == (k == 0))
+            .unwrap();
+        let p = g.join(format!("renders/novel/{k:04}.png"));
+        let mut img = read_image(&p).unwrap();
+        let v = (img.data[pick * 3] * 255.0).round();
+        img.data[pick * 3] = if v + delta <= 255.0 {
+            v + delta
+        } else {
+            v - delta
+        } / 255.0;
+        write_png(&p, &img).unwrap();
+        want.push((
+            m,
+            if k == 0 {
+                10.0 * (255.0f64.powi(2) * 3.0 * m as f64 / (delta as f64).powi(2)).log10()
+            } else {
+                100.0
+            },
+        ));
+    }
+    fabricate_run(&root, "mv", &scene_dir, &g, None);
+    let run = root.join("runs/mv");
+    let o = degs(&["eval", run.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let m: serde_json::Value =
+        serde_json::from_slice(&fs::read(run.join("metrics.json")).unwrap()).unwrap();
+    let novel = m["novel_frames"].as_array().unwrap();
+    for (k, (pixels, psnr)) in want.iter().enumerate() {
+        assert_eq!(
+            novel[k]["moving_pixels"].as_u64(),
+            Some(*pixels as u64),
+            "{k}"
+        );
+        let got = novel[k]["moving_psnr"].as_f64().unwrap();
+        assert!((got - psnr).abs() < 1e-9, "frame {k}: {got} vs {psnr}");
+    }
+    let mean = m["novel_moving_psnr_mean"].as_f64().unwrap();
+    assert!((mean - (want[0].1 + want[1].1) / 2.0).abs() < 1e-9);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("pixels of moving objects"), "{out}");
+}

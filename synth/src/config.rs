@@ -200,6 +200,20 @@ pub struct ObjectSpec {
     pub deform: Deform,
 }
 
+impl ObjectSpec {
+    /// Whether the object moves or deforms at all over time (a translation, an
+    /// oscillation, a spin, a pulsing scale or a wave): the pixels it covers are the
+    /// "moving object" pixels the novel-view scores single out.
+    pub fn moves(&self) -> bool {
+        let (m, d) = (&self.motion, &self.deform);
+        m.velocity != DVec3::ZERO
+            || (m.oscillation != DVec3::ZERO && m.oscillation_hz != 0.0)
+            || (m.spin_deg_per_s != 0.0 && m.spin_axis != DVec3::ZERO)
+            || (d.scale_amplitude != DVec3::ZERO && d.hz != 0.0)
+            || (d.wave_amplitude != 0.0 && d.wave_hz != 0.0)
+    }
+}
+
 impl scene::cli::Settings for SynthConfig {
     /// `Err` with a sentence when a setting is out of range.
     fn validate(&self) -> Result<(), String> {
