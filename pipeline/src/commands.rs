@@ -160,6 +160,12 @@ pub fn execute(command: Command) -> Result<()> {
                      (where a model wrong in 3D smears)"
                 );
             }
+            if let Some(sheet) = &m.novel_sheet {
+                println!(
+                    "  novel views beside their renders and ×4 differences: {}",
+                    sheet.display()
+                );
+            }
             let f = |v: Option<f64>| v.map_or("-".to_string(), |x| format!("{x:.4}"));
             match (&m.lpips_net, &m.lpips_note) {
                 (Some(net), _) => println!(

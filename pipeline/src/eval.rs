@@ -29,6 +29,9 @@ pub struct Metrics {
     pub novel_psnr_mean: Option<f64>,
     #[serde(default)]
     pub novel_ssim_mean: Option<f64>,
+    /// The novel views beside their renders and the difference ([`crate::eval_sheet`]).
+    #[serde(default)]
+    pub novel_sheet: Option<PathBuf>,
     /// The novel views' PSNR over the pixels of moving objects (the mean over the
     /// frames that show one; [`crate::eval_moving`]); None where the scene cannot say.
     #[serde(default)]
@@ -298,6 +301,7 @@ pub fn eval_run_with(run_dir: &Path, lpips: crate::eval_lpips::LpipsUse) -> Resu
         .map(|f| (f.test_image.as_path(), f.render.as_path()))
         .collect();
     let moving = crate::eval_moving::moving_scores(&scene_dir, &pairs, PSNR_CAP)?;
+    let novel_sheet = crate::eval_sheet::write_sheet(&pairs, &run_dir.join("novel_sheet.png"))?;
     for (f, m) in novel_frames.iter_mut().zip(&moving) {
         (f.moving_pixels, f.moving_psnr) = (Some(m.pixels), m.psnr);
     }
@@ -325,6 +329,7 @@ pub fn eval_run_with(run_dir: &Path, lpips: crate::eval_lpips::LpipsUse) -> Resu
         lpips_note,
         frames,
         novel_psnr_mean: mean(&novel_frames, &|f| f.psnr),
+        novel_sheet,
         novel_moving_psnr_mean: {
             let v: Vec<f64> = novel_frames.iter().filter_map(|f| f.moving_psnr).collect();
             (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)

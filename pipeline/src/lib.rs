@@ -18,6 +18,7 @@ pub mod demo;
 pub mod eval;
 pub mod eval_lpips;
 pub mod eval_moving;
+pub mod eval_sheet;
 pub mod experiment;
 pub mod graph;
 pub mod overrides;

@@ -650,4 +650,27 @@ fn eval_scores_the_novel_views_on_the_pixels_of_moving_objects() {
     assert!((mean - (want[0].1 + want[1].1) / 2.0).abs() < 1e-9);
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(out.contains("pixels of moving objects"), "{out}");
+    // The sheet: per row the ground truth, the render and |difference| ×4, each panel
+    // enlarged to at least 128 px; frame 0's changed value shows in its difference.
+    let sheet = read_image(run.join("novel_sheet.png")).unwrap();
+    let gt = read_image(scene.image_path(&scene.novel.frames[0])).unwrap();
+    let z = 128u32.div_ceil(gt.width);
+    assert_eq!(
+        (sheet.width, sheet.height),
+        (3 * z * gt.width + 4, 2 * z * gt.height + 2)
+    );
+    let (_, _, ids) =
+        synth::gt::read_object_png(scene_dir.join("gt/novel/object_0000.png")).unwrap();
+    let pick = ids.iter().position(|o| moving.contains(o)).unwrap() as u32;
+    let (x, y) = (pick % gt.width, pick / gt.width);
+    let at = |panel: u32| {
+        let sx = panel * (z * gt.width + 2) + z * x;
+        sheet.data[((z * y * sheet.width + sx) * 3) as usize]
+    };
+    assert_eq!(at(0), gt.data[(pick * 3) as usize]);
+    assert!(
+        (at(2) - (4.0 * delta / 255.0).min(1.0)).abs() < 1e-6,
+        "{}",
+        at(2)
+    );
 }
