@@ -160,6 +160,9 @@ pub fn execute(command: Command) -> Result<()> {
                      (where a model wrong in 3D smears)"
                 );
             }
+            if let Some(p) = m.novel_covisible_psnr_mean {
+                println!("  novel views, pixels some train view saw: PSNR {p:.2} dB");
+            }
             if let Some(sheet) = &m.novel_sheet {
                 println!(
                     "  novel views beside their renders and ×4 differences: {}",

@@ -32,10 +32,13 @@ pub struct Metrics {
     /// The novel views beside their renders and the difference ([`crate::eval_sheet`]).
     #[serde(default)]
     pub novel_sheet: Option<PathBuf>,
-    /// The novel views' PSNR over the pixels of moving objects (the mean over the
-    /// frames that show one; [`crate::eval_moving`]); None where the scene cannot say.
+    /// The novel views' PSNR over the pixels of moving objects and over the pixels some
+    /// train view saw (means over the frames that have such pixels;
+    /// [`crate::eval_masked`]); None where the scene cannot say.
     #[serde(default)]
     pub novel_moving_psnr_mean: Option<f64>,
+    #[serde(default)]
+    pub novel_covisible_psnr_mean: Option<f64>,
     /// Mean LPIPS of the test frames and of the novel views (network `lpips_net`);
     /// None with the reason in `lpips_note` when the weights cannot be had.
     #[serde(default)]
@@ -88,6 +91,11 @@ pub struct FrameMetrics {
     pub moving_pixels: Option<usize>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub moving_psnr: Option<f64>,
+    /// Novel views: the pixels some train view saw, and the PSNR over them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub covisible_pixels: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub covisible_psnr: Option<f64>,
 }
 
 fn to_u8_levels(img: &Image) -> Vec<f32> {
@@ -296,14 +304,15 @@ pub fn eval_run_with(run_dir: &Path, lpips: crate::eval_lpips::LpipsUse) -> Resu
         Some(stage) => eval_novel(&entry_of, stage, &images(&scene.novel))?,
         None => Vec::new(),
     };
-    let pairs: Vec<(&Path, &Path)> = novel_frames
-        .iter()
-        .map(|f| (f.test_image.as_path(), f.render.as_path()))
-        .collect();
-    let moving = crate::eval_moving::moving_scores(&scene_dir, &pairs, PSNR_CAP)?;
-    let novel_sheet = crate::eval_sheet::write_sheet(&pairs, &run_dir.join("novel_sheet.png"))?;
-    for (f, m) in novel_frames.iter_mut().zip(&moving) {
-        (f.moving_pixels, f.moving_psnr) = (Some(m.pixels), m.psnr);
+    let novel_pairs = pairs(&novel_frames);
+    let masks = crate::eval_masked::novel_masks(&scene_dir, &novel_pairs, PSNR_CAP)?;
+    let novel_sheet =
+        crate::eval_sheet::write_sheet(&novel_pairs, &run_dir.join("novel_sheet.png"))?;
+    for (f, m) in novel_frames.iter_mut().zip(&masks) {
+        f.moving_pixels = m.moving.map(|s| s.pixels);
+        f.moving_psnr = m.moving.and_then(|s| s.psnr);
+        f.covisible_pixels = m.covisible.map(|s| s.pixels);
+        f.covisible_psnr = m.covisible.and_then(|s| s.psnr);
     }
     let (lpips_net, lpips_note) = add_lpips(&mut frames, &mut novel_frames, lpips);
     let mean = |frames: &[FrameMetrics], f: &dyn Fn(&FrameMetrics) -> f64| {
@@ -330,10 +339,8 @@ pub fn eval_run_with(run_dir: &Path, lpips: crate::eval_lpips::LpipsUse) -> Resu
         frames,
         novel_psnr_mean: mean(&novel_frames, &|f| f.psnr),
         novel_sheet,
-        novel_moving_psnr_mean: {
-            let v: Vec<f64> = novel_frames.iter().filter_map(|f| f.moving_psnr).collect();
-            (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
-        },
+        novel_moving_psnr_mean: mean_of(novel_frames.iter().map(|f| f.moving_psnr)),
+        novel_covisible_psnr_mean: mean_of(novel_frames.iter().map(|f| f.covisible_psnr)),
         novel_ssim_mean: mean(&novel_frames, &|f| f.ssim),
         novel_frames,
         baselines,
@@ -349,6 +356,12 @@ pub fn eval_run_with(run_dir: &Path, lpips: crate::eval_lpips::LpipsUse) -> Resu
     };
     scene::atomic::write_json_atomic(&run_dir.join("metrics.json"), &metrics)?;
     Ok(metrics)
+}
+
+/// The mean of the values present; None when none is.
+fn mean_of(v: impl Iterator<Item = Option<f64>>) -> Option<f64> {
+    let v: Vec<f64> = v.flatten().collect();
+    (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
 }
 
 fn pairs(s: &[FrameMetrics]) -> Vec<(&Path, &Path)> {
@@ -412,6 +425,8 @@ fn score_pairs(pairs: &[(PathBuf, PathBuf)]) -> Result<Vec<FrameMetrics>> {
                 lpips: None,
                 moving_pixels: None,
                 moving_psnr: None,
+                covisible_pixels: None,
+                covisible_psnr: None,
             })
         })
         .collect()

@@ -17,7 +17,7 @@ pub mod context;
 pub mod demo;
 pub mod eval;
 pub mod eval_lpips;
-pub mod eval_moving;
+pub mod eval_masked;
 pub mod eval_sheet;
 pub mod experiment;
 pub mod graph;

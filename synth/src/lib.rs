@@ -15,6 +15,7 @@
 //! on nothing else of degs.
 
 pub mod config;
+pub mod covis;
 pub mod frames;
 mod geometry;
 pub mod gt;

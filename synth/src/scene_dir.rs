@@ -21,6 +21,8 @@
 //! gt/train/depth_XXXX.exr depth (EXR `Z`, −z_cam, 0 on background) at the train times
 //! gt/train/flow_XXXX.exr  analytic optical flow (EXR `U`,`V`, px/s)
 //! gt/train/object_XXXX.png object ids (16-bit PNG, 0 = background, k+1 = objects[k])
+//! gt/novel/covisible_XXXX.png 1 where some train view saw what the novel pixel shows,
+//!                          else 0 (16-bit PNG, [`crate::covis`])
 //! gt/test/…               the same at the test times
 //! gt/novel/…              the same from the novel cameras
 //! gt/event_flow.bin       per-event flow (px/s) and object id, one row per event of
@@ -191,6 +193,11 @@ fn write_split(world: &SynthWorld, root: &Path, split: &str, times: &[f64]) -> R
             h,
             &r.object_id,
         )?;
+        if novel {
+            let seen = crate::covis::novel_covisible(world, t, &cfg.train_times());
+            let ids: Vec<u16> = seen.iter().map(|&s| u16::from(s)).collect();
+            write_object_png(gt_dir.join(format!("covisible_{k:04}.png")), w, h, &ids)?;
+        }
         frames.push(Frame {
             file_path,
             timestamp: t,

@@ -304,6 +304,11 @@ impl SynthWorld {
         self.frame(t).cast(px)
     }
 
+    /// The ray through pixel `px` of the novel-view camera at time `t`.
+    pub fn cast_novel(&self, t: f64, px: DVec2) -> Option<Hit> {
+        self.frame_from(t, self.novel_camera_state(t)).cast(px)
+    }
+
     /// Analytic flow (px/s) at pixel `px` and time `t`.
     pub fn flow_at(&self, t: f64, px: DVec2) -> DVec2 {
         let f = self.frame(t);

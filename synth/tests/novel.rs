@@ -135,3 +135,32 @@ fn the_novel_angle_is_validated() {
         assert!(e.contains("novel_angle_deg"), "{e}");
     }
 }
+
+/// Co-visibility: from a novel camera (almost) on the recorded path, at a train view's
+/// time, nearly every pixel was seen (it aims at the path's target, not as the train
+/// camera sways, so a sliver at one edge falls outside every train view); from 45° off
+/// the path much less, and still more than the background.
+#[test]
+fn covisibility_is_full_at_a_train_camera_and_partial_off_the_path() {
+    let cfg = |angle: f64| synth::SynthConfig {
+        width: 32,
+        height: 24,
+        novel_angle_deg: angle,
+        ..synth::SynthConfig::preset("rigid").unwrap()
+    };
+    let fraction = |angle: f64, t: f64| {
+        let c = cfg(angle);
+        let world = synth::SynthWorld::new(&c).unwrap();
+        let seen = synth::covis::novel_covisible(&world, t, &c.train_times());
+        seen.iter().filter(|&&s| s).count() as f64 / seen.len() as f64
+    };
+    let t0 = cfg(1e-4).train_times()[2];
+    let near = fraction(1e-4, t0);
+    let far = fraction(45.0, t0);
+    eprintln!("co-visible: on the path {near:.3}, 45° off it {far:.3}");
+    assert!(near > 0.9, "on the path: {near}");
+    assert!(
+        far < near - 0.05 && far > 0.2,
+        "45° off the path: {far} (on it {near})"
+    );
+}

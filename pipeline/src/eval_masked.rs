@@ -1,10 +1,12 @@
-//! Novel-view PSNR on the pixels of moving objects (issue #30, "metrics that see it"): a
-//! model that is right along the recorded path but wrong in 3D smears its moving
-//! objects seen from a new viewpoint, which the whole-image PSNR hides behind the
-//! static background. Where the scene holds object ids for its novel views
-//! (`gt/novel/object_NNNN.png`, written by `degs synth`) and says which objects move
-//! (`synth.json`, [`synth::ObjectSpec::moves`]), each novel frame also gets the PSNR
-//! over the pixels a moving object covers in the ground truth.
+//! Novel-view PSNR on two masks (issue #30, "metrics that see it"). A model that is
+//! right along the recorded path but wrong in 3D smears its moving objects seen from a
+//! new viewpoint, which the whole-image PSNR hides behind the static background; and
+//! regions no train view saw weigh on every model alike. Where the scene holds them
+//! (`degs synth` writes both), each novel frame also gets the PSNR over
+//! - the pixels a moving object covers in the ground truth (`gt/novel/object_NNNN.png`,
+//!   the objects that move by `synth.json` and [`synth::ObjectSpec::moves`]);
+//! - the co-visible pixels, those some train view saw (`gt/novel/covisible_NNNN.png`,
+//!   [`synth::covis`]; the masked PSNR of Gao et al., NeurIPS 2022).
 
 use anyhow::{Result, bail};
 use scene::image_io::read_image;
@@ -61,35 +63,50 @@ pub fn masked_psnr(test: &Path, render: &Path, mask: &[bool], cap: f64) -> Resul
     }))
 }
 
-/// A novel frame's score on its moving-object pixels: how many pixels, and their PSNR
-/// (None when there are none).
+/// A novel frame's score on one mask: how many pixels it holds, and their PSNR (None
+/// when it holds none).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct MovingScore {
+pub struct MaskScore {
     pub pixels: usize,
     pub psnr: Option<f64>,
 }
 
-/// The moving-object score of each novel `(ground truth, render)` pair, in order (novel
-/// view k has `gt/novel/object_kkkk.png`); empty where the scene lacks what it takes.
-pub fn moving_scores(
+/// Each novel frame's scores on its moving-object and co-visible pixels.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NovelMasks {
+    pub moving: Option<MaskScore>,
+    pub covisible: Option<MaskScore>,
+}
+
+/// The masked scores of each novel `(ground truth, render)` pair, in order (novel view k
+/// has `gt/novel/*_kkkk.png`); a mask the scene lacks is None.
+pub fn novel_masks(
     scene_dir: &Path,
     pairs: &[(&Path, &Path)],
     cap: f64,
-) -> Result<Vec<MovingScore>> {
-    let Some(ids) = moving_ids(scene_dir) else {
-        return Ok(Vec::new());
-    };
+) -> Result<Vec<NovelMasks>> {
+    let ids = moving_ids(scene_dir);
     let mut out = Vec::with_capacity(pairs.len());
     for (k, (test, render)) in pairs.iter().enumerate() {
-        let path = scene_dir.join(format!("gt/novel/object_{k:04}.png"));
-        if !path.is_file() {
-            return Ok(Vec::new());
-        }
-        let (_, _, objects) = synth::gt::read_object_png(&path)?;
-        let mask: Vec<bool> = objects.iter().map(|o| ids.contains(o)).collect();
-        out.push(MovingScore {
-            pixels: mask.iter().filter(|m| **m).count(),
-            psnr: masked_psnr(test, render, &mask, cap)?,
+        let score = |name: &str, keep: &dyn Fn(u16) -> bool| -> Result<Option<MaskScore>> {
+            let path = scene_dir.join(format!("gt/novel/{name}_{k:04}.png"));
+            if !path.is_file() {
+                return Ok(None);
+            }
+            let (_, _, values) = synth::gt::read_object_png(&path)?;
+            let mask: Vec<bool> = values.iter().map(|&v| keep(v)).collect();
+            Ok(Some(MaskScore {
+                pixels: mask.iter().filter(|m| **m).count(),
+                psnr: masked_psnr(test, render, &mask, cap)?,
+            }))
+        };
+        let moving = match &ids {
+            Some(ids) => score("object", &|o| ids.contains(&o))?,
+            None => None,
+        };
+        out.push(NovelMasks {
+            moving,
+            covisible: score("covisible", &|v| v != 0)?,
         });
     }
     Ok(out)
