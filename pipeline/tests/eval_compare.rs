@@ -650,7 +650,7 @@ fn eval_scores_the_novel_views_on_the_pixels_of_moving_objects() {
     assert!((mean - (want[0].1 + want[1].1) / 2.0).abs() < 1e-9);
     // The co-visible pixels: the same closed form where the changed value lies among
     // them, the cap where it does not.
-    for k in 0..2 {
+    for (k, frame) in novel.iter().enumerate() {
         let (_, _, seen) =
             synth::gt::read_object_png(scene_dir.join(format!("gt/novel/covisible_{k:04}.png")))
                 .unwrap();
@@ -663,13 +663,13 @@ fn eval_scores_the_novel_views_on_the_pixels_of_moving_objects() {
             .unwrap();
         let mc = seen.iter().filter(|&&v| v != 0).count();
         assert!(mc > 0 && mc <= seen.len());
-        assert_eq!(novel[k]["covisible_pixels"].as_u64(), Some(mc as u64));
+        assert_eq!(frame["covisible_pixels"].as_u64(), Some(mc as u64));
         let want = if seen[pick] != 0 {
             10.0 * (255.0f64.powi(2) * 3.0 * mc as f64 / (delta as f64).powi(2)).log10()
         } else {
             100.0
         };
-        let got = novel[k]["covisible_psnr"].as_f64().unwrap();
+        let got = frame["covisible_psnr"].as_f64().unwrap();
         assert!((got - want).abs() < 1e-9, "frame {k}: {got} vs {want}");
     }
     let out = String::from_utf8_lossy(&o.stdout);
