@@ -1,0 +1,165 @@
+//! `degs eval` on what a scene can say beyond the whole image: test frames that are
+//! train frames (its scene checks), and the novel views' PSNR on the pixels of moving
+//! objects and on those some train view saw, with the contact sheet.
+
+mod eval_common;
+use eval_common::*;
+use scene::image_io::{read_image, write_png};
+use scene::manifest::Scene;
+use std::fs;
+
+/// A run over a scene whose test frame is a train frame (same time and camera): `eval`
+/// still scores it and records and prints why those scores are not held-out scores.
+#[test]
+fn eval_says_when_test_frames_are_train_frames() {
+    let d = tempfile::tempdir().unwrap();
+    let root = d.path().join("cache-root");
+    let scene_dir = tiny_scene(d.path());
+    let path = scene_dir.join("transforms_test.json");
+    let train: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(scene_dir.join("transforms_train.json")).unwrap())
+            .unwrap();
+    let mut test: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(&path).unwrap()).unwrap();
+    let keep = test["frames"][0]["file_path"].clone();
+    test["frames"][0] = train["frames"][1].clone();
+    test["frames"][0]["file_path"] = keep;
+    fs::write(&path, test.to_string()).unwrap();
+    let scene = Scene::open(&scene_dir).unwrap();
+    let g = d.path().join("g");
+    renders(&g, &scene, 0.0);
+    fabricate_run(&root, "dup", &scene_dir, &g, None);
+    let run = root.join("runs/dup");
+    let o = degs(&["eval", run.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let err = String::from_utf8_lossy(&o.stderr).to_string();
+    assert!(err.contains("test frames are train frames"), "{err}");
+    let m: serde_json::Value =
+        serde_json::from_slice(&fs::read(run.join("metrics.json")).unwrap()).unwrap();
+    let findings = m["scene_findings"].as_array().unwrap();
+    assert!(
+        findings
+            .iter()
+            .any(|f| f.as_str().unwrap().starts_with("error: 1 of 2 test frames")),
+        "{findings:?}"
+    );
+}
+
+/// The novel views' PSNR on moving-object pixels: a render off by `δ` levels in one value
+/// of one moving pixel scores `10·log10(255²·3M/δ²)` over the M moving pixels; one off at
+/// a still pixel leaves it at the cap.
+#[test]
+fn eval_scores_the_novel_views_on_the_pixels_of_moving_objects() {
+    let d = tempfile::tempdir().unwrap();
+    let root = d.path().join("cache-root");
+    let scene_dir = tiny_scene(d.path());
+    let scene = Scene::open(&scene_dir).unwrap();
+    let cfg: synth::SynthConfig =
+        serde_json::from_str(&fs::read_to_string(scene_dir.join("synth.json")).unwrap()).unwrap();
+    let moving: Vec<u16> = (0..cfg.objects.len())
+        .filter(|&k| cfg.objects[k].moves())
+        .map(|k| k as u16 + 1)
+        .collect();
+    assert!(!moving.is_empty());
+    let g = d.path().join("g");
+    renders(&g, &scene, 0.0);
+    copies(&g.join("renders/novel"), &scene, &scene.novel.frames, 0.0);
+    let delta = 40.0f32;
+    let mut want = Vec::new();
+    for k in 0..scene.novel.frames.len() {
+        let (_, _, ids) =
+            synth::gt::read_object_png(scene_dir.join(format!("gt/novel/object_{k:04}.png")))
+                .unwrap();
+        let m = ids.iter().filter(|o| moving.contains(o)).count();
+        // Frame 0: one value of a moving pixel; frame 1: one of a still pixel.
+        let pick = ids
+            .iter()
+            .position(|o| moving.contains(o) == (k == 0))
+            .unwrap();
+        let p = g.join(format!("renders/novel/{k:04}.png"));
+        let mut img = read_image(&p).unwrap();
+        let v = (img.data[pick * 3] * 255.0).round();
+        img.data[pick * 3] = if v + delta <= 255.0 {
+            v + delta
+        } else {
+            v - delta
+        } / 255.0;
+        write_png(&p, &img).unwrap();
+        want.push((
+            m,
+            if k == 0 {
+                10.0 * (255.0f64.powi(2) * 3.0 * m as f64 / (delta as f64).powi(2)).log10()
+            } else {
+                100.0
+            },
+        ));
+    }
+    fabricate_run(&root, "mv", &scene_dir, &g, None);
+    let run = root.join("runs/mv");
+    let o = degs(&["eval", run.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let m: serde_json::Value =
+        serde_json::from_slice(&fs::read(run.join("metrics.json")).unwrap()).unwrap();
+    let novel = m["novel_frames"].as_array().unwrap();
+    for (k, (pixels, psnr)) in want.iter().enumerate() {
+        assert_eq!(
+            novel[k]["moving_pixels"].as_u64(),
+            Some(*pixels as u64),
+            "{k}"
+        );
+        let got = novel[k]["moving_psnr"].as_f64().unwrap();
+        assert!((got - psnr).abs() < 1e-9, "frame {k}: {got} vs {psnr}");
+    }
+    let mean = m["novel_moving_psnr_mean"].as_f64().unwrap();
+    assert!((mean - (want[0].1 + want[1].1) / 2.0).abs() < 1e-9);
+    // The co-visible pixels: the same closed form where the changed value lies among
+    // them, the cap where it does not.
+    for (k, frame) in novel.iter().enumerate() {
+        let (_, _, seen) =
+            synth::gt::read_object_png(scene_dir.join(format!("gt/novel/covisible_{k:04}.png")))
+                .unwrap();
+        let (_, _, ids) =
+            synth::gt::read_object_png(scene_dir.join(format!("gt/novel/object_{k:04}.png")))
+                .unwrap();
+        let pick = ids
+            .iter()
+            .position(|o| moving.contains(o) == (k == 0))
+            .unwrap();
+        let mc = seen.iter().filter(|&&v| v != 0).count();
+        assert!(mc > 0 && mc <= seen.len());
+        assert_eq!(frame["covisible_pixels"].as_u64(), Some(mc as u64));
+        let want = if seen[pick] != 0 {
+            10.0 * (255.0f64.powi(2) * 3.0 * mc as f64 / (delta as f64).powi(2)).log10()
+        } else {
+            100.0
+        };
+        let got = frame["covisible_psnr"].as_f64().unwrap();
+        assert!((got - want).abs() < 1e-9, "frame {k}: {got} vs {want}");
+    }
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("pixels of moving objects"), "{out}");
+    assert!(out.contains("pixels some train view saw"), "{out}");
+    // The sheet: per row the ground truth, the render and |difference| ×4, each panel
+    // enlarged to at least 128 px; frame 0's changed value shows in its difference.
+    let sheet = read_image(run.join("novel_sheet.png")).unwrap();
+    let gt = read_image(scene.image_path(&scene.novel.frames[0])).unwrap();
+    let z = 128u32.div_ceil(gt.width);
+    assert_eq!(
+        (sheet.width, sheet.height),
+        (3 * z * gt.width + 4, 2 * z * gt.height + 2)
+    );
+    let (_, _, ids) =
+        synth::gt::read_object_png(scene_dir.join("gt/novel/object_0000.png")).unwrap();
+    let pick = ids.iter().position(|o| moving.contains(o)).unwrap() as u32;
+    let (x, y) = (pick % gt.width, pick / gt.width);
+    let at = |panel: u32| {
+        let sx = panel * (z * gt.width + 2) + z * x;
+        sheet.data[((z * y * sheet.width + sx) * 3) as usize]
+    };
+    assert_eq!(at(0), gt.data[(pick * 3) as usize]);
+    assert!(
+        (at(2) - (4.0 * delta / 255.0).min(1.0)).abs() < 1e-6,
+        "{}",
+        at(2)
+    );
+}
