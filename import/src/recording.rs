@@ -300,6 +300,34 @@ pub fn write_scene_with(
     let span = t1 - t0;
     let encoding = opts.frame_encoding.unwrap_or(rec.frame_encoding);
 
+    // The scene checks, before any frame is decoded or written: findings that make the
+    // scene meaningless refuse it; the others go in the summary.
+    let planned = |idx: &[usize]| -> Vec<Frame> {
+        idx.iter()
+            .map(|&i| Frame {
+                file_path: String::new(),
+                timestamp: rec.frames[i].timestamp,
+                time: 0.0,
+                cam_to_world: rec.frames[i].pose,
+            })
+            .collect()
+    };
+    let findings = scene::check::check_frames(
+        &planned(&split.train),
+        &planned(&split.test),
+        Some(&rec.events.t),
+    );
+    if let Some(e) = scene::check::first_error(out, &findings) {
+        return Err(e);
+    }
+    let mut warnings = rec.warnings.clone();
+    warnings.extend(
+        findings
+            .into_iter()
+            .filter(|f| f.level == scene::check::Level::Warning)
+            .map(|f| f.message),
+    );
+
     let dir = AtomicDir::new(out, rule)?;
     let root = dir.path().to_path_buf();
     let write_split = |name: &str, idx: &[usize]| -> Result<Vec<Frame>> {
@@ -334,18 +362,6 @@ pub fn write_scene_with(
         events: None,
         ..train.clone()
     };
-    // Findings that make the scene meaningless refuse it; the others go in the summary.
-    let findings = scene::check::check_frames(&train.frames, &test.frames, Some(&rec.events.t));
-    if let Some(e) = scene::check::first_error(out, &findings) {
-        return Err(e);
-    }
-    let mut warnings = rec.warnings.clone();
-    warnings.extend(
-        findings
-            .into_iter()
-            .filter(|f| f.level == scene::check::Level::Warning)
-            .map(|f| f.message),
-    );
     scene::formats::write_evs(root.join(EVENTS_FILE), &rec.events)?;
     train.write(root.join(TRAIN_FILE))?;
     test.write(root.join(TEST_FILE))?;

@@ -149,8 +149,10 @@ impl Experiment {
 
     /// Parse experiment text; `path` names it in errors and anchors relative `dir`s.
     pub fn parse(text: &str, path: &Path) -> Result<Experiment> {
-        let raw: RawExperiment = toml::from_str(text)
-            .map_err(|e| anyhow!("{}: {}", path.display(), one_line(text, &e)))?;
+        let raw: RawExperiment = toml::from_str(text).map_err(|e| {
+            let where_what = scene::cli::settings::toml_error(text, &e);
+            anyhow!("{}: {where_what}", path.display())
+        })?;
         check_name(&raw.name).map_err(|e| anyhow!("{}: {e}", path.display()))?;
         let scene = match (raw.scene.dir, raw.scene.synth, raw.scene.settings) {
             (Some(dir), None, None) => {
@@ -312,12 +314,6 @@ fn check_name(name: &str) -> std::result::Result<(), String> {
             "name {name:?} must be 1-100 characters of A-Z a-z 0-9 - _ . (it names runs/<name>/)"
         ))
     }
-}
-
-/// toml errors span several lines (with a caret excerpt); keep the message readable
-/// on one line.
-fn one_line(text: &str, e: &toml::de::Error) -> String {
-    scene::cli::settings::toml_error(text, e)
 }
 
 /// The preset `preset` with `overrides` merged in (nested tables merge, other values

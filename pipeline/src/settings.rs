@@ -37,18 +37,7 @@ fn defaults_of<T: Serialize + Default>() -> Table {
 fn check_as<T: Settings>(settings: &Table) -> Result<(), String> {
     let mut full = defaults_of::<T>();
     merge(&mut full, settings);
-    let text = toml::to_string(&full).map_err(|e| e.to_string())?;
-    let s = toml::from_str::<T>(&text).map_err(|e| {
-        let msg = e.message().trim().replace('\n', " ");
-        match e
-            .span()
-            .and_then(|sp| scene::cli::settings::key_at(&text, sp.start))
-        {
-            Some(key) => format!("key `{key}`: {msg}"),
-            None => msg,
-        }
-    })?;
-    s.validate()
+    scene::cli::settings::from_table_naming_key::<T>(full)?.validate()
 }
 
 /// `settings` as a TOML table, through TOML text: the text writer prints an `f32`

@@ -72,17 +72,24 @@ pub fn read_file<S: Settings>(path: &Path) -> Result<S> {
 /// Settings from a TOML table (a file's keys with `--set key=value` overrides merged
 /// in), then [`Settings::validate`]; errors name `origin`.
 pub fn from_table<S: Settings>(table: toml::Table, origin: &Path) -> Result<S> {
-    // Through text, so that an error can name the line's key.
-    let text = toml::to_string(&table).map_err(|e| Error::invalid(origin, e.to_string()))?;
-    let s: S = toml::from_str(&text).map_err(|e| {
-        let msg = e.message().trim().replace('\n', " ");
-        match e.span().and_then(|sp| key_at(&text, sp.start)) {
-            Some(key) => Error::invalid(origin, format!("key `{key}`: {msg}")),
-            None => Error::invalid(origin, msg),
-        }
-    })?;
+    let s: S = from_table_naming_key(table).map_err(|e| Error::invalid(origin, e))?;
     s.validate().map_err(|e| Error::invalid(origin, e))?;
     Ok(s)
+}
+
+/// `table` read as `T` through TOML text, so that an error names the key it is about
+/// (`key \`densify.interval\`: invalid type …`).
+pub fn from_table_naming_key<T: DeserializeOwned>(
+    table: toml::Table,
+) -> std::result::Result<T, String> {
+    let text = toml::to_string(&table).map_err(|e| e.to_string())?;
+    toml::from_str(&text).map_err(|e| {
+        let msg = e.message().trim().replace('\n', " ");
+        match e.span().and_then(|sp| key_at(&text, sp.start)) {
+            Some(key) => format!("key `{key}`: {msg}"),
+            None => msg,
+        }
+    })
 }
 
 /// The settings of a run: `config` (or the defaults), then `overrides` (the flags),
