@@ -142,6 +142,10 @@ pub struct TrainReport {
     /// The same on the novel-view split; absent when the scene has none.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub novel: Option<Evaluation>,
+    /// The Gaussians' motion against the moving objects' true 3D motion (synthetic
+    /// scenes; `gaussians::trajectory`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub trajectory: Option<gaussians::trajectory::TrajectoryError>,
     /// The 2D baselines on the same test frames (nearest frame, linear blend, event
     /// pseudo image); none on the novel views, which they cannot render.
     pub baselines: Baselines,
@@ -266,6 +270,7 @@ pub fn train(
         camera,
         test,
         novel,
+        trajectory: gaussians::trajectory::trajectory_error(&model, &d.scene),
         baselines,
         settings,
     };

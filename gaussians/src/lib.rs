@@ -16,6 +16,7 @@ pub mod raster;
 pub mod splats;
 pub mod stage;
 pub mod train;
+pub mod trajectory;
 
 pub use raster::{Rasterizer, RenderedImage, TileRasterizer};
 pub use splats::{Gaussian, SplatGrads, Splats};

@@ -160,6 +160,10 @@ pub struct TrainReport {
     /// The same on the novel-view split; absent when the scene has none.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub novel: Option<Evaluation>,
+    /// The Gaussians' motion against the moving objects' true 3D motion (synthetic
+    /// scenes; [`crate::trajectory`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub trajectory: Option<crate::trajectory::TrajectoryError>,
 }
 
 /// Planar RGB of a frame's image, checked against the camera size.
@@ -280,14 +284,20 @@ fn mean_colour(rgb: &[f32]) -> Vec<f32> {
 }
 
 /// PSNR/SSIM of `model` on the scene's novel-view split, its renders written to
-/// `renders/novel/NNNN.png` under `out`; None when the scene has no novel views.
+/// `renders/novel/NNNN.png` and their depth to `renders/novel_depth/NNNN.exr` under
+/// `out` (`degs eval` scores the depth of moving objects on it); None when the scene
+/// has no novel views.
 pub fn evaluate_novel(model: &Model, scene: &Scene, out: &Path) -> Result<Option<Evaluation>> {
     if scene.novel.frames.is_empty() {
         return Ok(None);
     }
     let views = load_views(scene, &scene.novel)?;
     let dir = out.join("renders").join("novel");
-    evaluate(model, &views, "novel", Some(&dir)).map(Some)
+    let ev = evaluate(model, &views, "novel", Some(&dir))?;
+    let depth = out.join("renders").join("novel_depth");
+    std::fs::create_dir_all(&depth).map_err(|e| Error::io(&depth, e))?;
+    write_depths(model, &views, &depth)?;
+    Ok(Some(ev))
 }
 
 /// Write `depth/NNNN.exr` for every view.
@@ -442,6 +452,7 @@ pub fn train(
         init_ply_dropped_transparent,
         test,
         novel,
+        trajectory: crate::trajectory::trajectory_error(&model, &scene),
         settings,
     };
     write_json_atomic(&out.path().join("report.json"), &report)?;

@@ -154,14 +154,37 @@ pub fn execute(command: Command) -> Result<()> {
                 eval::compare_table(&[(m.experiment.clone(), m.clone())])
             );
             print!("\n{}", eval::baseline_block(&m));
+            let ssim = |s: Option<f64>| s.map_or(String::new(), |s| format!(", SSIM {s:.4}"));
             if let Some(p) = m.novel_moving_psnr_mean {
+                let depth = m.novel_moving_depth_error_mean.map_or(String::new(), |e| {
+                    format!(", depth off by {:.1} % of the true depth", 100.0 * e)
+                });
                 println!(
-                    "  novel views, pixels of moving objects: PSNR {p:.2} dB \
-                     (where a model wrong in 3D smears)"
+                    "  novel views, pixels of moving objects: PSNR {p:.2} dB{}{depth} \
+                     (where a model wrong in 3D smears)",
+                    ssim(m.novel_moving_ssim_mean)
                 );
             }
             if let Some(p) = m.novel_covisible_psnr_mean {
-                println!("  novel views, pixels some train view saw: PSNR {p:.2} dB");
+                println!(
+                    "  novel views, pixels some train view saw: PSNR {p:.2} dB{}",
+                    ssim(m.novel_covisible_ssim_mean)
+                );
+            }
+            if let Some(t) = &m.trajectory {
+                let all = t.seen_motion_mean.map_or(String::new(), |v| {
+                    format!(" (all of them move {v:.3} on average)")
+                });
+                println!(
+                    "  moving objects in 3D: {:.0} % of the Gaussians on their pixels lie on \
+                     their surface{all}; those move {:.3} where the objects move {:.3} \
+                     (error {:.3}, {:.0} % of the true motion)",
+                    100.0 * t.on_surface_fraction,
+                    t.model_motion_mean,
+                    t.true_motion_mean,
+                    t.motion_error_mean,
+                    100.0 * t.relative_error
+                );
             }
             if let Some(sheet) = &m.novel_sheet {
                 println!(

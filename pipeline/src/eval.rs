@@ -39,6 +39,17 @@ pub struct Metrics {
     pub novel_moving_psnr_mean: Option<f64>,
     #[serde(default)]
     pub novel_covisible_psnr_mean: Option<f64>,
+    /// The same means of SSIM over those pixels, and of the relative depth error over
+    /// the moving objects' pixels ([`crate::eval_masked::NovelMasks`]).
+    #[serde(default)]
+    pub novel_moving_ssim_mean: Option<f64>,
+    #[serde(default)]
+    pub novel_covisible_ssim_mean: Option<f64>,
+    #[serde(default)]
+    pub novel_moving_depth_error_mean: Option<f64>,
+    /// The render stage's Gaussians against the moving objects' true 3D motion.
+    #[serde(default)]
+    pub trajectory: Option<crate::eval_masked::Trajectory>,
     /// Mean LPIPS of the test frames and of the novel views (network `lpips_net`);
     /// None with the reason in `lpips_note` when the weights cannot be had.
     #[serde(default)]
@@ -85,17 +96,9 @@ pub struct FrameMetrics {
     pub ssim: f64,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub lpips: Option<f64>,
-    /// Novel views: the pixels moving objects cover in the ground truth, and the PSNR
-    /// over them.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub moving_pixels: Option<usize>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub moving_psnr: Option<f64>,
-    /// Novel views: the pixels some train view saw, and the PSNR over them.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub covisible_pixels: Option<usize>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub covisible_psnr: Option<f64>,
+    /// Novel views: the scores on the moving objects' and the co-visible pixels.
+    #[serde(flatten)]
+    pub masks: crate::eval_masked::MaskFigures,
 }
 
 fn to_u8_levels(img: &Image) -> Vec<f32> {
@@ -305,15 +308,24 @@ pub fn eval_run_with(run_dir: &Path, lpips: crate::eval_lpips::LpipsUse) -> Resu
         None => Vec::new(),
     };
     let novel_pairs = pairs(&novel_frames);
-    let masks = crate::eval_masked::novel_masks(&scene_dir, &novel_pairs, PSNR_CAP)?;
+    let depth_dir = render_stage.as_deref().and_then(|st| {
+        Some(
+            entry_of(st)?
+                .join(stages::find(st)?.renders?)
+                .join("novel_depth"),
+        )
+    });
+    let masks =
+        crate::eval_masked::novel_masks(&scene_dir, &novel_pairs, depth_dir.as_deref(), PSNR_CAP)?;
     let novel_sheet =
         crate::eval_sheet::write_sheet(&novel_pairs, &run_dir.join("novel_sheet.png"))?;
     for (f, m) in novel_frames.iter_mut().zip(&masks) {
-        f.moving_pixels = m.moving.map(|s| s.pixels);
-        f.moving_psnr = m.moving.and_then(|s| s.psnr);
-        f.covisible_pixels = m.covisible.map(|s| s.pixels);
-        f.covisible_psnr = m.covisible.and_then(|s| s.psnr);
+        f.masks = m.figures();
     }
+    let trajectory = render_stage
+        .as_deref()
+        .and_then(entry_of)
+        .and_then(|e| crate::eval_masked::trajectory(&e));
     let (lpips_net, lpips_note) = add_lpips(&mut frames, &mut novel_frames, lpips);
     let mean = |frames: &[FrameMetrics], f: &dyn Fn(&FrameMetrics) -> f64| {
         (!frames.is_empty()).then(|| frames.iter().map(f).sum::<f64>() / frames.len() as f64)
@@ -339,8 +351,14 @@ pub fn eval_run_with(run_dir: &Path, lpips: crate::eval_lpips::LpipsUse) -> Resu
         frames,
         novel_psnr_mean: mean(&novel_frames, &|f| f.psnr),
         novel_sheet,
-        novel_moving_psnr_mean: mean_of(novel_frames.iter().map(|f| f.moving_psnr)),
-        novel_covisible_psnr_mean: mean_of(novel_frames.iter().map(|f| f.covisible_psnr)),
+        novel_moving_psnr_mean: mean_of(novel_frames.iter().map(|f| f.masks.moving_psnr)),
+        novel_covisible_psnr_mean: mean_of(novel_frames.iter().map(|f| f.masks.covisible_psnr)),
+        novel_moving_ssim_mean: mean_of(novel_frames.iter().map(|f| f.masks.moving_ssim)),
+        novel_covisible_ssim_mean: mean_of(novel_frames.iter().map(|f| f.masks.covisible_ssim)),
+        trajectory,
+        novel_moving_depth_error_mean: mean_of(
+            novel_frames.iter().map(|f| f.masks.moving_depth_error),
+        ),
         novel_ssim_mean: mean(&novel_frames, &|f| f.ssim),
         novel_frames,
         baselines,
@@ -423,10 +441,7 @@ fn score_pairs(pairs: &[(PathBuf, PathBuf)]) -> Result<Vec<FrameMetrics>> {
                 psnr,
                 ssim,
                 lpips: None,
-                moving_pixels: None,
-                moving_psnr: None,
-                covisible_pixels: None,
-                covisible_psnr: None,
+                masks: Default::default(),
             })
         })
         .collect()

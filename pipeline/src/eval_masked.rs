@@ -27,9 +27,15 @@ pub fn moving_ids(scene_dir: &Path) -> Option<Vec<u16>> {
     )
 }
 
-/// PSNR (dB, 8-bit levels, every channel, at most `cap`) of `render` against `test`
-/// over the pixels where `mask` holds; None when it holds nowhere.
-pub fn masked_psnr(test: &Path, render: &Path, mask: &[bool], cap: f64) -> Result<Option<f64>> {
+/// PSNR (dB, 8-bit levels, every channel, at most `cap`) and SSIM (the per-pixel SSIM
+/// map's mean, [`scene::metrics::ssim_map_u8`]) of `render` against `test` over the
+/// pixels where `mask` holds; None when it holds nowhere.
+pub fn masked_scores(
+    test: &Path,
+    render: &Path,
+    mask: &[bool],
+    cap: f64,
+) -> Result<Option<(f64, f64)>> {
     let (a, b) = (read_image(test)?, read_image(render)?);
     let n = (a.width * a.height) as usize;
     if (b.width, b.height, b.channels) != (a.width, a.height, a.channels) || mask.len() != n {
@@ -53,61 +59,183 @@ pub fn masked_psnr(test: &Path, render: &Path, mask: &[bool], cap: f64) -> Resul
         }
         count += c;
     }
-    Ok((count > 0).then(|| {
-        let mse = sum / count as f64;
-        if mse == 0.0 {
-            cap
-        } else {
-            (10.0 * (255.0f64.powi(2) / mse).log10()).min(cap)
-        }
-    }))
+    if count == 0 {
+        return Ok(None);
+    }
+    let mse = sum / count as f64;
+    let psnr = if mse == 0.0 {
+        cap
+    } else {
+        (10.0 * (255.0f64.powi(2) / mse).log10()).min(cap)
+    };
+    let (w, h) = (a.width as usize, a.height as usize);
+    let planar =
+        |img: &scene::image_io::Image| scene::metrics::interleaved_to_planar(&img.data, w, h, c);
+    let map = scene::metrics::ssim_map_u8(&planar(&a), &planar(&b), w, h);
+    let ssim = mask
+        .iter()
+        .zip(&map)
+        .filter(|(m, _)| **m)
+        .map(|(_, s)| s)
+        .sum::<f64>()
+        / (count / c) as f64;
+    Ok(Some((psnr, ssim)))
 }
 
-/// A novel frame's score on one mask: how many pixels it holds, and their PSNR (None
-/// when it holds none).
+/// A novel frame's score on one mask: how many pixels it holds, and their PSNR and SSIM
+/// (None when it holds none).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MaskScore {
     pub pixels: usize,
     pub psnr: Option<f64>,
+    pub ssim: Option<f64>,
 }
 
-/// Each novel frame's scores on its moving-object and co-visible pixels.
+/// Each novel frame's scores on its moving-object and co-visible pixels, and the depth
+/// error on its moving-object pixels.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct NovelMasks {
     pub moving: Option<MaskScore>,
     pub covisible: Option<MaskScore>,
+    /// Mean relative depth error `|d − d_gt| / d_gt` of the render over the moving
+    /// objects' pixels (a pixel the render leaves empty counts 1); None without the
+    /// render's depth (`<renders>/novel_depth/NAME.exr`) or the scene's
+    /// (`gt/novel/depth_NNNN.exr`).
+    pub moving_depth_error: Option<f64>,
+}
+
+/// A novel frame's figures in `metrics.json` (flattened into its frame record).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct MaskFigures {
+    /// The pixels moving objects cover in the ground truth, the PSNR and SSIM over them
+    /// and the render's relative depth error there.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub moving_pixels: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub moving_psnr: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub moving_ssim: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub moving_depth_error: Option<f64>,
+    /// The pixels some train view saw, and the PSNR and SSIM over them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub covisible_pixels: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub covisible_psnr: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub covisible_ssim: Option<f64>,
+}
+
+impl NovelMasks {
+    /// The figures as `metrics.json` records them.
+    pub fn figures(&self) -> MaskFigures {
+        MaskFigures {
+            moving_pixels: self.moving.map(|s| s.pixels),
+            moving_psnr: self.moving.and_then(|s| s.psnr),
+            moving_ssim: self.moving.and_then(|s| s.ssim),
+            moving_depth_error: self.moving_depth_error,
+            covisible_pixels: self.covisible.map(|s| s.pixels),
+            covisible_psnr: self.covisible.and_then(|s| s.psnr),
+            covisible_ssim: self.covisible.and_then(|s| s.ssim),
+        }
+    }
+}
+
+/// Mean relative depth error over `mask` (see [`NovelMasks::moving_depth_error`]).
+pub fn depth_error(render: &Path, gt: &Path, mask: &[bool]) -> Result<Option<f64>> {
+    let (w, h, d) = scene::image_io::read_exr_depth(render)?;
+    let (gw, gh, g) = scene::image_io::read_exr_depth(gt)?;
+    if (w, h) != (gw, gh) || g.len() != mask.len() {
+        bail!(
+            "{}: {w}x{h} does not match {} ({gw}x{gh})",
+            render.display(),
+            gt.display()
+        );
+    }
+    let (mut sum, mut n) = (0.0, 0usize);
+    for ((&m, &dg), &dr) in mask.iter().zip(&g).zip(&d) {
+        if m && dg > 0.0 {
+            let e = if dr > 0.0 && dr.is_finite() {
+                f64::from((dr - dg).abs() / dg)
+            } else {
+                1.0
+            };
+            sum += e;
+            n += 1;
+        }
+    }
+    Ok((n > 0).then(|| sum / n as f64))
 }
 
 /// The masked scores of each novel `(ground truth, render)` pair, in order (novel view k
-/// has `gt/novel/*_kkkk.png`); a mask the scene lacks is None.
+/// has `gt/novel/*_kkkk.png`); a mask the scene lacks is None. `depth_dir`: where the
+/// render stage wrote the novel views' depth (`NAME.exr` for render `NAME.png`).
 pub fn novel_masks(
     scene_dir: &Path,
     pairs: &[(&Path, &Path)],
+    depth_dir: Option<&Path>,
     cap: f64,
 ) -> Result<Vec<NovelMasks>> {
     let ids = moving_ids(scene_dir);
     let mut out = Vec::with_capacity(pairs.len());
     for (k, (test, render)) in pairs.iter().enumerate() {
-        let score = |name: &str, keep: &dyn Fn(u16) -> bool| -> Result<Option<MaskScore>> {
+        let mask_of = |name: &str, keep: &dyn Fn(u16) -> bool| -> Result<Option<Vec<bool>>> {
             let path = scene_dir.join(format!("gt/novel/{name}_{k:04}.png"));
             if !path.is_file() {
                 return Ok(None);
             }
             let (_, _, values) = synth::gt::read_object_png(&path)?;
-            let mask: Vec<bool> = values.iter().map(|&v| keep(v)).collect();
+            Ok(Some(values.iter().map(|&v| keep(v)).collect()))
+        };
+        let score = |mask: &Option<Vec<bool>>| -> Result<Option<MaskScore>> {
+            let Some(mask) = mask else { return Ok(None) };
+            let s = masked_scores(test, render, mask, cap)?;
             Ok(Some(MaskScore {
                 pixels: mask.iter().filter(|m| **m).count(),
-                psnr: masked_psnr(test, render, &mask, cap)?,
+                psnr: s.map(|s| s.0),
+                ssim: s.map(|s| s.1),
             }))
         };
         let moving = match &ids {
-            Some(ids) => score("object", &|o| ids.contains(&o))?,
+            Some(ids) => mask_of("object", &|o| ids.contains(&o))?,
             None => None,
         };
+        let gt_depth = scene_dir.join(format!("gt/novel/depth_{k:04}.exr"));
+        let depth = depth_dir.and_then(|d| Some(d.join(render.file_stem()?).with_extension("exr")));
+        let moving_depth_error = match (&moving, depth) {
+            (Some(mask), Some(d)) if d.is_file() && gt_depth.is_file() => {
+                depth_error(&d, &gt_depth, mask)?
+            }
+            _ => None,
+        };
         out.push(NovelMasks {
-            moving,
-            covisible: score("covisible", &|v| v != 0)?,
+            moving: score(&moving)?,
+            covisible: score(&mask_of("covisible", &|v| v != 0)?)?,
+            moving_depth_error,
         });
     }
     Ok(out)
+}
+
+/// The render stage's figures of its Gaussians' motion against the moving objects' true
+/// 3D motion (`report.json`: `trajectory`, written by `gaussians::trajectory` for
+/// synthetic scenes); read as the stage wrote them.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Trajectory {
+    pub gaussians: usize,
+    pub on_surface_fraction: f64,
+    pub motion_error_mean: f64,
+    pub true_motion_mean: f64,
+    pub model_motion_mean: f64,
+    /// Absent in reports of stages built before it was added.
+    #[serde(default)]
+    pub seen_motion_mean: Option<f64>,
+    pub relative_error: f64,
+}
+
+/// The `trajectory` of the report in stage entry `entry`; None when absent.
+pub fn trajectory(entry: &Path) -> Option<Trajectory> {
+    let bytes = std::fs::read(entry.join("report.json")).ok()?;
+    let v: serde_json::Value = serde_json::from_slice(&bytes).ok()?;
+    serde_json::from_value(v.get("trajectory")?.clone()).ok()
 }

@@ -163,3 +163,46 @@ fn eval_scores_the_novel_views_on_the_pixels_of_moving_objects() {
         at(2)
     );
 }
+
+/// The novel views' SSIM on the masks and the depth error on the moving pixels: renders
+/// equal to the ground truth score SSIM 1 on both masks; a render depth 1.1 × the true
+/// one scores a relative error of 0.1 (frame 0), an empty render (depth 0) 1 (frame 1),
+/// both over the moving pixels the ground truth depth covers.
+#[test]
+fn eval_scores_ssim_on_the_masks_and_the_depth_of_moving_objects() {
+    use scene::image_io::{read_exr_depth, write_exr_depth};
+    let d = tempfile::tempdir().unwrap();
+    let root = d.path().join("cache-root");
+    let scene_dir = tiny_scene(d.path());
+    let scene = Scene::open(&scene_dir).unwrap();
+    let g = d.path().join("g");
+    renders(&g, &scene, 0.0);
+    copies(&g.join("renders/novel"), &scene, &scene.novel.frames, 0.0);
+    let depth = g.join("renders/novel_depth");
+    fs::create_dir_all(&depth).unwrap();
+    for k in 0..scene.novel.frames.len() {
+        let (w, h, z) =
+            read_exr_depth(scene_dir.join(format!("gt/novel/depth_{k:04}.exr"))).unwrap();
+        let scale = if k == 0 { 1.1 } else { 0.0 };
+        let z: Vec<f32> = z.iter().map(|v| v * scale).collect();
+        write_exr_depth(depth.join(format!("{k:04}.exr")), w, h, &z).unwrap();
+    }
+    fabricate_run(&root, "dz", &scene_dir, &g, None);
+    let run = root.join("runs/dz");
+    let o = degs(&["eval", run.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let m: serde_json::Value =
+        serde_json::from_slice(&fs::read(run.join("metrics.json")).unwrap()).unwrap();
+    let novel = m["novel_frames"].as_array().unwrap();
+    for (k, f) in novel.iter().enumerate() {
+        assert_eq!(f["moving_ssim"].as_f64(), Some(1.0), "frame {k}");
+        assert_eq!(f["covisible_ssim"].as_f64(), Some(1.0), "frame {k}");
+        let want = if k == 0 { 0.1 } else { 1.0 };
+        let got = f["moving_depth_error"].as_f64().unwrap();
+        assert!((got - want).abs() < 1e-6, "frame {k}: {got} vs {want}");
+    }
+    let mean = m["novel_moving_depth_error_mean"].as_f64().unwrap();
+    assert!((mean - 0.55).abs() < 1e-6, "{mean}");
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("depth off by 55.0 %"), "{out}");
+}

@@ -58,6 +58,30 @@ pub fn ssim_u8(a: &[f32], b: &[f32], width: usize, height: usize) -> f64 {
     ssim_and_grad(&qa, &qb, width, height, false).0
 }
 
+/// Per-pixel SSIM of two planar images after 8-bit quantisation (each pixel's mean
+/// over the planes; its mean over all pixels is [`ssim_u8`]), for scores on a mask.
+pub fn ssim_map_u8(a: &[f32], b: &[f32], width: usize, height: usize) -> Vec<f64> {
+    assert_eq!(a.len(), b.len());
+    let plane = width * height;
+    assert!(plane > 0 && a.len().is_multiple_of(plane));
+    let x: Vec<f64> = a.iter().map(|&v| quantize_u8(v) as f64).collect();
+    let y: Vec<f64> = b.iter().map(|&v| quantize_u8(v) as f64).collect();
+    let (mu1, mu2) = (blur(&x, width, height), blur(&y, width, height));
+    let prod = |u: &[f64], v: &[f64]| -> Vec<f64> { u.iter().zip(v).map(|(a, b)| a * b).collect() };
+    let p = blur(&prod(&x, &x), width, height);
+    let q = blur(&prod(&y, &y), width, height);
+    let r = blur(&prod(&x, &y), width, height);
+    let planes = a.len() / plane;
+    let mut map = vec![0.0; plane];
+    for i in 0..a.len() {
+        let (m1, m2) = (mu1[i], mu2[i]);
+        let s = (2.0 * m1 * m2 + C1) * (2.0 * (r[i] - m1 * m2) + C2)
+            / ((m1 * m1 + m2 * m2 + C1) * ((p[i] - m1 * m1) + (q[i] - m2 * m2) + C2));
+        map[i % plane] += s / planes as f64;
+    }
+    map
+}
+
 /// Normalised 1-D Gaussian window.
 fn window<T: Real>() -> [T; SSIM_WINDOW] {
     let c = (SSIM_WINDOW / 2) as f64;

@@ -1,6 +1,6 @@
 //! PSNR / SSIM values and invariants; D-SSIM and L1 gradients against finite differences.
 
-use scene::metrics::{dssim_loss, l1_loss, psnr_u8, ssim_and_grad, ssim_u8};
+use scene::metrics::{dssim_loss, l1_loss, psnr_u8, ssim_and_grad, ssim_map_u8, ssim_u8};
 
 fn pattern(n: usize, seed: f64) -> Vec<f64> {
     (0..n)
@@ -99,4 +99,38 @@ fn l1_gradient_matches_finite_differences() {
         let fd = (l1_loss(&p, &t).0 - l1_loss(&m, &t).0) / (2.0 * h as f64);
         assert!((fd - g[i] as f64).abs() < 1e-3);
     }
+}
+
+#[test]
+fn ssim_map_is_the_hand_computed_pixel_and_local() {
+    // 1×1 grey image: the map's one value is the hand computation of the test above.
+    let k5 = 1.0
+        / (0..11)
+            .map(|i| (-((i as f64 - 5.0).powi(2)) / 4.5).exp())
+            .sum::<f64>();
+    let w1 = k5 * k5;
+    let (x, y) = (204.0f64 / 255.0, 77.0f64 / 255.0);
+    let (m1, m2) = (w1 * x, w1 * y);
+    let want = (2.0 * m1 * m2 + 1e-4) * (2.0 * (w1 * x * y - m1 * m2) + 9e-4)
+        / ((m1 * m1 + m2 * m2 + 1e-4) * ((w1 * x * x - m1 * m1) + (w1 * y * y - m2 * m2) + 9e-4));
+    let map = ssim_map_u8(&[x as f32], &[y as f32], 1, 1);
+    // (the 8-bit levels pass through f32: 1e-7)
+    assert!((map[0] - want).abs() < 1e-7, "{} vs {want}", map[0]);
+    // A change confined to one corner: the far corner keeps SSIM 1 (the window is 11
+    // wide), the changed pixels drop, and the map's mean is the whole-image SSIM.
+    let (w, h) = (40, 30);
+    let a: Vec<f32> = pattern(3 * w * h, 0.7).iter().map(|&v| v as f32).collect();
+    let mut b = a.clone();
+    for c in 0..3 {
+        for y in 0..5 {
+            for x in 0..5 {
+                b[c * w * h + y * w + x] = 1.0 - b[c * w * h + y * w + x];
+            }
+        }
+    }
+    let map = ssim_map_u8(&a, &b, w, h);
+    assert!((map[(h - 1) * w + w - 1] - 1.0).abs() < 1e-12);
+    assert!(map[2 * w + 2] < 0.5, "{}", map[2 * w + 2]);
+    let mean = map.iter().sum::<f64>() / map.len() as f64;
+    assert!((mean - ssim_u8(&a, &b, w, h)).abs() < 1e-12);
 }

@@ -8,6 +8,7 @@
 pub mod field_probe;
 pub mod init;
 pub mod judge;
+pub mod rigidity;
 pub mod settings;
 pub mod sh_refit;
 pub mod sizing;
@@ -79,6 +80,8 @@ pub struct Trainer {
     pub sizing: Option<sizing::SizingSummary>,
     /// What the field's width probe measured and chose, once done ([`field_probe`]).
     pub field_probe: Option<field_probe::FieldProbeSummary>,
+    /// Canonical neighbours of the isometry term ([`rigidity`]), while it is on.
+    pub neighbours: Option<rigidity::Neighbours>,
     order: Vec<usize>,
     rng: rand_chacha::ChaCha8Rng,
     /// Buffers given back by [`Self::recycle_view`] / [`Self::recycle_grads`].
@@ -96,6 +99,8 @@ struct Spare {
     grads: Vec<ModelGrads>,
     field: field::FieldWork,
     delta_grads: field::Deltas,
+    /// The isometry term of the last [`Trainer::view_backward`].
+    rigidity_loss: f64,
 }
 
 /// Views and gradients kept for reuse (the joint training renders two views a step).
@@ -147,6 +152,7 @@ impl Trainer {
             split: None,
             sizing: None,
             field_probe: None,
+            neighbours: None,
             order: Vec::new(),
             spare: Mutex::default(),
         }
@@ -284,6 +290,7 @@ impl Trainer {
             let Spare {
                 field: work,
                 delta_grads,
+                rigidity_loss,
                 ..
             } = &mut *spare;
             // The means' gradient passes through unchanged (it is also δx's).
@@ -294,6 +301,13 @@ impl Trainer {
                 &g.means,
                 &mut g.log_scales,
                 &mut g.rotations,
+                delta_grads,
+            );
+            // L_iso on the deformed centres, into δx (the canonical ones held fixed).
+            *rigidity_loss = rigidity::Neighbours::backward(
+                self.neighbours.as_ref(),
+                &self.settings.rigidity,
+                &v.deformed.means,
                 delta_grads,
             );
             let dynamic_only = self.settings.dynamic_only;
@@ -327,6 +341,14 @@ impl Trainer {
         self.stats.add(&g.splats.screen_grad_norm, &g.splats.radius);
         self.iteration += 1;
         self.densify_if_due();
+        let (on, s) = (self.field_on(), &self.settings);
+        let nb = &mut self.neighbours;
+        rigidity::Neighbours::refresh(nb, &s.rigidity, on, &self.splats, s.dynamic_only, it + 1);
+    }
+
+    /// The isometry term of the last [`Self::view_backward`] (0 when it is off).
+    pub fn rigidity_loss(&self) -> f64 {
+        self.spare().rigidity_loss
     }
 
     /// The RGB loss of the warm-up (`(1−λ)·L1 + λ·D-SSIM`) of a render against a planar
@@ -412,6 +434,8 @@ impl Trainer {
         let tol = self.settings.static_tolerance_px;
         self.splats.dynamic = static_split::dynamic_flags(&motion, tol);
         self.settings.dynamic_only = true;
+        // The isometry term's lists hold the Gaussians the field moved until now.
+        self.neighbours = None;
         let dynamic = self.splats.dynamic.iter().filter(|&&d| d).count();
         if dynamic == 0 {
             // Nothing moves: the model needs no field at all.

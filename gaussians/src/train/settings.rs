@@ -1,6 +1,7 @@
 //! Training settings (`settings.toml`): schedules and learning rates after Deform-GS
 //! (`docs/REFERENCES.md`), scaled to the 3500-iteration warm-up of DEGS.
 
+pub use super::rigidity::RigiditySettings;
 pub use super::sizing::SizeSettings;
 pub use super::stereo::StereoSettings;
 use crate::densify::DensifySettings;
@@ -40,6 +41,8 @@ pub struct TrainSettings {
     /// When the split is made: this fraction of the way through the field phase.
     pub static_split_at: f32,
     pub field: FieldSettings,
+    /// The isometry term on the field's motion (local rigidity; `rigidity.rs`).
+    pub rigidity: RigiditySettings,
     /// Field learning rate, log-linear init → final over `iterations`. Deform-GS's
     /// 8e-4 → 1.6e-6 is spread over 40k iterations; squeezed into a 3500-iteration
     /// warm-up it left the field untrained (no better than a static model on the
@@ -96,6 +99,7 @@ impl Default for TrainSettings {
             static_tolerance_px: 0.0,
             static_split_at: 0.75,
             field: FieldSettings::default(),
+            rigidity: RigiditySettings::default(),
             field_lr_init: 3e-3,
             field_lr_final: 3e-4,
             position_lr_init: 1.6e-4 * 5.0,
@@ -168,6 +172,7 @@ impl scene::cli::Settings for TrainSettings {
             }
         }
         self.densify.validate()?;
+        self.rigidity.validate()?;
         if self.init_points == 0 {
             return Err("init_points must be positive".into());
         }
