@@ -25,22 +25,28 @@ fn cluster(shift: f32) -> Splats {
     s
 }
 
-#[test]
-fn the_field_learns_a_translation() {
+/// World units the cluster moves over the recording (≈ 5 px).
+const SPEED: f32 = 0.3;
+
+/// Nine views from a still camera, the cluster moving `SPEED` along x from t = 0 to 1.
+fn views() -> Vec<View> {
     let cam = camera(48, 48, 50.0, DVec3::new(0.0, 0.0, 3.0));
-    let speed = 0.3f32; // world units over the recording: ≈ 5 px
-    let frames = 9;
-    let views: Vec<View> = (0..frames)
+    (0..9)
         .map(|k| {
-            let t = k as f32 / (frames - 1) as f32;
-            let gt = cluster(speed * (t - 0.5));
+            let t = k as f32 / 8.0;
+            let gt = cluster(SPEED * (t - 0.5));
             View {
                 camera: cam,
                 time: t,
                 rgb: TileRasterizer.render(&gt, &cam, 0, [0.0; 3]).0.rgb,
             }
         })
-        .collect();
+        .collect()
+}
+
+#[test]
+fn the_field_learns_a_translation() {
+    let views = views();
     let mut s = TrainSettings {
         iterations: 1500,
         static_iterations: 0,
@@ -58,25 +64,12 @@ fn the_field_learns_a_translation() {
         .map(|i| b.means[i][0] - a.means[i][0])
         .sum::<f32>()
         / a.len() as f32;
-    assert!((dx - speed).abs() < 0.1 * speed, "{dx} vs {speed}");
+    assert!((dx - SPEED).abs() < 0.1 * SPEED, "{dx} vs {SPEED}");
 }
 
 #[test]
 fn the_field_learns_it_from_a_ghost_of_the_path() {
-    let cam = camera(48, 48, 50.0, DVec3::new(0.0, 0.0, 3.0));
-    let speed = 0.3f32;
-    let frames = 9;
-    let views: Vec<View> = (0..frames)
-        .map(|k| {
-            let t = k as f32 / (frames - 1) as f32;
-            let gt = cluster(speed * (t - 0.5));
-            View {
-                camera: cam,
-                time: t,
-                rgb: TileRasterizer.render(&gt, &cam, 0, [0.0; 3]).0.rgb,
-            }
-        })
-        .collect();
+    let views = views();
     for static_its in [0u32, 500] {
         let mut s = TrainSettings {
             iterations: 2000,
@@ -87,7 +80,7 @@ fn the_field_learns_it_from_a_ghost_of_the_path() {
         s.densify.until_iter = 0;
         let mut init = Splats::default();
         for k in 0..5 {
-            let c = cluster(speed * (k as f32 / 4.0 - 0.5));
+            let c = cluster(SPEED * (k as f32 / 4.0 - 0.5));
             for i in 0..c.len() {
                 let mut g = c.get(i);
                 g.opacity_logit = -1.0;
@@ -106,7 +99,7 @@ fn the_field_learns_it_from_a_ghost_of_the_path() {
             .sum::<f32>()
             / a.len() as f32;
         // Measured: 0.18 (field from the start), 0.29 (after 500 still iterations).
-        assert!(dx > 0.5 * speed, "still {static_its}: {dx} of {speed}");
+        assert!(dx > 0.5 * SPEED, "still {static_its}: {dx} of {SPEED}");
         assert!(
             last > 40.0,
             "still {static_its}: the views fit, PSNR {last}"

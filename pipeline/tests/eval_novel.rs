@@ -171,13 +171,13 @@ fn eval_scores_the_novel_views_on_the_pixels_of_moving_objects() {
 #[test]
 fn eval_scores_ssim_on_the_masks_and_the_depth_of_moving_objects() {
     use scene::image_io::{read_exr_depth, write_exr_depth};
-    let d = tempfile::tempdir().unwrap();
-    let root = d.path().join("cache-root");
-    let scene_dir = tiny_scene(d.path());
-    let scene = Scene::open(&scene_dir).unwrap();
-    let g = d.path().join("g");
-    renders(&g, &scene, 0.0);
-    copies(&g.join("renders/novel"), &scene, &scene.novel.frames, 0.0);
+    let Exact {
+        dir: _dir,
+        root,
+        scene_dir,
+        scene,
+        g,
+    } = exact_renders(true);
     let depth = g.join("renders/novel_depth");
     fs::create_dir_all(&depth).unwrap();
     for k in 0..scene.novel.frames.len() {

@@ -121,3 +121,32 @@ pub fn copies(out: &Path, scene: &Scene, frames: &[scene::manifest::Frame], delt
     }
     expected
 }
+
+/// A tiny synthetic scene in a temporary folder with exact renders of its test frames
+/// (and, with `novel`, of its novel views) in `g/renders`, and a cache root `root`.
+pub struct Exact {
+    pub dir: tempfile::TempDir,
+    pub root: PathBuf,
+    pub scene_dir: PathBuf,
+    pub scene: Scene,
+    pub g: PathBuf,
+}
+
+pub fn exact_renders(novel: bool) -> Exact {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("cache-root");
+    let scene_dir = tiny_scene(dir.path());
+    let scene = Scene::open(&scene_dir).unwrap();
+    let g = dir.path().join("g");
+    renders(&g, &scene, 0.0);
+    if novel {
+        copies(&g.join("renders/novel"), &scene, &scene.novel.frames, 0.0);
+    }
+    Exact {
+        dir,
+        root,
+        scene_dir,
+        scene,
+        g,
+    }
+}
