@@ -189,12 +189,13 @@ fn eval_and_compare_report_known_errors() {
 
 #[test]
 fn eval_errors_name_what_is_wrong() {
-    let d = tempfile::tempdir().unwrap();
-    let root = d.path().join("cache-root");
-    let scene_dir = tiny_scene(d.path());
-    let scene = Scene::open(&scene_dir).unwrap();
-    let g = d.path().join("g");
-    renders(&g, &scene, 0.0);
+    let Exact {
+        dir: _d,
+        root,
+        scene_dir,
+        scene: _,
+        g,
+    } = exact_renders(false);
     fs::remove_file(g.join("renders/0001.png")).unwrap();
     fabricate_run(&root, "short", &scene_dir, &g, None);
     let o = degs(&["eval", root.join("runs/short").to_str().unwrap()]);
@@ -335,12 +336,13 @@ fn scene_baselines(dir: &Path) -> baselines::BaselineFigures {
 
 #[test]
 fn eval_prints_the_baselines_of_the_deform_report() {
-    let d = tempfile::tempdir().unwrap();
-    let root = d.path().join("cache-root");
-    let scene_dir = tiny_scene(d.path());
-    let scene = Scene::open(&scene_dir).unwrap();
-    let g = d.path().join("g");
-    renders(&g, &scene, 0.0);
+    let Exact {
+        dir: d,
+        root,
+        scene_dir,
+        scene,
+        g,
+    } = exact_renders(false);
     // the deform entry: its renders (one off by 40 levels) and its report's baselines
     let deform = d.path().join("deform");
     let psnr1 = renders(&deform, &scene, 40.0);
@@ -384,12 +386,13 @@ fn eval_prints_the_baselines_of_the_deform_report() {
 
 #[test]
 fn eval_reports_lpips_beside_psnr_when_the_weights_are_there() {
-    let d = tempfile::tempdir().unwrap();
-    let root = d.path().join("cache-root");
-    let scene_dir = tiny_scene(d.path());
-    let scene = Scene::open(&scene_dir).unwrap();
-    let g = d.path().join("g");
-    renders(&g, &scene, 0.0);
+    let Exact {
+        dir: _d,
+        root,
+        scene_dir,
+        scene: _,
+        g,
+    } = exact_renders(false);
     // Frame 1's render: every value moved by a quarter of the range (clamped).
     let f1 = g.join("renders/0001.png");
     let mut img = read_image(&f1).unwrap();

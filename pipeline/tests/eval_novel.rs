@@ -50,10 +50,13 @@ fn eval_says_when_test_frames_are_train_frames() {
 /// a still pixel leaves it at the cap.
 #[test]
 fn eval_scores_the_novel_views_on_the_pixels_of_moving_objects() {
-    let d = tempfile::tempdir().unwrap();
-    let root = d.path().join("cache-root");
-    let scene_dir = tiny_scene(d.path());
-    let scene = Scene::open(&scene_dir).unwrap();
+    let Exact {
+        dir: _dir,
+        root,
+        scene_dir,
+        scene,
+        g,
+    } = exact_renders(true);
     let cfg: synth::SynthConfig =
         serde_json::from_str(&fs::read_to_string(scene_dir.join("synth.json")).unwrap()).unwrap();
     let moving: Vec<u16> = (0..cfg.objects.len())
@@ -61,9 +64,6 @@ fn eval_scores_the_novel_views_on_the_pixels_of_moving_objects() {
         .map(|k| k as u16 + 1)
         .collect();
     assert!(!moving.is_empty());
-    let g = d.path().join("g");
-    renders(&g, &scene, 0.0);
-    copies(&g.join("renders/novel"), &scene, &scene.novel.frames, 0.0);
     let delta = 40.0f32;
     let mut want = Vec::new();
     for k in 0..scene.novel.frames.len() {
