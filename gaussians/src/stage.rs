@@ -249,6 +249,20 @@ pub fn evaluate(
     split: &str,
     renders: Option<&Path>,
 ) -> Result<Evaluation> {
+    evaluate_writing(model, views, split, renders.map(|r| (r, None)))
+}
+
+/// [`evaluate`], writing each render to `NNNN.png` in the first folder and, when given,
+/// its depth ([`write_depths`]' form) to `NNNN.exr` in the second, from one render.
+fn evaluate_writing(
+    model: &Model,
+    views: &[View],
+    split: &str,
+    out: Option<(&Path, Option<&Path>)>,
+) -> Result<Evaluation> {
+    if let Some(depth) = out.and_then(|o| o.1) {
+        std::fs::create_dir_all(depth).map_err(|e| Error::io(depth, e))?;
+    }
     let mut ev = Evaluation {
         split: split.to_string(),
         frames: views.len(),
@@ -257,8 +271,17 @@ pub fn evaluate(
     let mut base = Vec::new();
     for (i, v) in views.iter().enumerate() {
         let f = model.render(&v.camera, v.time);
-        if let Some(dir) = renders {
+        if let Some((dir, depth)) = out {
             write_png(dir.join(format!("{i:04}.png")), &f.rgb_image())?;
+            if let Some(depth) = depth {
+                let (w, h) = (f.width as u32, f.height as u32);
+                write_exr_depth(
+                    depth.join(format!("{i:04}.exr")),
+                    w,
+                    h,
+                    &f.normalised_depth(),
+                )?;
+            }
         }
         ev.psnr.push(metrics::psnr_u8(&f.rgb, &v.rgb).min(PSNR_CAP));
         ev.ssim
@@ -293,11 +316,8 @@ pub fn evaluate_novel(model: &Model, scene: &Scene, out: &Path) -> Result<Option
     }
     let views = load_views(scene, &scene.novel)?;
     let dir = out.join("renders").join("novel");
-    let ev = evaluate(model, &views, "novel", Some(&dir))?;
     let depth = out.join("renders").join("novel_depth");
-    std::fs::create_dir_all(&depth).map_err(|e| Error::io(&depth, e))?;
-    write_depths(model, &views, &depth)?;
-    Ok(Some(ev))
+    evaluate_writing(model, &views, "novel", Some((&dir, Some(&depth)))).map(Some)
 }
 
 /// Write `depth/NNNN.exr` for every view.

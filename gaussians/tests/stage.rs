@@ -234,6 +234,17 @@ fn trains_writes_every_output_and_reloads_identically() {
     let rn = stage::render(&out, &scene_dir, &rendered, Split::Novel, false).unwrap();
     assert_eq!(rn.evaluation.psnr, novel.psnr);
     assert_ne!(rn.evaluation.psnr, r.test.psnr);
+    // The novel views' depth written beside their renders is what `render` writes.
+    for i in 0..3 {
+        let read = |p: std::path::PathBuf| scene::image_io::read_exr_depth(p).unwrap();
+        let mine = read(out.join(format!("renders/novel_depth/{i:04}.exr")));
+        assert_eq!(
+            mine,
+            read(rendered.join(format!("depth/{i:04}.exr"))),
+            "view {i}"
+        );
+        assert!(mine.2.iter().any(|&z| z > 0.0));
+    }
     let inputs = report["inputs"].as_array().unwrap();
     assert!(
         inputs.iter().any(|i| i["path"]

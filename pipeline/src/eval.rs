@@ -40,7 +40,7 @@ pub struct Metrics {
     #[serde(default)]
     pub novel_covisible_psnr_mean: Option<f64>,
     /// The same means of SSIM over those pixels, and of the relative depth error over
-    /// the moving objects' pixels ([`crate::eval_masked::NovelMasks`]).
+    /// the moving objects' pixels ([`crate::eval_masked::MaskFigures`]).
     #[serde(default)]
     pub novel_moving_ssim_mean: Option<f64>,
     #[serde(default)]
@@ -320,7 +320,7 @@ pub fn eval_run_with(run_dir: &Path, lpips: crate::eval_lpips::LpipsUse) -> Resu
     let novel_sheet =
         crate::eval_sheet::write_sheet(&novel_pairs, &run_dir.join("novel_sheet.png"))?;
     for (f, m) in novel_frames.iter_mut().zip(&masks) {
-        f.masks = m.figures();
+        f.masks = *m;
     }
     let trajectory = render_stage
         .as_deref()

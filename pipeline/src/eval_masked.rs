@@ -9,7 +9,7 @@
 //!   [`synth::covis`]; the masked PSNR of Gao et al., NeurIPS 2022).
 
 use anyhow::{Result, bail};
-use scene::image_io::read_image;
+use scene::image_io::{Image, read_image};
 use std::path::Path;
 
 /// Object ids (`k + 1` for `objects[k]`) of the objects that move; None when the scene
@@ -27,81 +27,71 @@ pub fn moving_ids(scene_dir: &Path) -> Option<Vec<u16>> {
     )
 }
 
-/// PSNR (dB, 8-bit levels, every channel, at most `cap`) and SSIM (the per-pixel SSIM
-/// map's mean, [`scene::metrics::ssim_map_u8`]) of `render` against `test` over the
-/// pixels where `mask` holds; None when it holds nowhere.
-pub fn masked_scores(
-    test: &Path,
-    render: &Path,
-    mask: &[bool],
-    cap: f64,
-) -> Result<Option<(f64, f64)>> {
-    let (a, b) = (read_image(test)?, read_image(render)?);
-    let n = (a.width * a.height) as usize;
-    if (b.width, b.height, b.channels) != (a.width, a.height, a.channels) || mask.len() != n {
-        bail!(
-            "{}: {}x{} does not match {} ({}x{}, mask of {} pixels)",
-            render.display(),
-            b.width,
-            b.height,
-            test.display(),
-            a.width,
-            a.height,
-            mask.len()
-        );
-    }
-    let c = a.channels as usize;
-    let level = |v: f32| f64::from((v.clamp(0.0, 1.0) * 255.0).round());
-    let (mut sum, mut count) = (0.0, 0usize);
-    for (p, _) in mask.iter().enumerate().filter(|(_, m)| **m) {
-        for k in p * c..(p + 1) * c {
-            sum += (level(a.data[k]) - level(b.data[k])).powi(2);
+/// A novel view and its render, read once, with their per-pixel SSIM map
+/// ([`scene::metrics::ssim_map_u8`]), to score on any number of masks.
+struct Pair {
+    test: Image,
+    render: Image,
+    ssim: Vec<f64>,
+}
+
+impl Pair {
+    fn read(test: &Path, render: &Path) -> Result<Pair> {
+        let (a, b) = (read_image(test)?, read_image(render)?);
+        if (b.width, b.height, b.channels) != (a.width, a.height, a.channels) {
+            bail!(
+                "{}: {}x{} does not match {} ({}x{})",
+                render.display(),
+                b.width,
+                b.height,
+                test.display(),
+                a.width,
+                a.height
+            );
         }
-        count += c;
+        let (w, h, c) = (a.width as usize, a.height as usize, a.channels as usize);
+        let planar = |img: &Image| scene::metrics::interleaved_to_planar(&img.data, w, h, c);
+        let ssim = scene::metrics::ssim_map_u8(&planar(&a), &planar(&b), w, h);
+        Ok(Pair {
+            test: a,
+            render: b,
+            ssim,
+        })
     }
-    if count == 0 {
-        return Ok(None);
+
+    /// PSNR (dB, 8-bit levels, every channel, at most `cap`) and SSIM (the map's mean)
+    /// over the pixels where `mask` holds; None when it holds nowhere.
+    fn scores(&self, mask: &[bool], cap: f64) -> Result<Option<(f64, f64)>> {
+        let (a, b) = (&self.test, &self.render);
+        if mask.len() != self.ssim.len() {
+            bail!(
+                "a mask of {} pixels for {}x{} images",
+                mask.len(),
+                a.width,
+                a.height
+            );
+        }
+        let c = a.channels as usize;
+        let level = |v: f32| f64::from((v.clamp(0.0, 1.0) * 255.0).round());
+        let (mut sum, mut ssim, mut pixels) = (0.0, 0.0, 0usize);
+        for (p, _) in mask.iter().enumerate().filter(|(_, m)| **m) {
+            for k in p * c..(p + 1) * c {
+                sum += (level(a.data[k]) - level(b.data[k])).powi(2);
+            }
+            ssim += self.ssim[p];
+            pixels += 1;
+        }
+        if pixels == 0 {
+            return Ok(None);
+        }
+        let mse = sum / (pixels * c) as f64;
+        let psnr = if mse == 0.0 {
+            cap
+        } else {
+            (10.0 * (255.0f64.powi(2) / mse).log10()).min(cap)
+        };
+        Ok(Some((psnr, ssim / pixels as f64)))
     }
-    let mse = sum / count as f64;
-    let psnr = if mse == 0.0 {
-        cap
-    } else {
-        (10.0 * (255.0f64.powi(2) / mse).log10()).min(cap)
-    };
-    let (w, h) = (a.width as usize, a.height as usize);
-    let planar =
-        |img: &scene::image_io::Image| scene::metrics::interleaved_to_planar(&img.data, w, h, c);
-    let map = scene::metrics::ssim_map_u8(&planar(&a), &planar(&b), w, h);
-    let ssim = mask
-        .iter()
-        .zip(&map)
-        .filter(|(m, _)| **m)
-        .map(|(_, s)| s)
-        .sum::<f64>()
-        / (count / c) as f64;
-    Ok(Some((psnr, ssim)))
-}
-
-/// A novel frame's score on one mask: how many pixels it holds, and their PSNR and SSIM
-/// (None when it holds none).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct MaskScore {
-    pub pixels: usize,
-    pub psnr: Option<f64>,
-    pub ssim: Option<f64>,
-}
-
-/// Each novel frame's scores on its moving-object and co-visible pixels, and the depth
-/// error on its moving-object pixels.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct NovelMasks {
-    pub moving: Option<MaskScore>,
-    pub covisible: Option<MaskScore>,
-    /// Mean relative depth error `|d − d_gt| / d_gt` of the render over the moving
-    /// objects' pixels (a pixel the render leaves empty counts 1); None without the
-    /// render's depth (`<renders>/novel_depth/NAME.exr`) or the scene's
-    /// (`gt/novel/depth_NNNN.exr`).
-    pub moving_depth_error: Option<f64>,
 }
 
 /// A novel frame's figures in `metrics.json` (flattened into its frame record).
@@ -115,6 +105,10 @@ pub struct MaskFigures {
     pub moving_psnr: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub moving_ssim: Option<f64>,
+    /// Mean relative depth error `|d − d_gt| / d_gt` of the render over the moving
+    /// objects' pixels (a pixel the render leaves empty counts 1); None without the
+    /// render's depth (`<renders>/novel_depth/NAME.exr`) or the scene's
+    /// (`gt/novel/depth_NNNN.exr`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub moving_depth_error: Option<f64>,
     /// The pixels some train view saw, and the PSNR and SSIM over them.
@@ -126,22 +120,7 @@ pub struct MaskFigures {
     pub covisible_ssim: Option<f64>,
 }
 
-impl NovelMasks {
-    /// The figures as `metrics.json` records them.
-    pub fn figures(&self) -> MaskFigures {
-        MaskFigures {
-            moving_pixels: self.moving.map(|s| s.pixels),
-            moving_psnr: self.moving.and_then(|s| s.psnr),
-            moving_ssim: self.moving.and_then(|s| s.ssim),
-            moving_depth_error: self.moving_depth_error,
-            covisible_pixels: self.covisible.map(|s| s.pixels),
-            covisible_psnr: self.covisible.and_then(|s| s.psnr),
-            covisible_ssim: self.covisible.and_then(|s| s.ssim),
-        }
-    }
-}
-
-/// Mean relative depth error over `mask` (see [`NovelMasks::moving_depth_error`]).
+/// Mean relative depth error over `mask` (see [`MaskFigures::moving_depth_error`]).
 pub fn depth_error(render: &Path, gt: &Path, mask: &[bool]) -> Result<Option<f64>> {
     let (w, h, d) = scene::image_io::read_exr_depth(render)?;
     let (gw, gh, g) = scene::image_io::read_exr_depth(gt)?;
@@ -167,15 +146,16 @@ pub fn depth_error(render: &Path, gt: &Path, mask: &[bool]) -> Result<Option<f64
     Ok((n > 0).then(|| sum / n as f64))
 }
 
-/// The masked scores of each novel `(ground truth, render)` pair, in order (novel view k
-/// has `gt/novel/*_kkkk.png`); a mask the scene lacks is None. `depth_dir`: where the
-/// render stage wrote the novel views' depth (`NAME.exr` for render `NAME.png`).
+/// The masked figures of each novel `(ground truth, render)` pair, in order (novel view
+/// k has `gt/novel/*_kkkk.png`); a mask the scene lacks leaves its figures None.
+/// `depth_dir`: where the render stage wrote the novel views' depth (`NAME.exr` for
+/// render `NAME.png`).
 pub fn novel_masks(
     scene_dir: &Path,
     pairs: &[(&Path, &Path)],
     depth_dir: Option<&Path>,
     cap: f64,
-) -> Result<Vec<NovelMasks>> {
+) -> Result<Vec<MaskFigures>> {
     let ids = moving_ids(scene_dir);
     let mut out = Vec::with_capacity(pairs.len());
     for (k, (test, render)) in pairs.iter().enumerate() {
@@ -187,32 +167,36 @@ pub fn novel_masks(
             let (_, _, values) = synth::gt::read_object_png(&path)?;
             Ok(Some(values.iter().map(|&v| keep(v)).collect()))
         };
-        let score = |mask: &Option<Vec<bool>>| -> Result<Option<MaskScore>> {
-            let Some(mask) = mask else { return Ok(None) };
-            let s = masked_scores(test, render, mask, cap)?;
-            Ok(Some(MaskScore {
-                pixels: mask.iter().filter(|m| **m).count(),
-                psnr: s.map(|s| s.0),
-                ssim: s.map(|s| s.1),
-            }))
-        };
         let moving = match &ids {
             Some(ids) => mask_of("object", &|o| ids.contains(&o))?,
             None => None,
         };
-        let gt_depth = scene_dir.join(format!("gt/novel/depth_{k:04}.exr"));
-        let depth = depth_dir.and_then(|d| Some(d.join(render.file_stem()?).with_extension("exr")));
-        let moving_depth_error = match (&moving, depth) {
-            (Some(mask), Some(d)) if d.is_file() && gt_depth.is_file() => {
-                depth_error(&d, &gt_depth, mask)?
+        let covisible = mask_of("covisible", &|v| v != 0)?;
+        let mut f = MaskFigures::default();
+        if moving.is_none() && covisible.is_none() {
+            out.push(f);
+            continue;
+        }
+        let pair = Pair::read(test, render)?;
+        let count = |m: &[bool]| m.iter().filter(|v| **v).count();
+        if let Some(mask) = &moving {
+            let s = pair.scores(mask, cap)?;
+            (f.moving_pixels, f.moving_psnr, f.moving_ssim) =
+                (Some(count(mask)), s.map(|s| s.0), s.map(|s| s.1));
+            let gt_depth = scene_dir.join(format!("gt/novel/depth_{k:04}.exr"));
+            let depth = depth_dir
+                .and_then(|d| Some(d.join(render.file_stem()?).with_extension("exr")))
+                .filter(|d| d.is_file() && gt_depth.is_file());
+            if let Some(d) = depth {
+                f.moving_depth_error = depth_error(&d, &gt_depth, mask)?;
             }
-            _ => None,
-        };
-        out.push(NovelMasks {
-            moving: score(&moving)?,
-            covisible: score(&mask_of("covisible", &|v| v != 0)?)?,
-            moving_depth_error,
-        });
+        }
+        if let Some(mask) = &covisible {
+            let s = pair.scores(mask, cap)?;
+            (f.covisible_pixels, f.covisible_psnr, f.covisible_ssim) =
+                (Some(count(mask)), s.map(|s| s.0), s.map(|s| s.1));
+        }
+        out.push(f);
     }
     Ok(out)
 }
