@@ -1,0 +1,78 @@
+//! Diagnostic for synthetic scenes (`degs synth`), issue #30: initial Gaussians at the
+//! ground-truth depth of some train frames, one per pixel, for `gaussians train
+//! --init-ply`. It measures what a right initial depth alone is worth (BENCHMARKS.md,
+//! "Why moving objects smear"), against the stereo init, which assumes a still scene and
+//! puts the moving objects at the wrong depth.
+//!
+//! ```text
+//! cargo run --release -p degs-gaussians --example gt_init -- SCENE OUT.ply [FRAMES] [MOVING_IDS]
+//! ```
+//!
+//! `FRAMES`: comma-separated train frame indices (default `0`). `MOVING_IDS`: object ids
+//! (`gt/train/object_NNNN.png`: k + 1 for `objects[k]`) whose pixels are taken from the
+//! first listed frame only, so that each moving object starts as one copy (default: none,
+//! every pixel of every listed frame). Pixels without a surface (infinite depth) are
+//! skipped. Colours are the frame's pixel values, opacity 0.5, isotropic footprint of one
+//! pixel at the point's depth.
+
+use gaussians::splats::{Gaussian, Splats};
+use glam::DVec2;
+use std::path::Path;
+
+fn list<T: std::str::FromStr>(arg: Option<&String>, default: Vec<T>) -> Vec<T> {
+    match arg {
+        None => default,
+        Some(s) => s
+            .split(',')
+            .map(|v| {
+                v.trim()
+                    .parse()
+                    .ok()
+                    .expect("a comma-separated list of numbers")
+            })
+            .collect(),
+    }
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<String> = std::env::args().collect();
+    if args.len() < 3 {
+        eprintln!("usage: gt_init SCENE OUT.ply [FRAMES] [MOVING_IDS]");
+        std::process::exit(2);
+    }
+    let scene = scene::manifest::Scene::open(&args[1])?;
+    let frames: Vec<usize> = list(args.get(3), vec![0]);
+    let moving: Vec<u16> = list(args.get(4), Vec::new());
+    const SH_C0: f32 = 0.282_094_8;
+    let mut splats = Splats::default();
+    for (n, &k) in frames.iter().enumerate() {
+        let frame = scene
+            .train
+            .frames
+            .get(k)
+            .ok_or_else(|| format!("{}: no train frame {k}", args[1]))?;
+        let cam = scene.camera(frame);
+        let gt = scene.root.join("gt").join("train");
+        let (w, h, depth) = scene::image_io::read_exr_depth(gt.join(format!("depth_{k:04}.exr")))?;
+        let (_, _, ids) = synth::gt::read_object_png(gt.join(format!("object_{k:04}.png")))?;
+        let rgb = scene::image_io::read_image(scene.image_path(frame))?;
+        for y in 0..h as usize {
+            for x in 0..w as usize {
+                let i = y * w as usize + x;
+                let d = depth[i] as f64;
+                if !(d.is_finite() && d > 0.0 && d < 1e4) || (n > 0 && moving.contains(&ids[i])) {
+                    continue;
+                }
+                let p = cam.unproject_world(DVec2::new(x as f64 + 0.5, y as f64 + 0.5), d);
+                let c = &rgb.data[3 * i..3 * i + 3];
+                let sh = [c[0], c[1], c[2]].map(|v| (v - 0.5) / SH_C0);
+                let scale = (0.5 * d / cam.intrinsics.fx) as f32;
+                let mean = [p.x as f32, p.y as f32, p.z as f32];
+                splats.push(Gaussian::isotropic(mean, scale.ln(), 0.0, sh));
+            }
+        }
+    }
+    gaussians::ply::write(Path::new(&args[2]), &splats, 0)?;
+    eprintln!("{}: {} Gaussians", args[2], splats.len());
+    Ok(())
+}
