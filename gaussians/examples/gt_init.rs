@@ -5,7 +5,7 @@
 //! puts the moving objects at the wrong depth.
 //!
 //! ```text
-//! cargo run --release -p degs-gaussians --example gt_init -- SCENE OUT.ply [FRAMES] [MOVING_IDS]
+//! cargo run --release -p degs-gaussians --example gt_init -- SCENE OUT.ply [FRAMES] [MOVING_IDS] [MOTION]
 //! ```
 //!
 //! `FRAMES`: comma-separated train frame indices (default `0`). `MOVING_IDS`: object ids
@@ -13,11 +13,34 @@
 //! first listed frame only, so that each moving object starts as one copy (default: none,
 //! every pixel of every listed frame). Pixels without a surface (infinite depth) are
 //! skipped. Colours are the frame's pixel values, opacity 0.5, isotropic footprint of one
-//! pixel at the point's depth.
+//! pixel at the point's depth. `MOTION` (a path): also the true trajectories, for
+//! `--init-motion`: the moving objects' Gaussians get the quadratic (about the
+//! recording's middle, `gaussians::motion`) fitted by least squares to their surface
+//! point's analytic positions at the train times, and sit where that fit puts them at the
+//! middle; every other Gaussian is still.
 
 use gaussians::splats::{Gaussian, Splats};
-use glam::DVec2;
+use glam::{DMat3, DVec2, DVec3};
 use std::path::Path;
+
+/// Least squares `x(t) ≈ μ + v·τ + a·τ²` (τ = t − T0) over `(t, x)` samples: `(μ, v, a)`.
+fn fit_quadratic(samples: &[(f64, DVec3)]) -> (DVec3, DVec3, DVec3) {
+    let t0 = gaussians::motion::T0 as f64;
+    let mut ata = DMat3::ZERO;
+    let mut atb = [DVec3::ZERO; 3];
+    for &(t, x) in samples {
+        let b = [1.0, t - t0, (t - t0) * (t - t0)];
+        for r in 0..3 {
+            for c in 0..3 {
+                ata.col_mut(c)[r] += b[r] * b[c];
+            }
+            atb[r] += b[r] * x;
+        }
+    }
+    let inv = ata.inverse();
+    let coef = |r: usize| (0..3).fold(DVec3::ZERO, |acc, c| acc + inv.col(c)[r] * atb[c]);
+    (coef(0), coef(1), coef(2))
+}
 
 fn list<T: std::str::FromStr>(arg: Option<&String>, default: Vec<T>) -> Vec<T> {
     match arg {
@@ -43,6 +66,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let scene = scene::manifest::Scene::open(&args[1])?;
     let frames: Vec<usize> = list(args.get(3), vec![0]);
     let moving: Vec<u16> = list(args.get(4), Vec::new());
+    let motion_out = args.get(5);
+    let world = match motion_out {
+        None => None,
+        Some(_) => {
+            let text = std::fs::read_to_string(scene.root.join("synth.json"))?;
+            let cfg: synth::SynthConfig = serde_json::from_str(&text)?;
+            Some(synth::SynthWorld::new(&cfg)?)
+        }
+    };
+    let mut motion = Vec::new();
     const SH_C0: f32 = 0.282_094_8;
     let mut splats = Splats::default();
     for (n, &k) in frames.iter().enumerate() {
@@ -63,16 +96,38 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 if !(d.is_finite() && d > 0.0 && d < 1e4) || (n > 0 && moving.contains(&ids[i])) {
                     continue;
                 }
-                let p = cam.unproject_world(DVec2::new(x as f64 + 0.5, y as f64 + 0.5), d);
+                let px = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
+                let mut p = cam.unproject_world(px, d);
+                let mut m = [0.0f32; 6];
+                if let Some(world) = &world
+                    && moving.contains(&ids[i])
+                    && let Some(hit) = world.cast(frame.timestamp, px)
+                {
+                    let path: Vec<(f64, DVec3)> = (scene.train.frames.iter())
+                        .map(|f| {
+                            (
+                                f.time,
+                                world.material_to_world(hit.object, hit.local, f.timestamp),
+                            )
+                        })
+                        .collect();
+                    let (mu, v, a) = fit_quadratic(&path);
+                    p = mu;
+                    m = [v.x, v.y, v.z, a.x, a.y, a.z].map(|c| c as f32);
+                }
                 let c = &rgb.data[3 * i..3 * i + 3];
                 let sh = [c[0], c[1], c[2]].map(|v| (v - 0.5) / SH_C0);
                 let scale = (0.5 * d / cam.intrinsics.fx) as f32;
                 let mean = [p.x as f32, p.y as f32, p.z as f32];
                 splats.push(Gaussian::isotropic(mean, scale.ln(), 0.0, sh));
+                motion.push(m);
             }
         }
     }
     gaussians::ply::write(Path::new(&args[2]), &splats, 0)?;
+    if let Some(path) = motion_out {
+        gaussians::model::motion_file::write(Path::new(path), &motion)?;
+    }
     eprintln!("{}: {} Gaussians", args[2], splats.len());
     Ok(())
 }

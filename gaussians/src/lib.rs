@@ -1,6 +1,7 @@
 //! `gaussians`: a dynamic 3D Gaussian model (canonical [`Splats`] + deformation
-//! [`field`]), its differentiable CPU [`raster`]izer and the RGB warm-up that trains it
-//! ([`train`], run as a stage by [`stage`]).
+//! [`field`] + per-Gaussian trajectories, [`motion`]), its differentiable CPU
+//! [`raster`]izer and the RGB warm-up that trains it ([`train`], run as a stage by
+//! [`stage`]).
 //!
 //! The core types other crates build on are re-exported here: [`Splats`] /
 //! [`Gaussian`] (the parameters), [`SplatGrads`] (their gradients), the [`Rasterizer`]
@@ -9,6 +10,7 @@
 pub mod densify;
 pub mod field;
 pub mod model;
+pub mod motion;
 pub use scene::optim;
 pub mod ply;
 pub mod progress;

@@ -19,6 +19,9 @@ pub struct Splats {
     /// Per Gaussian: deformed by the field (used when `TrainSettings::dynamic_only`).
     /// Empty when the Gaussians carry no flags (every Gaussian counts as dynamic).
     pub dynamic: Vec<bool>,
+    /// Per Gaussian: its own trajectory `[v; a]` ([`crate::motion`]). Empty when the
+    /// Gaussians have none (every centre still unless the field moves it).
+    pub motion: Vec<[f32; 6]>,
 }
 
 impl Clone for Splats {
@@ -35,6 +38,7 @@ impl Clone for Splats {
         self.sh_dc.clone_from(&src.sh_dc);
         self.sh_rest.clone_from(&src.sh_rest);
         self.dynamic.clone_from(&src.dynamic);
+        self.motion.clone_from(&src.motion);
     }
 }
 
@@ -78,6 +82,7 @@ impl Splats {
             sh_dc: Vec::with_capacity(n),
             sh_rest: Vec::with_capacity(n),
             dynamic: Vec::with_capacity(n),
+            motion: Vec::new(),
         }
     }
 
@@ -89,8 +94,12 @@ impl Splats {
         self.means.is_empty()
     }
 
-    /// Append a Gaussian, its dynamic flag included.
+    /// Append a Gaussian, its dynamic flag included (and a still trajectory when the
+    /// Gaussians have trajectories).
     pub fn push(&mut self, g: Gaussian) {
+        if !self.motion.is_empty() {
+            self.motion.push([0.0; 6]);
+        }
         self.means.push(g.mean);
         self.log_scales.push(g.log_scale);
         self.rotations.push(g.rotation);
@@ -148,6 +157,8 @@ pub struct SplatGrads {
     pub screen_grad_norm: Vec<f32>,
     /// Screen radius in pixels (0 = not rendered).
     pub radius: Vec<f32>,
+    /// The trajectories' gradient ([`crate::motion::backward`]; empty without them).
+    pub motion: Vec<[f32; 6]>,
 }
 
 impl SplatGrads {
@@ -162,6 +173,7 @@ impl SplatGrads {
             sh_rest: vec![[0.0; 45]; n],
             screen_grad_norm: vec![0.0; n],
             radius: vec![0.0; n],
+            motion: Vec::new(),
         }
     }
 

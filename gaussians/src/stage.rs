@@ -51,6 +51,11 @@ pub struct TrainArgs {
     /// Initial Gaussians from a 3DGS PLY (e.g. SfM points) instead of `--init`
     #[arg(long)]
     pub init_ply: Option<PathBuf>,
+    /// Trajectories of the `--init-ply` Gaussians (safetensors, tensor `motion`, F32
+    /// [n, 6]: velocity and acceleration per Gaussian about the recording's middle;
+    /// `gaussians::motion`); without it the Gaussians start still
+    #[arg(long, requires = "init_ply")]
+    pub init_motion: Option<PathBuf>,
     /// Initial Gaussians without a PLY
     #[arg(long, value_enum)]
     pub init: Option<Init>,
@@ -216,8 +221,8 @@ fn hash_file(path: &Path) -> Result<InputHash> {
     })
 }
 
-/// Hashes of the manifests, every image and the initial point cloud.
-fn input_hashes(scene: &Scene, init_ply: Option<&Path>) -> Result<Vec<InputHash>> {
+/// Hashes of the manifests, every image, the initial point cloud and its trajectories.
+fn input_hashes(scene: &Scene, init: [Option<&Path>; 2]) -> Result<Vec<InputHash>> {
     let mut out = Vec::new();
     use scene::manifest::{NOVEL_FILE, TEST_FILE, TRAIN_FILE};
     for name in [TRAIN_FILE, TEST_FILE, NOVEL_FILE] {
@@ -230,7 +235,7 @@ fn input_hashes(scene: &Scene, init_ply: Option<&Path>) -> Result<Vec<InputHash>
     for f in frames.chain(&scene.novel.frames) {
         out.push(hash_file(&scene.image_path(f))?);
     }
-    if let Some(p) = init_ply {
+    for p in init.into_iter().flatten() {
         out.push(hash_file(p)?);
     }
     Ok(out)
@@ -405,17 +410,34 @@ pub fn train(
     let mut rule = OutputRule::new("gaussians train")
         .force(args.force)
         .source(&args.scene);
-    if let Some(p) = &args.init_ply {
+    for p in args.init_ply.iter().chain(&args.init_motion) {
         rule = rule.source(p);
     }
     rule.check(&args.out)?;
     let scene = Scene::open(&args.scene)?;
     let views = load_views(&scene, &scene.train)?;
     let test_views = load_views(&scene, &scene.test)?;
-    let inputs = input_hashes(&scene, args.init_ply.as_deref())?;
+    let inputs = input_hashes(
+        &scene,
+        [args.init_ply.as_deref(), args.init_motion.as_deref()],
+    )?;
     phases.start("init");
     let (splats, init_surface_points, init_ply_dropped_transparent) =
         initial_splats(&settings, &views, args.init_ply.as_deref())?;
+    let mut splats = splats;
+    if let (Some(m), Some(p)) = (&args.init_motion, &args.init_ply) {
+        if init_ply_dropped_transparent > 0 {
+            return Err(Error::invalid(
+                m,
+                format!(
+                    "{} dropped {init_ply_dropped_transparent} fully transparent Gaussians, \
+                     so its rows no longer match the trajectories'",
+                    p.display()
+                ),
+            ));
+        }
+        splats.motion = crate::model::motion_file::read(m, splats.len())?;
+    }
     let cams: Vec<_> = views.iter().map(|v| v.camera).collect();
     let extent = scene_extent(&settings, &cams);
     let out = AtomicDir::new(&args.out, &rule)?;

@@ -2,12 +2,14 @@
 //! `point_cloud.ply` (canonical Gaussians, 3DGS layout), `dynamic.safetensors`
 //! (per-Gaussian dynamic flags, when the Gaussians carry them), `field.safetensors` +
 //! `field.json` (deformation field, when the model has one) and `model.json`
-//! ([`ModelInfo`]: SH degree, background, Gaussian count, which files belong to it).
+//! ([`ModelInfo`]: SH degree, background, Gaussian count, which files belong to it),
+//! and `motion.safetensors` (per-Gaussian trajectories, when the Gaussians have them).
 //!
 //! `model.json` format 1 held the dynamic flags as a string of `'0'`/`'1'`; such
 //! models still load.
 
 pub mod dynamic_flags;
+pub mod motion_file;
 pub mod size;
 
 use crate::field::{self, Mlp};
@@ -19,6 +21,7 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 pub use dynamic_flags::FLAGS_FILE;
+pub use motion_file::MOTION_FILE;
 
 pub const PLY_FILE: &str = "point_cloud.ply";
 pub const INFO_FILE: &str = "model.json";
@@ -52,6 +55,9 @@ pub struct ModelInfo {
     /// sized); the joint training's `regrow` restores it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gaussian_cap_before_sizing: Option<usize>,
+    /// Whether [`MOTION_FILE`] (per-Gaussian trajectories) belongs to the model.
+    #[serde(default)]
+    pub has_motion: bool,
 }
 
 impl Default for ModelInfo {
@@ -66,6 +72,7 @@ impl Default for ModelInfo {
             iterations: 0,
             has_dynamic_flags: false,
             gaussian_cap_before_sizing: None,
+            has_motion: false,
         }
     }
 }
@@ -125,7 +132,18 @@ impl Model {
                 format!("{} dynamic flags for {n} Gaussians", flags.len()),
             ));
         }
+        let motion = &self.splats.motion;
+        info.has_motion = !motion.is_empty();
+        if info.has_motion && motion.len() != n {
+            return Err(Error::invalid(
+                dir.join(MOTION_FILE),
+                format!("{} trajectories for {n} Gaussians", motion.len()),
+            ));
+        }
         crate::ply::write(&dir.join(PLY_FILE), &self.splats, info.sh_degree)?;
+        if info.has_motion {
+            motion_file::write(&dir.join(MOTION_FILE), motion)?;
+        }
         if info.has_dynamic_flags {
             dynamic_flags::write(&dir.join(FLAGS_FILE), flags)?;
         }
@@ -175,6 +193,9 @@ impl Model {
         } else if info.has_dynamic_flags {
             splats.dynamic = dynamic_flags::read(&dir.join(FLAGS_FILE), info.gaussians)?;
         }
+        if info.has_motion {
+            splats.motion = motion_file::read(&dir.join(MOTION_FILE), info.gaussians)?;
+        }
         // In memory the model is in the current layout (what `save` writes).
         info.format_version = FORMAT_VERSION;
         info.has_dynamic_flags = !splats.dynamic.is_empty();
@@ -190,16 +211,18 @@ impl Model {
         })
     }
 
-    /// The Gaussians deformed to normalised time `t` (the manifest's `time`); the
-    /// canonical ones when the model has no field.
+    /// The Gaussians deformed to normalised time `t` (the manifest's `time`): the field's
+    /// deltas and each centre's trajectory; the canonical ones when it has neither.
     pub fn at(&self, t: f32) -> Splats {
-        match &self.field {
+        let mut s = match &self.field {
             None => self.splats.clone(),
             Some(mlp) => {
                 let (d, _) = field::splat_deltas(mlp, &self.splats, t, self.info.dynamic_only);
                 field::deform_splats(&self.splats, &d)
             }
-        }
+        };
+        crate::motion::advance(&self.splats, t, &mut s.means);
+        s
     }
 
     /// Render colour, depth and alpha at a camera and normalised time.

@@ -9,6 +9,7 @@ pub mod field_probe;
 pub mod init;
 pub mod judge;
 pub mod rigidity;
+mod run;
 pub mod settings;
 pub mod sh_refit;
 pub mod sizing;
@@ -20,6 +21,7 @@ use crate::field::{self, Mlp};
 use crate::optim::{Adam, ExpSchedule};
 use crate::raster::{Rasterizer, RenderedImage};
 use crate::splats::{SplatGrads, Splats};
+pub use run::RunSummary;
 use scene::Camera;
 use scene::metrics;
 pub use settings::TrainSettings;
@@ -38,6 +40,8 @@ pub struct View {
 pub struct ViewRender<S> {
     pub image: RenderedImage,
     pub camera: Camera,
+    /// Normalised time of the view.
+    pub time: f32,
     /// The Gaussians as rendered (deformed to the view's time).
     pub deformed: Splats,
     deltas: Option<(field::Deltas, field::MlpCache<f32>)>,
@@ -106,13 +110,14 @@ struct Spare {
 /// Views and gradients kept for reuse (the joint training renders two views a step).
 const SPARE_MAX: usize = 2;
 
-const GROUPS: [&str; 6] = [
+const GROUPS: [&str; 7] = [
     "means",
     "log_scales",
     "rotations",
     "opacity",
     "sh_dc",
     "sh_rest",
+    "motion",
 ];
 
 impl Trainer {
@@ -121,7 +126,7 @@ impl Trainer {
         let n = splats.len();
         let mut adam = Adam::default();
         let s = &settings;
-        let widths = [3, 3, 4, 1, 3, 45];
+        let widths = [3, 3, 4, 1, 3, 45, crate::motion::WIDTH];
         let lrs = [
             s.position_lr_init * extent as f64,
             s.scaling_lr,
@@ -129,8 +134,9 @@ impl Trainer {
             s.opacity_lr,
             s.feature_lr,
             s.feature_lr / 20.0,
+            s.position_lr_init * extent as f64,
         ];
-        for k in 0..6 {
+        for k in 0..GROUPS.len() {
             adam.add_group(GROUPS[k], lrs[k], 1e-15, widths[k], n * widths[k]);
         }
         let mut field = Mlp::<f32>::new(s.field, s.field.seed);
@@ -197,11 +203,14 @@ impl Trainer {
 
     /// The Gaussians at time `t` (deformed when the field is on), with the deltas used.
     pub fn deformed(&self, t: f32) -> (Splats, Option<(field::Deltas, field::MlpCache<f32>)>) {
-        if !self.field_on() {
-            return (self.splats.clone(), None);
-        }
-        let (d, cache) = self.field_deltas(t);
-        (field::deform_splats(&self.splats, &d), Some((d, cache)))
+        let (mut s, d) = if self.field_on() {
+            let (d, cache) = self.field_deltas(t);
+            (field::deform_splats(&self.splats, &d), Some((d, cache)))
+        } else {
+            (self.splats.clone(), None)
+        };
+        crate::motion::advance(&self.splats, t, &mut s.means);
+        (s, d)
     }
 
     /// Field deltas for every Gaussian at time `t`.
@@ -246,6 +255,7 @@ impl Trainer {
             deformed.clone_from(&self.splats);
             None
         };
+        crate::motion::advance(&self.splats, t, &mut deformed.means);
         let (image, state) = r.render_reusing(
             &deformed,
             camera,
@@ -256,6 +266,7 @@ impl Trainer {
         ViewRender {
             image,
             camera: *camera,
+            time: t,
             deformed,
             deltas,
             state,
@@ -284,6 +295,7 @@ impl Trainer {
                 (0..3).for_each(|c| a[c] += b[c]);
             }
         }
+        crate::motion::backward(&self.splats, v.time, &g.means, &mut g.motion);
         out.field.clear();
         if let Some((d, cache)) = &v.deltas {
             let mut spare = self.spare();
@@ -460,6 +472,7 @@ impl Trainer {
             s.iterations as u64,
         );
         self.adam.groups[0].lr = pos.at(it as u64);
+        self.adam.groups[6].lr = pos.at(it as u64);
         let sp = &mut self.splats;
         self.adam
             .step(0, sp.means.as_flattened_mut(), g.means.as_flattened());
@@ -478,6 +491,10 @@ impl Trainer {
             .step(4, sp.sh_dc.as_flattened_mut(), g.sh_dc.as_flattened());
         self.adam
             .step(5, sp.sh_rest.as_flattened_mut(), g.sh_rest.as_flattened());
+        if !sp.motion.is_empty() && g.motion.len() == sp.motion.len() {
+            self.adam
+                .step(6, sp.motion.as_flattened_mut(), g.motion.as_flattened());
+        }
     }
 
     fn densify_if_due(&mut self) {
@@ -512,9 +529,14 @@ impl Trainer {
                 } else {
                     Vec::new()
                 },
+                motion: if sp.motion.len() == sp.len() {
+                    plan.gather(&sp.motion)
+                } else {
+                    Vec::new()
+                },
             };
             let src = plan.moment_sources();
-            for k in 0..6 {
+            for k in 0..GROUPS.len() {
                 self.adam.remap(k, &src);
             }
             self.splats = new;
@@ -528,62 +550,5 @@ impl Trainer {
             let n = self.splats.len();
             self.adam.reset_items(3, 0..n);
         }
-    }
-}
-
-/// Steps and wall time per phase and how the run ended (for `report.json`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
-pub struct RunSummary {
-    /// The trainer's iteration count at the end of the run.
-    pub iterations: u32,
-    /// Steps this run took before / after the field was switched on.
-    pub static_steps: u32,
-    pub deform_steps: u32,
-    pub static_seconds: f64,
-    pub deform_seconds: f64,
-    pub interrupted: bool,
-    pub final_loss: f64,
-    pub gaussians: usize,
-}
-
-impl Trainer {
-    /// Train until `settings.iterations` or until `stop` is set (e.g. by a SIGINT
-    /// handler); the state stays consistent at every step boundary, so an interrupted
-    /// run can still be saved. `on_step` receives every step's figures (progress bar).
-    pub fn run<R: Rasterizer>(
-        &mut self,
-        r: &R,
-        views: &[View],
-        stop: &std::sync::atomic::AtomicBool,
-        mut on_step: impl FnMut(&StepInfo),
-    ) -> RunSummary
-    where
-        R::State: Send + 'static,
-    {
-        let mut sum = RunSummary::default();
-        while self.iteration < self.settings.iterations {
-            if stop.load(std::sync::atomic::Ordering::Relaxed) {
-                sum.interrupted = true;
-                break;
-            }
-            let t0 = std::time::Instant::now();
-            let before = self.iteration;
-            let info = self.step(r, views);
-            let dt = t0.elapsed().as_secs_f64();
-            // More than one when the field's width probe ran in this step.
-            let steps = self.iteration - before;
-            if info.field_on {
-                sum.deform_steps += steps;
-                sum.deform_seconds += dt;
-            } else {
-                sum.static_steps += steps;
-                sum.static_seconds += dt;
-            }
-            sum.final_loss = info.loss;
-            on_step(&info);
-        }
-        sum.iterations = self.iteration;
-        sum.gaussians = self.splats.len();
-        sum
     }
 }

@@ -253,6 +253,11 @@ pub fn gather(s: &Splats, keep: &[usize]) -> Splats {
         } else {
             Vec::new()
         },
+        motion: if s.motion.len() == s.len() {
+            keep.iter().map(|&i| s.motion[i]).collect()
+        } else {
+            Vec::new()
+        },
     }
 }
 

@@ -1,0 +1,69 @@
+//! Per-Gaussian trajectories ([`Splats::motion`], issue #30): each centre follows its
+//! own quadratic path in normalised time,
+//!
+//! ```text
+//! μ(t) = μ + v·τ + a·τ²,   τ = t − T0,   motion[i] = [v; a]
+//! ```
+//!
+//! on top of whatever the deformation field adds (`μ' = μ(t) + δx`). Why: the rendering
+//! loss does not move a textured object (its Gaussians' photometric gradients align them
+//! with the texture under them, not with the object's motion), so the motion has to come
+//! from correspondences, and a few numbers per Gaussian hold it where an MLP would have
+//! to learn it (BENCHMARKS.md, "What moves them"). `T0` is the middle of the recording, so
+//! `v` and `a` are uncorrelated over it and μ is the centre there.
+//!
+//! Empty [`Splats::motion`] = no trajectories (every centre still, the field alone moves
+//! it). The gradient: `∂μ(t)/∂v = τ·I`, `∂μ(t)/∂a = τ²·I`.
+
+use crate::splats::Splats;
+use rayon::prelude::*;
+
+/// Normalised time at which a Gaussian's centre is `μ` (the middle of the recording).
+pub const T0: f32 = 0.5;
+
+/// Values per Gaussian: velocity then acceleration, world units per normalised time.
+pub const WIDTH: usize = 6;
+
+/// `(τ, τ²)` of normalised time `t`.
+fn powers(t: f32) -> (f32, f32) {
+    let tau = t - T0;
+    (tau, tau * tau)
+}
+
+/// The trajectory's shift `v·τ + a·τ²` of Gaussian `i` at time `t` (0 without motion).
+pub fn shift(s: &Splats, i: usize, t: f32) -> [f32; 3] {
+    let Some(m) = s.motion.get(i) else {
+        return [0.0; 3];
+    };
+    let (p1, p2) = powers(t);
+    std::array::from_fn(|k| m[k] * p1 + m[3 + k] * p2)
+}
+
+/// Add every Gaussian's trajectory shift at time `t` to `means` (the centres of `s` as
+/// rendered, one per Gaussian); nothing when `s` has no motion.
+pub fn advance(s: &Splats, t: f32, means: &mut [[f32; 3]]) {
+    if s.motion.is_empty() {
+        return;
+    }
+    assert_eq!(s.motion.len(), means.len(), "motion: one row per Gaussian");
+    let (p1, p2) = powers(t);
+    (means, &s.motion)
+        .into_par_iter()
+        .with_min_len(4096)
+        .for_each(|(x, m)| (0..3).for_each(|k| x[k] += m[k] * p1 + m[3 + k] * p2));
+}
+
+/// Gradient of the trajectory parameters from the rendered centres' gradient `g_means`
+/// at time `t`, into `out` (resized; emptied when `s` has no motion).
+pub fn backward(s: &Splats, t: f32, g_means: &[[f32; 3]], out: &mut Vec<[f32; WIDTH]>) {
+    out.clear();
+    if s.motion.is_empty() {
+        return;
+    }
+    let (p1, p2) = powers(t);
+    out.resize(g_means.len(), [0.0; WIDTH]);
+    (out.as_mut_slice(), g_means)
+        .into_par_iter()
+        .with_min_len(4096)
+        .for_each(|(o, g)| *o = std::array::from_fn(|k| g[k % 3] * if k < 3 { p1 } else { p2 }));
+}

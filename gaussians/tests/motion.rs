@@ -1,0 +1,160 @@
+//! Per-Gaussian trajectories (`gaussians::motion`, `Splats::motion`): the rendered centre
+//! against the closed form `μ + v·τ + a·τ²` in f64, the trainer's gradient against
+//! central finite differences of a rendered loss, the model files' round trip, and the
+//! column following the Gaussians through gathering and growth.
+
+mod raster_common;
+
+use gaussians::model::{Model, motion_file};
+use gaussians::motion::{self, T0};
+use gaussians::raster::TileRasterizer;
+use gaussians::train::init::random_splats;
+use gaussians::train::{TrainSettings, Trainer};
+use rand::{RngExt, SeedableRng};
+
+fn random_motion(n: usize, seed: u64, scale: f32) -> Vec<[f32; 6]> {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    (0..n)
+        .map(|_| std::array::from_fn(|_| rng.random_range(-scale..scale)))
+        .collect()
+}
+
+#[test]
+fn a_centre_follows_its_quadratic_path() {
+    let mut s = random_splats(50, glam::DVec3::ZERO, 0.5, 1);
+    s.motion = random_motion(50, 2, 0.4);
+    for t in [0.0f32, 0.3, T0, 1.0] {
+        let mut means = s.means.clone();
+        motion::advance(&s, t, &mut means);
+        let tau = t as f64 - 0.5;
+        let rows = means.iter().zip(s.means.iter().zip(&s.motion));
+        for (i, (got, (mu, m))) in rows.enumerate() {
+            for k in 0..3 {
+                let want = mu[k] as f64 + m[k] as f64 * tau + m[3 + k] as f64 * tau * tau;
+                assert!((got[k] as f64 - want).abs() < 1e-6, "t {t}, Gaussian {i}");
+            }
+        }
+    }
+    // No trajectories: nothing moves.
+    let still = random_splats(5, glam::DVec3::ZERO, 0.5, 1);
+    let mut means = still.means.clone();
+    motion::advance(&still, 0.9, &mut means);
+    assert_eq!(means, still.means);
+}
+
+/// Without a field, the trainer's gradient of the trajectories matches central
+/// differences in f64 of `Σ w·rgb` rendered by the f64 reference rasterizer at the
+/// centres `μ + v·τ + a·τ²` (the scene of `raster_grad.rs`: Gaussians a few pixels to
+/// ten wide, so the loss is smooth), every parameter of every Gaussian.
+#[test]
+fn the_trainer_gradient_of_the_trajectories_matches_finite_differences() {
+    use gaussians::raster::reference::{self, Gaussians64};
+    use raster_common::{Rng, SceneKind};
+    let mut rng = Rng(77);
+    let kind = SceneKind {
+        n: 8,
+        spread: 1.2,
+        log_scale: (-2.6, -1.4),
+        logit: (-0.5, 1.2),
+        sh_rest: 0.0,
+    };
+    let mut splats = raster_common::random_splats(&mut rng, kind);
+    let n = splats.len();
+    splats.motion = random_motion(n, 4, 0.3);
+    let s = TrainSettings {
+        deform: false,
+        ..TrainSettings::default()
+    };
+    let tr = Trainer::new(s, splats, 1.0);
+    let (w, h) = (37u32, 29u32);
+    let cam = raster_common::camera(w, h, 34.0, glam::DVec3::new(0.1, 0.3, 4.0));
+    let t = 0.9f32;
+    let weights: Vec<f64> = (0..3 * w * h).map(|_| rng.uni(-1.0, 1.0)).collect();
+    let w32: Vec<f32> = weights.iter().map(|&x| x as f32).collect();
+    let r = TileRasterizer;
+    let v = tr.render_view(&r, &cam, t);
+    let g = tr.view_backward(&r, &v, &w32, None, None);
+    assert_eq!(g.splats.motion.len(), n);
+    let bg = tr.settings.background.map(f64::from);
+    let tau = t as f64 - 0.5;
+    let loss = |motion: &[[f64; 6]]| -> f64 {
+        let mut g64 = Gaussians64::from(&tr.splats);
+        for (m, mv) in g64.means.iter_mut().zip(motion) {
+            (0..3).for_each(|k| m[k] += mv[k] * tau + mv[3 + k] * tau * tau);
+        }
+        let f = reference::render(&g64, &cam, 0, bg);
+        f.rgb.iter().zip(&weights).map(|(a, b)| a * b).sum()
+    };
+    let base: Vec<[f64; 6]> = tr.splats.motion.iter().map(|m| m.map(f64::from)).collect();
+    let (mut num, mut den) = (0.0f64, 0.0f64);
+    const EPS: f64 = 1e-6;
+    for i in 0..n {
+        for k in 0..6 {
+            let mut m = base.clone();
+            m[i][k] += EPS;
+            let lp = loss(&m);
+            m[i][k] -= 2.0 * EPS;
+            let fd = (lp - loss(&m)) / (2.0 * EPS);
+            num += (g.splats.motion[i][k] as f64 - fd).powi(2);
+            den += fd * fd;
+        }
+    }
+    assert!(
+        den.sqrt() > 1e-3,
+        "the view must see the Gaussians move: {}",
+        den.sqrt()
+    );
+    let rel = num.sqrt() / den.sqrt();
+    assert!(
+        rel < 1e-3,
+        "relative error {rel:.2e} against f64 central differences"
+    );
+}
+
+#[test]
+fn a_saved_model_keeps_its_trajectories_and_moves_them() {
+    let mut splats = random_splats(30, glam::DVec3::ZERO, 0.5, 7);
+    splats.motion = random_motion(30, 8, 0.5);
+    let model = Model {
+        splats,
+        field: None,
+        info: Default::default(),
+    };
+    let dir = tempfile::tempdir().unwrap();
+    model.save(dir.path()).unwrap();
+    assert!(dir.path().join(motion_file::MOTION_FILE).is_file());
+    let back = Model::load(dir.path()).unwrap();
+    assert_eq!(back.splats.motion, model.splats.motion);
+    let at = back.at(0.2);
+    let tau = 0.2f64 - 0.5;
+    for i in 0..30 {
+        let (m, mu) = (model.splats.motion[i], model.splats.means[i]);
+        for k in 0..3 {
+            let want = mu[k] as f64 + m[k] as f64 * tau + m[3 + k] as f64 * tau * tau;
+            assert!((at.means[i][k] as f64 - want).abs() < 1e-6);
+        }
+    }
+    // A file of the wrong shape is refused, naming it.
+    let bad = dir.path().join("bad.safetensors");
+    motion_file::write(&bad, &model.splats.motion[..29]).unwrap();
+    let e = motion_file::read(&bad, 30).unwrap_err().to_string();
+    assert!(
+        e.contains("bad.safetensors") && e.contains("[30, 6]"),
+        "{e}"
+    );
+}
+
+#[test]
+fn trajectories_follow_their_gaussians() {
+    let mut s = random_splats(10, glam::DVec3::ZERO, 0.5, 9);
+    s.motion = random_motion(10, 10, 0.5);
+    let kept = gaussians::train::sizing::gather(&s, &[1, 4, 7]);
+    assert_eq!(kept.motion, vec![s.motion[1], s.motion[4], s.motion[7]]);
+    let mut grown = s.clone();
+    grown.push(s.get(3));
+    assert_eq!(grown.motion.len(), 11);
+    assert_eq!(grown.motion[10], [0.0; 6], "a new Gaussian starts still");
+    let mut none = random_splats(3, glam::DVec3::ZERO, 0.5, 9);
+    none.push(s.get(0));
+    assert!(none.motion.is_empty(), "no column appears by itself");
+}
