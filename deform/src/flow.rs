@@ -179,26 +179,9 @@ pub fn ego_flow<R: Real>(
         pts.v.len() == n && pts.inv_depth.len() == n,
         "ego_flow: lengths differ"
     );
-    out.resize(n);
-    out.u
-        .par_chunks_mut(CHUNK)
-        .zip(out.v.par_chunks_mut(CHUNK))
-        .zip(out.valid.par_chunks_mut(CHUNK))
-        .enumerate()
-        .for_each(|(c, ((fu, fv), ok))| {
-            let o = c * CHUNK;
-            for j in 0..fu.len() {
-                let (u, v, rho) = (pts.u[o + j], pts.v[o + j], pts.inv_depth[o + j]);
-                ok[j] = ego_valid(u, v, rho, max_inv_depth);
-                let f = if ok[j] {
-                    ego_flow_at(k, u, v, rho, vel)
-                } else {
-                    [R::ZERO; 2]
-                };
-                fu[j] = f[0];
-                fv[j] = f[1];
-            }
-        });
+    ego_flow_points(k, vel, n, CHUNK, max_inv_depth, out, |i| {
+        (pts.u[i], pts.v[i], pts.inv_depth[i])
+    });
 }
 
 /// Eq. 9 on a whole `width × height` inverse-depth map (row-major, pixel centres at
@@ -213,25 +196,42 @@ pub fn ego_flow_image<R: Real>(
 ) {
     let n = inv_depth.len();
     assert!(width > 0 && n.is_multiple_of(width), "ego_flow_image: size");
+    // One row per chunk.
+    ego_flow_points(k, vel, n, width, max_inv_depth, out, |i| {
+        let (u, v) = (i % width, i / width);
+        (R::from_f64(u as f64), R::from_f64(v as f64), inv_depth[i])
+    });
+}
+
+/// Eq. 9 at the `n` points `point(i) = (u, v, ρ)`, rayon over chunks of `chunk` points;
+/// invalid points ([`ego_valid`]) get zero flow. `out` is resized to `n`.
+fn ego_flow_points<R: Real>(
+    k: &Pinhole<R>,
+    vel: &[R; 6],
+    n: usize,
+    chunk: usize,
+    max_inv_depth: R,
+    out: &mut Flow2<R>,
+    point: impl Fn(usize) -> (R, R, R) + Sync,
+) {
     out.resize(n);
     out.u
-        .par_chunks_mut(width)
-        .zip(out.v.par_chunks_mut(width))
-        .zip(out.valid.par_chunks_mut(width))
+        .par_chunks_mut(chunk)
+        .zip(out.v.par_chunks_mut(chunk))
+        .zip(out.valid.par_chunks_mut(chunk))
         .enumerate()
-        .for_each(|(row, ((fu, fv), ok))| {
-            let v = R::from_f64(row as f64);
-            for x in 0..width {
-                let u = R::from_f64(x as f64);
-                let rho = inv_depth[row * width + x];
-                ok[x] = ego_valid(u, v, rho, max_inv_depth);
-                let f = if ok[x] {
+        .for_each(|(c, ((fu, fv), ok))| {
+            let o = c * chunk;
+            for j in 0..fu.len() {
+                let (u, v, rho) = point(o + j);
+                ok[j] = ego_valid(u, v, rho, max_inv_depth);
+                let f = if ok[j] {
                     ego_flow_at(k, u, v, rho, vel)
                 } else {
                     [R::ZERO; 2]
                 };
-                fu[x] = f[0];
-                fv[x] = f[1];
+                fu[j] = f[0];
+                fv[j] = f[1];
             }
         });
 }

@@ -20,7 +20,8 @@
 //! | [`rate_outliers`] | hot pixels and bursts: event-rate outliers left out of the pseudo images and of `L_motion` |
 //! | [`schedule`] | loss weights γ1, γ2(iter) (Eq. 13) |
 //! | [`lie`] | SO(3) exp/log and Jacobians, the two pose perturbations and gradient conversion between them |
-//! | [`real`] | the float trait |
+//! | [`baselines`] | the 2D baselines on the held-out frames: nearest train frame, linear blend, two-sided event pseudo image |
+//! | [`camera_check`] | the joint training's camera (interpolated, and with the PoseNet) against the held-out frames' recorded poses |
 //!
 //! **Conventions.** Camera axes OpenGL (−Z forward, +Y up), poses camera-to-world, pixel
 //! `v` downwards (`scene::camera`); Eq. 9's computer-vision frame is converted inside
@@ -35,9 +36,9 @@
 //! `gaussians::train::Trainer`, rebinding through `assoc`, and falls back as
 //! [`fallbacks`] says on degenerate inputs; [`stage`] writes the outputs
 //! and `report.json`; [`settings`] holds every setting. The kernels depend only on
-//! `scene`, `glam`, `rayon` and `serde`. Imports between modules go one way only: any module may use the leaves
-//! `real` and `lie`, and `event_image`, `fallbacks`, `contrast` and `rate_outliers` use
-//! `event_counts`.
+//! `scene`, `glam`, `rayon` and `serde` (the float trait is `scene::real::Real`). Imports
+//! between modules go one way only: any module may use the leaf `lie`, and
+//! `event_image`, `fallbacks`, `contrast` and `rate_outliers` use `event_counts`.
 
 pub mod baselines;
 pub mod camera_check;

@@ -3,7 +3,8 @@
 //! paper's `γ1 = 1` weighs its per-channel `L_event`, ours defaults to `γ1 = 2` for the
 //! luminance form (the luminance of an error is never larger than the luma-weighted mean
 //! of its channels' errors, `|Σ w_c e_c| ≤ Σ w_c |e_c|`; measured better on all eight
-//! rows of the DEGS-against-RGB-only table: BENCHMARKS.md).
+//! rows of the DEGS-against-RGB-only table:
+//! docs/benchmarks/2026-11-24-joint-training-sessions-17-19.md, "γ1 = 2").
 //!
 //! `iter` counts the iterations of the joint phase (0 at its first iteration, the
 //! warm-up not included), so the motion loss starts at zero weight whatever the length

@@ -77,7 +77,7 @@ pub struct FlowSettings {
     /// last all of them (the finest level used moves down linearly over the epochs;
     /// with the stopping rule, over the epochs of `stop.min_steps`).
     /// On by default: on large per-window motion it keeps LoRA from sharpening the
-    /// events towards a wrong flow (BENCHMARKS.md, LoCM ablation).
+    /// events towards a wrong flow (docs/benchmarks/2026-11-23-locm-ablation.md).
     pub cm_coarse_to_fine: bool,
     /// Events per window used by the CM loss (even stride; 0 = all). Prediction always
     /// covers every event.
@@ -101,7 +101,8 @@ pub struct FlowSettings {
     /// `deform` binds events to Gaussians (within `assoc`'s δt = 10 ms); 0 = one per
     /// interval between consecutive train frames. The network assumes one flow per
     /// window, which a long interval of fast motion breaks (on `fast` at 4 fps: 92 %
-    /// outliers with interval windows, 1 % with 50 ms windows; BENCHMARKS.md).
+    /// outliers with interval windows, 1 % with 50 ms windows;
+    /// docs/benchmarks/2026-11-24-joint-training-sessions-17-19.md).
     pub frame_window: f64,
 }
 

@@ -44,8 +44,8 @@ pub struct DensifySettings {
 /// The warm-up's values, so a partial `[densify]` table in a `settings.toml` keeps them
 /// for the keys it does not name. 3DGS densifies until 15k of 30k iterations, resets
 /// opacity every 3k and has no cap; in a 3500-iteration warm-up a reset costs more than
-/// it gains (measured, BENCHMARKS.md), so densify until 2500, never reset, and cap the
-/// count automatically (`max_gaussians = 0`, see `TrainSettings::gaussian_cap`).
+/// it gains (measured: docs/benchmarks/2026-11-23-warm-up.md), so densify until 2500,
+/// never reset, and cap the count automatically (`max_gaussians = 0`, see `TrainSettings::gaussian_cap`).
 impl Default for DensifySettings {
     fn default() -> Self {
         DensifySettings {

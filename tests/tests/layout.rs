@@ -7,9 +7,15 @@
 //! `b::y` is an edge `a → b` among the children of the crate root); edges between a module
 //! and its own ancestors (a `mod.rs` using its children, a child using `super::`) are
 //! allowed. Each folder's children must then form a DAG.
+//!
+//! The documents that describe this shape (DESIGN §2 and §8, the README's crate list,
+//! each `lib.rs`'s module docs) are checked against it in `layout/docs.rs`.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
+
+#[path = "layout/docs.rs"]
+mod docs;
 
 const MAX_LINES: usize = 600;
 const MAX_MAIN_LINES: usize = 150;
@@ -501,49 +507,5 @@ fn no_source_file_is_over_600_lines_and_main_rs_is_thin() {
         long.is_empty(),
         "files over the limit:\n{}",
         long.join("\n")
-    );
-}
-
-/// `docs/DESIGN.md`'s equation table names files that exist and functions they define.
-#[test]
-fn design_equation_table_names_real_files_and_functions() {
-    let root = workspace_root();
-    let design = std::fs::read_to_string(root.join("docs/DESIGN.md")).unwrap();
-    let table: Vec<&str> = design
-        .lines()
-        .skip_while(|l| !l.starts_with("## 8."))
-        .take_while(|l| !l.starts_with("## 9."))
-        .filter(|l| l.starts_with("| ") && !l.starts_with("| Eq."))
-        .collect();
-    assert_eq!(table.len(), 15, "one row per equation (Eq. 1–15)");
-    let mut missing = Vec::new();
-    for row in table {
-        let ticked: Vec<&str> = row.split('`').skip(1).step_by(2).collect();
-        let files: Vec<&str> = ticked
-            .iter()
-            .copied()
-            .filter(|t| t.ends_with(".rs"))
-            .collect();
-        assert!(!files.is_empty(), "no file in row {row}");
-        let sources: String = files
-            .iter()
-            .map(|f| {
-                std::fs::read_to_string(root.join(f)).unwrap_or_else(|_| {
-                    missing.push(format!("{f} (file)"));
-                    String::new()
-                })
-            })
-            .collect();
-        for name in ticked.iter().filter(|t| !t.ends_with(".rs")) {
-            let f = name.rsplit("::").next().unwrap();
-            if !sources.contains(&format!("fn {f}")) {
-                missing.push(format!("{name} (function) in {files:?}"));
-            }
-        }
-    }
-    assert!(
-        missing.is_empty(),
-        "docs/DESIGN.md §8 names what does not exist:\n{}",
-        missing.join("\n")
     );
 }

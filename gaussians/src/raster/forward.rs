@@ -320,12 +320,32 @@ impl TileOut {
     }
 }
 
-/// Gaussian-outer, then for each row of the Gaussian's box the lane chunks that meet
-/// its ellipse; per lane branch-free (masked lanes get α = 0).
+/// What a front-to-back walk over one tile ([`walk_tile`]) does with the Gaussians'
+/// blending weights: the forward composites colour and depth, the contribution pass
+/// sums each Gaussian's weight. Monomorphised and inlined into each walk.
+pub(crate) trait TileSink<V: Lanes> {
+    /// Entry `k` of the tile's list, Gaussian `g`, comes next.
+    fn gaussian(&mut self, p: &Projected, k: usize, g: usize);
+    /// Its blending weights `w = α·T` on the lanes `lanes` of tile row `row`; `used`
+    /// marks the lanes it composites on (`w` is 0 on the others).
+    fn chunk(&mut self, row: usize, lanes: std::ops::Range<usize>, w: V, used: V::M);
+    /// Done with entry `k`.
+    fn done(&mut self, k: usize);
+}
+
+/// Walk one tile front to back: Gaussian-outer, then for each row of the Gaussian's box
+/// the lane chunks that meet its ellipse; per lane branch-free (masked lanes get α = 0).
+/// `tt` is the tile's transmittance (all 1 at the start, final T at the end); a pixel
+/// stops before the Gaussian that would take its T below `T_MIN`.
 // Eq. 1: C = Σᵢ cᵢ αᵢ Πⱼ₍ⱼ<ᵢ₎ (1 − αⱼ), front to back (depth and alpha alike).
 #[inline(always)]
-fn tile_forward_lanes<V: Lanes>(p: &Projected, list: &[u32], r: [usize; 4]) -> TileOut {
-    let mut o = TileOut::blank();
+pub(crate) fn walk_tile<V: Lanes, S: TileSink<V>>(
+    p: &Projected,
+    list: &[u32],
+    r: [usize; 4],
+    tt: &mut Plane<f32>,
+    sink: &mut S,
+) {
     let n = V::N;
     let chunk_bits = lane_bits(0, n);
     // Bit per pixel of each row: set while the pixel still composites.
@@ -342,9 +362,8 @@ fn tile_forward_lanes<V: Lanes>(p: &Projected, list: &[u32], r: [usize; 4]) -> T
         let (x0, x1) = ((b[0] as usize).max(r[0]), (b[1] as usize + 1).min(r[1]));
         let (y0, y1) = ((b[2] as usize).max(r[2]), (b[3] as usize + 1).min(r[3]));
         let [u, v] = p.xy[g];
-        let (conic, op, col, dep) = (p.conic[g], p.opacity[g], p.color[g], p.depth[g]);
-        let (u4, col4, dep4) = (s(u), col.map(s), s(dep));
-        let kk = s((k + 1) as f32);
+        let (conic, op, u4) = (p.conic[g], p.opacity[g], s(u));
+        sink.gaussian(p, k, g);
         for y in y0..y1 {
             let row = y - r[2];
             let dyf = y as f32 - v;
@@ -365,7 +384,7 @@ fn tile_forward_lanes<V: Lanes>(p: &Projected, list: &[u32], r: [usize; 4]) -> T
                 let l = n * c..n * c + n;
                 let (a0, _) = eval_alpha(conic, op, xs[c] - u4, dy);
                 let a0 = a0.and(V::M::from_bits(bits));
-                let t = V::load(&o.t[row][l.clone()]);
+                let t = V::load(&tt[row][l.clone()]);
                 let test_t = t * (s(1.0) - a0);
                 let stop = a0.gt(s(0.0)).and(test_t.lt(s(T_MIN)));
                 let sb = stop.bits();
@@ -374,20 +393,63 @@ fn tile_forward_lanes<V: Lanes>(p: &Projected, list: &[u32], r: [usize; 4]) -> T
                 // Lanes that stop take nothing: α = 0 leaves colour and T as they are
                 // (`T·(1 − 0)` is T exactly).
                 let used = a0.gt(s(0.0)).and(V::M::from_bits(!sb));
-                let a = a0.and(used);
-                let w = a * t;
-                for ch in 0..3 {
-                    let dst = &mut o.rgb[ch][row][l.clone()];
-                    w.mul_add(col4[ch], V::load(dst)).store(dst);
-                }
-                let dst = &mut o.depth[row][l.clone()];
-                w.mul_add(dep4, V::load(dst)).store(dst);
-                V::select(used, test_t, t).store(&mut o.t[row][l.clone()]);
-                let dst = &mut o.last[row][l];
-                V::select(used, kk, V::load(dst)).store(dst);
+                let w = a0.and(used) * t;
+                sink.chunk(row, l.clone(), w, used);
+                V::select(used, test_t, t).store(&mut tt[row][l]);
             }
         }
+        sink.done(k);
     }
+}
+
+/// The forward's sink: colour, depth and the last contributing entry per pixel.
+struct Composite<'a, V> {
+    rgb: &'a mut [Plane<f32>; 3],
+    depth: &'a mut Plane<f32>,
+    last: &'a mut Plane<f32>,
+    col: [V; 3],
+    dep: V,
+    kk: V,
+}
+
+impl<V: Lanes> TileSink<V> for Composite<'_, V> {
+    #[inline(always)]
+    fn gaussian(&mut self, p: &Projected, k: usize, g: usize) {
+        self.col = p.color[g].map(V::splat);
+        self.dep = V::splat(p.depth[g]);
+        self.kk = V::splat((k + 1) as f32);
+    }
+
+    #[inline(always)]
+    fn chunk(&mut self, row: usize, l: std::ops::Range<usize>, w: V, used: V::M) {
+        for ch in 0..3 {
+            let dst = &mut self.rgb[ch][row][l.clone()];
+            w.mul_add(self.col[ch], V::load(dst)).store(dst);
+        }
+        let dst = &mut self.depth[row][l.clone()];
+        w.mul_add(self.dep, V::load(dst)).store(dst);
+        let dst = &mut self.last[row][l];
+        V::select(used, self.kk, V::load(dst)).store(dst);
+    }
+
+    #[inline(always)]
+    fn done(&mut self, _k: usize) {}
+}
+
+/// Composite one tile ([`walk_tile`] with the colour, depth and last-entry sink).
+#[inline(always)]
+fn tile_forward_lanes<V: Lanes>(p: &Projected, list: &[u32], r: [usize; 4]) -> TileOut {
+    let mut o = TileOut::blank();
+    let zero = V::splat(0.0);
+    let mut sink = Composite {
+        rgb: &mut o.rgb,
+        depth: &mut o.depth,
+        last: &mut o.last,
+        col: [zero; 3],
+        dep: zero,
+        kk: zero,
+    };
+    walk_tile(p, list, r, &mut o.t, &mut sink);
     o
 }
 

@@ -46,7 +46,7 @@ pub struct TrainSettings {
     /// Field learning rate, log-linear init → final over `iterations`. Deform-GS's
     /// 8e-4 → 1.6e-6 is spread over 40k iterations; squeezed into a 3500-iteration
     /// warm-up it left the field untrained (no better than a static model on the
-    /// nonrigid preset; BENCHMARKS.md "deformation field").
+    /// nonrigid preset; docs/benchmarks/2026-11-23-warm-up.md, "Stop 12").
     pub field_lr_init: f64,
     pub field_lr_final: f64,
     /// Position learning rate × scene extent, log-linear over `iterations`.
@@ -68,7 +68,7 @@ pub struct TrainSettings {
     pub size: SizeSettings,
     /// Cap on the Gaussians per pixel of a train frame, used when
     /// `densify.max_gaussians` is 0 (auto): a model needs no more Gaussians than its
-    /// views have pixels to constrain them (measured, BENCHMARKS.md).
+    /// views have pixels to constrain them (measured: docs/benchmarks/2026-11-23-warm-up.md).
     pub max_gaussians_per_pixel: f64,
     /// Random initial Gaussians (when no point cloud is given).
     pub init_points: usize,

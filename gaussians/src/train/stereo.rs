@@ -3,9 +3,9 @@
 //!
 //! Random initial Gaussians cannot find the geometry of a scene seen by a few cameras
 //! along a short path: the optimiser fits each train view with Gaussians at wrong depths
-//! and novel views fall apart (BENCHMARKS.md, "warm-up"). Plane sweep (Collins 1996;
-//! multi-baseline SAD as Okutomi & Kanade 1993) gives the depth of textured pixels from
-//! the frames alone:
+//! and novel views fall apart (docs/benchmarks/2026-11-23-warm-up.md). Plane sweep
+//! (Collins 1996; multi-baseline SAD as Okutomi & Kanade 1993) gives the depth of
+//! textured pixels from the frames alone:
 //!
 //! - for each reference view and each of `planes` fronto-parallel depths `d_k` (uniform in
 //!   inverse depth between `near` and `far`), every reference pixel's ray point
