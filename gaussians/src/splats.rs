@@ -19,7 +19,7 @@ pub struct Splats {
     /// Per Gaussian: deformed by the field (used when `TrainSettings::dynamic_only`).
     /// Empty when the Gaussians carry no flags (every Gaussian counts as dynamic).
     pub dynamic: Vec<bool>,
-    /// Per Gaussian: its own trajectory `[v; a]` ([`crate::motion`]). Empty when the
+    /// Per Gaussian: its own trajectory `[v; a]` (`motion.rs`). Empty when the
     /// Gaussians have none (every centre still unless the field moves it).
     pub motion: Vec<[f32; 6]>,
 }
@@ -157,7 +157,7 @@ pub struct SplatGrads {
     pub screen_grad_norm: Vec<f32>,
     /// Screen radius in pixels (0 = not rendered).
     pub radius: Vec<f32>,
-    /// The trajectories' gradient ([`crate::motion::backward`]; empty without them).
+    /// The trajectories' gradient (`motion.rs`; empty without them).
     pub motion: Vec<[f32; 6]>,
 }
 
