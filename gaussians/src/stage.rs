@@ -422,9 +422,8 @@ pub fn train(
         [args.init_ply.as_deref(), args.init_motion.as_deref()],
     )?;
     phases.start("init");
-    let (splats, init_surface_points, init_ply_dropped_transparent) =
+    let (mut splats, init_surface_points, init_ply_dropped_transparent) =
         initial_splats(&settings, &views, args.init_ply.as_deref())?;
-    let mut splats = splats;
     if let (Some(m), Some(p)) = (&args.init_motion, &args.init_ply) {
         if init_ply_dropped_transparent > 0 {
             return Err(Error::invalid(

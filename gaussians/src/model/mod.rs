@@ -214,15 +214,8 @@ impl Model {
     /// The Gaussians deformed to normalised time `t` (the manifest's `time`): the field's
     /// deltas and each centre's trajectory; the canonical ones when it has neither.
     pub fn at(&self, t: f32) -> Splats {
-        let mut s = match &self.field {
-            None => self.splats.clone(),
-            Some(mlp) => {
-                let (d, _) = field::splat_deltas(mlp, &self.splats, t, self.info.dynamic_only);
-                field::deform_splats(&self.splats, &d)
-            }
-        };
-        crate::motion::advance(&self.splats, t, &mut s.means);
-        s
+        let field = self.field.as_ref();
+        crate::train::judge::at_time(&self.splats, field, self.info.dynamic_only, t).into_owned()
     }
 
     /// Render colour, depth and alpha at a camera and normalised time.
