@@ -17,6 +17,7 @@ pub mod progress;
 pub mod raster;
 pub mod splats;
 pub mod stage;
+pub mod tracks;
 pub mod train;
 pub mod trajectory;
 

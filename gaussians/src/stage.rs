@@ -366,6 +366,19 @@ fn initial_splats(
                 Init::Stereo => {
                     init::stereo_splats(views, n, near, far, &settings.stereo, settings.seed)
                 }
+                Init::Tracks => {
+                    let (mut s, found) =
+                        init::stereo_splats(views, n, near, far, &settings.stereo, settings.seed);
+                    let images: Vec<_> = (views.iter())
+                        .map(|v| crate::tracks::Image {
+                            camera: &v.camera,
+                            time: v.time as f64,
+                            rgb: &v.rgb,
+                        })
+                        .collect();
+                    let moving = crate::tracks::add_moving(&mut s, &images, 1, &settings.tracks);
+                    (s, found + moving)
+                }
                 Init::Frustum => (init::frustum_splats(&cams, n, near, far, settings.seed), 0),
                 Init::Box => {
                     let (centre, half) = init::camera_bounds(&cams);

@@ -19,6 +19,9 @@ pub enum Init {
     Frustum,
     /// Random points in the box the cameras look at (Deform-GS synthetic init).
     Box,
+    /// Lucas–Kanade tracks through the train frames, lifted to still points and to
+    /// quadratic trajectories (`crate::tracks`): the moving objects start moving.
+    Tracks,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -76,6 +79,8 @@ pub struct TrainSettings {
     pub init: Init,
     /// Plane-sweep stereo settings (`init = "stereo"`).
     pub stereo: StereoSettings,
+    /// Tracks settings (`init = "tracks"`).
+    pub tracks: crate::tracks::TrackSettings,
     /// Depth range of the frustum points and of the stereo sweep, × each camera's
     /// distance to the point the cameras look at.
     pub init_near: f64,
@@ -117,6 +122,7 @@ impl Default for TrainSettings {
             init_points: 20_000,
             init: Init::Stereo,
             stereo: StereoSettings::default(),
+            tracks: Default::default(),
             init_near: 0.3,
             init_far: 2.5,
             scene_extent: 0.0,
@@ -180,6 +186,7 @@ impl scene::cli::Settings for TrainSettings {
             return Err("0 < init_near < init_far required".into());
         }
         self.stereo.validate()?;
+        self.tracks.validate()?;
         self.size.validate()?;
         if !(self.max_gaussians_per_pixel > 0.0 && self.max_gaussians_per_pixel.is_finite()) {
             return Err("max_gaussians_per_pixel must be positive".into());

@@ -1,0 +1,147 @@
+//! A 2D track to 3D: triangulated as a still point when its rays meet, else fitted with
+//! the quadratic trajectory of [`crate::motion`] (trajectory triangulation, Avidan &
+//! Shashua 2000), with a penalty on the acceleration.
+//!
+//! Each observation `(c_k, d_k)` (camera centre, unit ray) at time `τ_k` asks for
+//! `P_k (X(τ_k) − c_k) = 0`, `P_k = I − d_k d_kᵀ`; rows are divided by the point's
+//! depth so that they are angles. A still point: `X(τ) = X`, 3 unknowns. A moving one:
+//! `X(τ) = μ + v·τ + a·τ²`, 9 unknowns, plus `ridge · |a|² / depth²`.
+//!
+//! Why the penalty: with one camera a moving point's distance is known only where the
+//! camera's own path leaves the trajectory's span. A camera path that is itself close
+//! to a quadratic over the recording (a smooth sway) lets a family `C(τ) + s (X(τ) −
+//! C(τ))` fit every observation; the penalty picks the member with the smallest
+//! acceleration (Park et al., ECCV 2010, on when trajectories are reconstructible).
+
+use glam::{DMat3, DVec2, DVec3};
+use scene::Camera;
+
+/// What a track lifts to, positions at `τ = 0`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Lifted {
+    Still(DVec3),
+    Moving { mu: DVec3, v: DVec3, a: DVec3 },
+}
+
+impl Lifted {
+    pub fn at(&self, tau: f64) -> DVec3 {
+        match *self {
+            Lifted::Still(x) => x,
+            Lifted::Moving { mu, v, a } => mu + v * tau + a * tau * tau,
+        }
+    }
+}
+
+/// One observation: the camera, the pixel, and `τ = t − T0` of the frame.
+pub struct Observation<'a> {
+    pub camera: &'a Camera,
+    pub pixel: DVec2,
+    pub tau: f64,
+}
+
+/// Root-mean-square reprojection error (pixels) of a lifted point over the
+/// observations; infinite when it falls behind a camera.
+pub fn rms_pixels(l: &Lifted, obs: &[Observation]) -> f64 {
+    let mut e = 0.0;
+    for o in obs {
+        match o.camera.project_world(l.at(o.tau)) {
+            Some((q, d)) if d > 0.0 => e += (q - o.pixel).length_squared(),
+            _ => return f64::INFINITY,
+        }
+    }
+    (e / obs.len().max(1) as f64).sqrt()
+}
+
+fn ray(o: &Observation) -> (DVec3, DMat3) {
+    let c = o.camera.cam_to_world.centre();
+    let d = (o.camera.unproject_world(o.pixel, 1.0) - c).normalize();
+    (
+        c,
+        DMat3::IDENTITY - DMat3::from_cols(d * d.x, d * d.y, d * d.z),
+    )
+}
+
+/// The point nearest all rays (least squares); `None` for parallel rays.
+pub fn still(obs: &[Observation]) -> Option<DVec3> {
+    let (mut m, mut b) = (DMat3::ZERO, DVec3::ZERO);
+    for o in obs {
+        let (c, p) = ray(o);
+        m += p;
+        b += p * c;
+    }
+    (m.determinant().abs() > 1e-12)
+        .then(|| m.inverse() * b)
+        .filter(|x| x.is_finite())
+}
+
+/// The quadratic trajectory through the rays, rows weighted by `1 / depth²` of `guess`
+/// (a still triangulation); `None` when the system is singular.
+pub fn moving(obs: &[Observation], guess: DVec3, ridge: f64) -> Option<Lifted> {
+    let mut m = [[0.0f64; 9]; 9];
+    let mut b = [0.0f64; 9];
+    let mut depth2 = 0.0;
+    for o in obs {
+        let (c, p) = ray(o);
+        let w = 1.0 / (guess - c).length_squared().max(1e-12);
+        depth2 += (guess - c).length_squared() / obs.len() as f64;
+        let t = o.tau;
+        for i in 0..3 {
+            let r = p.row(i);
+            let co = [
+                r.x,
+                r.y,
+                r.z,
+                r.x * t,
+                r.y * t,
+                r.z * t,
+                r.x * t * t,
+                r.y * t * t,
+                r.z * t * t,
+            ];
+            let rhs = r.dot(c);
+            for u in 0..9 {
+                b[u] += w * co[u] * rhs;
+                for (q, cq) in co.iter().enumerate() {
+                    m[u][q] += w * co[u] * cq;
+                }
+            }
+        }
+    }
+    for (u, row) in m.iter_mut().enumerate().skip(6) {
+        row[u] += ridge / depth2.max(1e-12);
+    }
+    let x = solve(m, b)?;
+    Some(Lifted::Moving {
+        mu: DVec3::new(x[0], x[1], x[2]),
+        v: DVec3::new(x[3], x[4], x[5]),
+        a: DVec3::new(x[6], x[7], x[8]),
+    })
+}
+
+/// Gaussian elimination with partial pivoting.
+fn solve<const N: usize>(mut a: [[f64; N]; N], mut b: [f64; N]) -> Option<[f64; N]> {
+    let scale = (0..N)
+        .map(|i| a[i][i].abs())
+        .fold(0.0, f64::max)
+        .max(1e-300);
+    for c in 0..N {
+        let p = (c..N).max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))?;
+        if a[p][c].abs() < 1e-14 * scale {
+            return None;
+        }
+        a.swap(c, p);
+        b.swap(c, p);
+        for r in 0..N {
+            if r != c {
+                let f = a[r][c] / a[c][c];
+                let pivot_row = a[c];
+                for (x, y) in a[r].iter_mut().zip(pivot_row) {
+                    *x -= f * y;
+                }
+                b[r] -= f * b[c];
+            }
+        }
+    }
+    let x: [f64; N] = std::array::from_fn(|i| b[i] / a[i][i]);
+    x.iter().all(|v| v.is_finite()).then_some(x)
+}
