@@ -233,7 +233,7 @@ fn on_a_synthetic_scene_still_tracks_are_on_still_surfaces_and_moving_ones_move(
         v.sort_by(f64::total_cmp);
         v[v.len() / 2]
     };
-    let lifted = lift_frames(&frames, 1, &TrackSettings::default());
+    let lifted = lift_frames(&frames, 1, 5, &TrackSettings::default());
     let (mut still_ok, mut still_n, mut moving_ok, mut moving_n) = (0, 0, 0, 0);
     let (mut still_err, mut moving_err) = (vec![], vec![]);
     for l in &lifted {

@@ -9,7 +9,10 @@
 //! and drift check, Kalal et al. 2010). Each track is then lifted ([`lift`]): a still
 //! point where its rays meet within `still_pixels`, else a quadratic trajectory. Moving
 //! tracks are taken from the reference frame nearest the middle of the recording only,
-//! so that each moving object starts as one copy.
+//! so that each moving object starts as one copy. The init ([`add_moving`]) keeps the
+//! stereo init for the still scene (still tracks alone fail where the frames are too
+//! far apart for Lucas–Kanade: −4.5 dB on `fast`, BENCHMARKS.md "Tracks lifted to
+//! trajectories") and adds the moving tracks' Gaussians.
 
 pub mod lift;
 pub mod lk;
@@ -39,8 +42,6 @@ pub struct TrackSettings {
     pub moving_pixels: f64,
     /// Penalty on a trajectory's acceleration, relative to the angular residuals.
     pub ridge: f64,
-    /// Reference frames tracks start from (evenly spaced over the train frames).
-    pub reference_frames: usize,
 }
 
 impl Default for TrackSettings {
@@ -53,7 +54,6 @@ impl Default for TrackSettings {
             still_pixels: 1.0,
             moving_pixels: 2.0,
             ridge: 10.0,
-            reference_frames: 5,
         }
     }
 }
@@ -70,13 +70,8 @@ impl TrackSettings {
         ];
         if positive.iter().any(|v| !(v.is_finite() && *v > 0.0))
             || !(self.ridge >= 0.0 && self.min_texture >= 0.0)
-            || self.reference_frames == 0
         {
-            return Err(
-                "tracks: thresholds must be positive, ridge and min_texture ≥ 0, \
-                        reference_frames ≥ 1"
-                    .into(),
-            );
+            return Err("tracks: thresholds must be positive, ridge and min_texture ≥ 0".into());
         }
         Ok(())
     }
@@ -158,9 +153,15 @@ pub fn lift_track(frames: &[Frame], track: &[Option<Vec2>], st: &TrackSettings) 
     (lift::rms_pixels(&m, &obs) < st.moving_pixels).then_some(m)
 }
 
-/// Tracks from every `stride`-th pixel of the reference frames, lifted. Still points
-/// come from every reference frame, moving ones from the one nearest `T0` only.
-pub fn lift_frames(frames: &[Frame], stride: usize, st: &TrackSettings) -> Vec<LiftedTrack> {
+/// Tracks from every `stride`-th pixel of `references` frames evenly spaced over the
+/// recording and of the one nearest `T0`, lifted. Still points come from every
+/// reference frame, moving ones from the one nearest `T0` only.
+pub fn lift_frames(
+    frames: &[Frame],
+    stride: usize,
+    references: usize,
+    st: &TrackSettings,
+) -> Vec<LiftedTrack> {
     let n = frames.len();
     if n < 3 {
         return Vec::new();
@@ -173,7 +174,7 @@ pub fn lift_frames(frames: &[Frame], stride: usize, st: &TrackSettings) -> Vec<L
                 .total_cmp(&(frames[j].time - t0).abs())
         })
         .unwrap_or(0);
-    let count = st.reference_frames.min(n);
+    let count = references.min(n);
     let mut refs: Vec<usize> = (0..count)
         .map(|i| ((i as f64 + 0.5) * n as f64 / count as f64) as usize)
         .collect();
@@ -234,11 +235,7 @@ pub fn add_moving(s: &mut Splats, views: &[Image], stride: usize, st: &TrackSett
             pyramid: lk::Pyramid::new(lk::Grey::from_planar(v.rgb, w, h), st.levels as usize),
         })
         .collect();
-    let only_middle = TrackSettings {
-        reference_frames: 1,
-        ..*st
-    };
-    let lifted = lift_frames(&frames, stride, &only_middle);
+    let lifted = lift_frames(&frames, stride, 0, st);
     let t0 = crate::motion::T0 as f64;
     let before = s.len();
     s.motion.resize(before, [0.0; 6]);
