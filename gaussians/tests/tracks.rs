@@ -10,10 +10,17 @@ use scene::{Camera, Intrinsics, Pose};
 
 /// A smooth texture: a sum of sinusoids, sampled at pixel centres shifted by `d`.
 fn texture(w: usize, h: usize, d: Vec2) -> Grey {
+    textured(w, h, d, 0.0)
+}
+
+/// The smooth texture plus `fine` × waves of about 4.5 px period, which a window
+/// started more than a couple of pixels off locks onto the wrong crest of.
+fn textured(w: usize, h: usize, d: Vec2, fine: f32) -> Grey {
     let f = |x: f32, y: f32| {
         0.5 + 0.15 * (0.31 * x + 0.11 * y).sin()
             + 0.12 * (0.07 * x - 0.23 * y).cos()
             + 0.1 * (0.19 * x * 0.7 + 0.29 * y).sin()
+            + fine * ((1.3 * x + 0.5 * y).sin() + (0.6 * x - 1.2 * y).cos())
     };
     let data = (0..w * h)
         .map(|i| f((i % w) as f32 + 0.5 - d.x, (i / w) as f32 + 0.5 - d.y))
@@ -45,6 +52,20 @@ fn lucas_kanade_finds_known_sub_pixel_and_large_shifts() {
             assert!(
                 q.distance(p + d) < 0.1,
                 "shift {d}: tracked {p} to {q}, truth {}",
+                p + d
+            );
+        }
+    }
+    // Fine waves: each level must hand the next twice its estimate (coarse to fine), or
+    // the finest level starts pixels off and locks onto a wrong crest.
+    let a = Pyramid::new(textured(w, h, Vec2::ZERO, 0.08), 3);
+    for d in [Vec2::new(6.4, 3.1), Vec2::new(10.3, -7.6)] {
+        let b = Pyramid::new(textured(w, h, d, 0.08), 3);
+        for p in [Vec2::new(30.5, 40.5), Vec2::new(60.5, 60.5)] {
+            let q = track(&a, &b, p, 3, 1e-6).expect("textured window");
+            assert!(
+                q.distance(p + d) < 0.15,
+                "fine waves, shift {d}: {q} vs {}",
                 p + d
             );
         }
