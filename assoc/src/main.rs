@@ -13,6 +13,9 @@ use scene::cli::{Progress, exit_on_error, parse_with, settings, show_defaults};
 /// lifted to 3D through the warm-up's depth map, and every Gaussian binds to its k
 /// nearest lifted events within a radius (inverse-distance weights). Writes
 /// OUT/assoc.bin, OUT/report.json, OUT/settings.toml and OUT/preview/NNNN.png.
+///
+/// `assoc settings --defaults` prints the settings' defaults as TOML; `assoc settings
+/// --check FILE` checks a settings file (the runner learns the settings this way).
 #[derive(Parser, Debug)]
 #[command(name = "assoc", version)]
 struct Cli {
@@ -86,6 +89,11 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
 }
 
 fn main() -> ExitCode {
+    if let Some(code) =
+        scene::cli::verb::intercept::<AssocSettings>("assoc", scene::cli::verb::no_files)
+    {
+        return code;
+    }
     let cli: Cli = parse_with(|c| show_defaults::<AssocSettings>(c, SETTING_FLAGS));
     exit_on_error("assoc", || run(cli))
 }

@@ -21,10 +21,17 @@ enum Verb {
     /// Train from the warm-up model with the event and motion losses; writes the model,
     /// posenet.safetensors, depth/, renders/ of the test frames, settings.toml, report.json.
     Train(TrainArgs),
+    /// The settings of `deform train`: `--defaults` prints them as TOML, `--check FILE`
+    /// checks a settings file. The runner learns the settings this way.
+    Settings(scene::cli::SettingsArgs),
 }
 
 fn main() -> ExitCode {
     exit_on_error("deform", || match Cli::parse().verb {
+        Verb::Settings(a) => scene::cli::verb::run::<deform::settings::DeformSettings>(
+            &a,
+            scene::cli::verb::no_files,
+        ),
         Verb::Train(args) => {
             let total = stage::resolve_settings(&args)?.iterations;
             let progress = Progress::new("deform", total as u64);

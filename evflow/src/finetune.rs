@@ -157,6 +157,19 @@ impl Settings for FlowSettings {
 }
 
 impl FlowSettings {
+    /// The file outside the stage graph these settings make `evflow finetune` read:
+    /// the base weights (`weights`, else `$EVFLOW_WEIGHTS`, else the shipped file), when
+    /// they exist (a missing file is the stage's error to report). `evflow settings
+    /// --check` prints it so that the runner keys the stage on the weights' content.
+    pub fn input_files(&self) -> Vec<(&'static str, PathBuf)> {
+        crate::net::io::resolve_weights(self.weights.as_deref())
+            .ok()
+            .filter(|p| p.is_file())
+            .map(|p| ("weights", p))
+            .into_iter()
+            .collect()
+    }
+
     /// Settings for base weights without a sidecar.
     pub fn bare_weights(&self) -> BareWeights {
         BareWeights {

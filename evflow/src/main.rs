@@ -40,6 +40,10 @@ enum Cmd {
     /// (loss curve, held-out EPE) and settings.toml. The shipped default weights were made
     /// with `evflow pretrain --config evflow/weights/pretrain_c16.toml --out DIR`.
     Pretrain(PretrainArgs),
+    /// The settings of `evflow finetune` (the pipeline's stage): `--defaults` prints
+    /// them as TOML, `--check FILE` checks a settings file and prints the base weights
+    /// it makes the stage read. The runner learns the settings this way.
+    Settings(scene::cli::SettingsArgs),
 }
 
 fn run(cli: Cli) -> anyhow::Result<ExitCode> {
@@ -49,6 +53,12 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Cmd::Predict(a) => a.run(),
         Cmd::Eval(a) => a.run(),
         Cmd::Pretrain(a) => a.run(),
+        Cmd::Settings(a) => {
+            return Ok(scene::cli::verb::run::<evflow::finetune::FlowSettings>(
+                &a,
+                evflow::finetune::FlowSettings::input_files,
+            )?);
+        }
     }?;
     Ok(ExitCode::SUCCESS)
 }

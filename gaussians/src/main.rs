@@ -24,6 +24,9 @@ enum Verb {
     /// frames), renders/NNNN.png (test frames), renders/novel/NNNN.png (novel views, if
     /// the scene has them) and report.json (test and novel PSNR/SSIM, time per phase). Ctrl-C stops at the next iteration and still writes a usable model.
     Train(TrainArgs),
+    /// The settings of `gaussians train`: `--defaults` prints them as TOML, `--check
+    /// FILE` checks a settings file. The runner learns the settings this way.
+    Settings(scene::cli::SettingsArgs),
     /// Render a saved model at the frames of a scene split, with PSNR/SSIM.
     Render {
         /// Model directory written by `gaussians train`
@@ -68,6 +71,7 @@ fn main() -> ExitCode {
 
 fn run(verb: Verb) -> scene::Result<ExitCode> {
     match verb {
+        Verb::Settings(a) => scene::cli::verb::run::<TrainSettings>(&a, scene::cli::verb::no_files),
         Verb::Train(args) => {
             let total = stage::resolve_settings(&args)?.iterations;
             let progress = TrainProgress::new(total);

@@ -33,19 +33,6 @@ fn synth_set_help() -> String {
     )
 }
 
-/// The help of `degs demo --full`, with the stages' defaults it stands for (from their
-/// settings types, so that it cannot drift).
-fn full_help() -> String {
-    format!(
-        "Use every stage's default settings ({} + {} iterations, LoCM {}–{} steps until \
-         its loss stops improving) instead",
-        gaussians::train::TrainSettings::default().iterations,
-        deform::settings::DeformSettings::default().iterations,
-        evflow::finetune::FlowSettings::default().stop.min_steps,
-        evflow::finetune::FlowSettings::default().stop.max_steps
-    )
-}
-
 /// How `run`, `sweep` and `stress` run their stages.
 #[derive(Args, Clone, Copy)]
 pub struct RunFlags {
@@ -268,8 +255,9 @@ pub enum Command {
         /// Joint iterations of the deform stage
         #[arg(long, default_value_t = crate::demo::DEMO_DEFORM_ITERATIONS)]
         deform_iterations: u32,
-        // Help: "Use every stage's default settings (… + … iterations, LoCM …) instead".
-        #[arg(long, conflicts_with_all = ["iterations", "epochs", "deform_iterations"], help = full_help())]
+        /// Use every stage's default settings instead (each stage binary's own: `degs
+        /// config show FILE` lists them)
+        #[arg(long, conflicts_with_all = ["iterations", "epochs", "deform_iterations"])]
         full: bool,
         /// Stages to run at the same time
         #[arg(short = 'j', long, default_value_t = 2)]
@@ -430,6 +418,13 @@ pub enum EventsCommand {
 pub enum ConfigCommand {
     /// Print the resolved experiment: every synthetic-scene setting, each stage's own
     /// keys and, commented out under them, every default of that stage. Unknown stage
-    /// keys are errors naming the key.
-    Show { experiment: PathBuf },
+    /// keys are errors naming the key. The defaults come from the stage binaries
+    /// (`STAGE settings --defaults`).
+    Show {
+        experiment: PathBuf,
+        /// Look for stage binaries only in DIR (default: next to degs, then PATH)
+        /// [env: DEGS_STAGE_DIR]
+        #[arg(long, value_name = "DIR")]
+        stages: Option<PathBuf>,
+    },
 }

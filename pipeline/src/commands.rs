@@ -33,9 +33,17 @@ pub fn execute(command: Command) -> Result<()> {
             run(&experiment, &place, &opts, flags.quiet)
         }
         Command::Config {
-            command: ConfigCommand::Show { experiment },
+            command: ConfigCommand::Show { experiment, stages },
         } => {
-            print!("{}", config_show::show(&Experiment::load(&experiment)?)?);
+            let ctx = Where {
+                cache: None,
+                stages,
+            }
+            .context()?;
+            print!(
+                "{}",
+                config_show::show(&Experiment::load(&experiment)?, &ctx)?
+            );
             Ok(())
         }
         Command::Synth {
@@ -50,8 +58,9 @@ pub fn execute(command: Command) -> Result<()> {
             place,
             verify,
         } => {
-            let exp = Experiment::load_checked(&experiment)?;
-            let rows = status::status(&exp, &place.context()?, verify)?;
+            let ctx = place.context()?;
+            let exp = Experiment::load_checked(&experiment, &ctx)?;
+            let rows = status::status(&exp, &ctx, verify)?;
             print!("{}", status::format_status(&rows));
             Ok(())
         }
@@ -219,8 +228,8 @@ pub fn execute(command: Command) -> Result<()> {
 /// `degs run`: an error naming the failed stage, its error line and its log when a
 /// stage failed.
 fn run(experiment: &Path, place: &Where, opts: &RunOptions, quiet: bool) -> Result<()> {
-    let exp = Experiment::load_checked(experiment)?;
     let ctx = place.context()?;
+    let exp = Experiment::load_checked(experiment, &ctx)?;
     let record = runner::run(&exp, &ctx, opts, &Progress::new(quiet))?;
     match record.stages.iter().find(|s| s.action == Action::Failed) {
         Some(f) => Err(anyhow!(
@@ -294,7 +303,7 @@ fn plan(file: &Path, place: &Where, all: bool) -> Result<()> {
             .collect();
         Plan::build(&sweep.name, &exps, &ctx)?
     } else {
-        let exp = Experiment::load_checked(file)?;
+        let exp = Experiment::load_checked(file, &ctx)?;
         Plan::build(&exp.name, std::slice::from_ref(&exp), &ctx)?
     };
     print!("{}", p.shell(all));

@@ -19,14 +19,15 @@
 //! ```
 //!
 //! The stage tables are those of the stage registry ([`crate::stages`]). Unknown keys
-//! are errors that name the key and the file; a stage table is checked against its
-//! stage's settings type where this build links it ([`Experiment::check_stage_settings`]),
-//! and the stage binary fills its own defaults.
+//! are errors that name the key and the file; a stage table is checked by its stage's
+//! binary (`STAGE settings --check`, [`Experiment::check_stage_settings`]), which also
+//! fills its own defaults.
 
 use crate::canon;
+use crate::context;
 /// Re-exported: `synth` reads its overrides through these.
 pub use crate::overrides::{merge, parse_set};
-use crate::settings::toml_section;
+use crate::settings::{InputFile, toml_section};
 use crate::stages::{self, STAGES};
 use anyhow::{Context, Result, anyhow, bail};
 use scene::cli::Settings;
@@ -209,9 +210,9 @@ impl Experiment {
 
     /// Read an experiment file and check every stage table against its stage's
     /// settings (see [`Experiment::check_stage_settings`]).
-    pub fn load_checked(path: &Path) -> Result<Experiment> {
+    pub fn load_checked(path: &Path, ctx: &context::Context) -> Result<Experiment> {
         let exp = Self::load(path)?;
-        exp.check_stage_settings()?;
+        exp.check_stage_settings(ctx)?;
         for w in exp.check_scene()? {
             eprintln!("[degs] warning: {w}");
         }
@@ -243,21 +244,34 @@ impl Experiment {
             .collect())
     }
 
-    /// Check every stage table against its stage's settings type, so that a typo in
+    /// Check every stage table against its stage's settings, as its binary reads them
+    /// (`STAGE settings --check`, [`crate::settings::check`]), so that a typo in
     /// `[gaussians]` is an error naming the file, the stage and the key before any
-    /// stage runs.
-    pub fn check_stage_settings(&self) -> Result<()> {
+    /// stage runs. A stage whose binary is not built is not checked here: the run
+    /// says it is not built.
+    pub fn check_stage_settings(&self, ctx: &context::Context) -> Result<()> {
         for stage in STAGES {
-            if let Err(e) = stage.check_settings(&self.settings(stage.name)) {
+            if let Some(binary) = ctx.stage_binary(stage.binary) {
+                self.check_stage(stage.name, &binary)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Check the table of `stage` with its binary: Ok(the files outside the graph the
+    /// settings make it read), or an error naming the file, the stage and the key.
+    pub fn check_stage(&self, stage: &str, binary: &Path) -> Result<Vec<InputFile>> {
+        match crate::settings::check(binary, &self.settings(stage))? {
+            Ok(files) => Ok(files),
+            Err(e) => {
                 let file = self
                     .file
                     .as_deref()
                     .map(|f| format!("{}: ", f.display()))
                     .unwrap_or_default();
-                bail!("{file}[{}]: {e}", stage.name);
+                bail!("{file}[{stage}]: {e}")
             }
         }
-        Ok(())
     }
 
     /// Settings of `stage` (empty when the experiment has none).
@@ -422,30 +436,6 @@ mod tests {
         .unwrap();
         let again = parse(&e.to_toml()).unwrap();
         assert_eq!(again.stages, e.stages);
-    }
-
-    #[test]
-    fn unknown_stage_keys_are_named() {
-        let e =
-            parse("name = \"a\"\n[scene]\nsynth = \"rigid\"\n[gaussians]\niters = 10\n").unwrap();
-        let msg = e.check_stage_settings().unwrap_err().to_string();
-        assert!(
-            msg.contains("iters") && msg.contains("[gaussians]") && msg.contains("/exp/a.toml"),
-            "{msg}"
-        );
-        let e =
-            parse("name = \"a\"\n[scene]\nsynth = \"rigid\"\n[assoc]\nk = \"three\"\n").unwrap();
-        assert!(e.check_stage_settings().is_err());
-        let e = parse(
-            "name = \"a\"\n[scene]\nsynth = \"rigid\"\n[gaussians]\niterations = 10\n\
-             [gaussians.field]\nwidth = 32\n[deform]\nanything = 1\n",
-        )
-        .unwrap();
-        let err = e.check_stage_settings().unwrap_err().to_string();
-        assert!(
-            err.contains("[deform]") && err.contains("anything"),
-            "{err}"
-        );
     }
 
     #[test]

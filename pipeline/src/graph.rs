@@ -139,22 +139,20 @@ pub fn resolve(exp: &Experiment, ctx: &Context, hashes: &mut BinaryHashes) -> Re
             (None, _) => Some(def.not_built_message(ctx.stage_dir.as_deref())),
             (Some(_), b) => b,
         };
-        let key = match (&binary_hash, &unavailable) {
-            (Some(bh), None) => {
-                let file_hash = match &def.key_file {
-                    Some(file) => match (file.path)(&settings) {
-                        Some(path) => Some((file.name, hashes.hash(&path)?)),
-                        None => None,
-                    },
-                    None => None,
-                };
+        let key = match (&binary, &binary_hash, &unavailable) {
+            (Some(bin), Some(bh), None) => {
+                // The stage's own check of its table; the files outside the graph it
+                // names (evflow's base weights) enter the key by content.
+                let files = exp.check_stage(def.name, bin)?;
+                let file_hashes = files
+                    .iter()
+                    .map(|(name, path)| Ok((name.as_str(), hashes.hash(path)?)))
+                    .collect::<Result<Vec<_>>>()?;
                 let mut in_keys: Vec<(&str, &str)> = inputs
                     .iter()
                     .map(|i| (i.flag, nodes[i.node].key.as_deref().unwrap_or("")))
                     .collect();
-                if let Some((name, hash)) = &file_hash {
-                    in_keys.push((name, hash));
-                }
+                in_keys.extend(file_hashes.iter().map(|(n, h)| (*n, h.as_str())));
                 Some(key_of(def.name, bh, &settings, &in_keys))
             }
             _ => None,

@@ -1,51 +1,128 @@
-//! Stage settings as `degs` sees them: a settings type's defaults and the check of an
-//! experiment's table against it, and a table written out as a `[stage]` TOML section.
+//! Stage settings as `degs` sees them: each stage binary is the one authority on its
+//! settings, asked through its `settings` verb ([`scene::cli::verb`]): `STAGE settings
+//! --defaults` for every default, `STAGE settings --check -` for the check of an
+//! experiment's table (and the files outside the graph it makes the stage read, which
+//! enter the stage's key). `degs` links no stage library. Answers are remembered per
+//! binary (path, size, modification time) for the life of the process, so a sweep asks
+//! each binary once per distinct table. Also: a table written out as a `[stage]` TOML
+//! section.
 
 use crate::canon;
-use crate::overrides::merge;
-use scene::cli::Settings;
-use serde::Serialize;
+use anyhow::{Context as _, Result, anyhow, bail};
+use std::collections::HashMap;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::sync::{Mutex, OnceLock};
 use toml::{Table, Value};
 
-/// The settings type of a stage whose library this build links.
-#[derive(Clone, Copy)]
-pub struct SettingsType {
-    /// Every default, as the binary reads them from an empty `--config`.
-    pub defaults: fn() -> Table,
-    /// Check a table against the type: unknown keys and wrong types are errors naming
-    /// the key.
-    pub check: fn(&Table) -> Result<(), String>,
+/// A file outside the stage graph that a stage's settings make it read (its base
+/// weights), by the name it enters the key under.
+pub type InputFile = (String, PathBuf);
+
+type Memo = HashMap<(PathBuf, String), std::result::Result<String, String>>;
+
+fn memo() -> &'static Mutex<Memo> {
+    static MEMO: OnceLock<Mutex<Memo>> = OnceLock::new();
+    MEMO.get_or_init(|| Mutex::new(HashMap::new()))
 }
 
-impl SettingsType {
-    /// The settings type `T` (deserialised by the stage binary from its `--config` with
-    /// [`scene::cli::settings::resolve`]).
-    pub const fn of<T: Settings>() -> SettingsType {
-        SettingsType {
-            defaults: defaults_of::<T>,
-            check: check_as::<T>,
-        }
+/// `binary settings ARGS` with `stdin` on standard input: Ok(stdout) when it exits 0,
+/// Err(its error line, without the `binary: error: ` prefix) when it exits non-zero; an
+/// error when it cannot be started or answers with something that is not text.
+fn ask(binary: &Path, args: &[&str], stdin: &str) -> Result<std::result::Result<String, String>> {
+    let stamp = std::fs::metadata(binary)
+        .ok()
+        .and_then(|m| Some((m.len(), m.modified().ok()?)))
+        .map(|(len, t)| format!("{len}:{t:?}"))
+        .unwrap_or_default();
+    let memo_key = (
+        binary.to_path_buf(),
+        format!("{stamp}\0{}\0{stdin}", args.join(" ")),
+    );
+    if let Some(hit) = memo().lock().unwrap().get(&memo_key) {
+        return Ok(hit.clone());
+    }
+    let mut child = Command::new(binary)
+        .arg("settings")
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .with_context(|| format!("{}: cannot start", binary.display()))?;
+    if let Some(mut input) = child.stdin.take() {
+        // A binary that exits without reading closes the pipe: its exit status tells.
+        let _ = input.write_all(stdin.as_bytes());
+    }
+    let out = child
+        .wait_with_output()
+        .with_context(|| format!("{}: cannot run `settings`", binary.display()))?;
+    let name = binary
+        .file_name()
+        .map(|n| n.to_string_lossy().to_string())
+        .unwrap_or_default();
+    let answer = if out.status.success() {
+        Ok(String::from_utf8(out.stdout)
+            .map_err(|_| anyhow!("{}: `settings` printed non-UTF-8 text", binary.display()))?)
+    } else {
+        let err = String::from_utf8_lossy(&out.stderr);
+        let line = err
+            .lines()
+            .rev()
+            .find(|l| !l.trim().is_empty())
+            .unwrap_or("")
+            .trim();
+        let prefix = format!("{name}: error: ");
+        Err(match line.strip_prefix(&prefix) {
+            Some(rest) => rest.to_string(),
+            None if line.is_empty() => format!("`{name} settings` failed ({})", out.status),
+            None => line.to_string(),
+        })
+    };
+    memo().lock().unwrap().insert(memo_key, answer.clone());
+    Ok(answer)
+}
+
+/// Every default of the stage `binary` (`binary settings --defaults`).
+pub fn defaults(binary: &Path) -> Result<Table> {
+    match ask(binary, &["--defaults"], "")? {
+        Ok(text) => text.parse().map_err(|e: toml::de::Error| {
+            anyhow!(
+                "{}: `settings --defaults` printed no TOML: {}",
+                binary.display(),
+                e.message().trim()
+            )
+        }),
+        Err(e) => bail!(
+            "{}: does not answer `settings --defaults` ({e}); is it a degs stage of \
+             this version?",
+            binary.display()
+        ),
     }
 }
 
-fn defaults_of<T: Serialize + Default>() -> Table {
-    to_table(&T::default()).unwrap_or_default()
-}
-
-/// The stage's own check: the table over the defaults, read as the binary reads its
-/// `--config` (a wrong type names the key), then the type's [`Settings::validate`].
-fn check_as<T: Settings>(settings: &Table) -> Result<(), String> {
-    let mut full = defaults_of::<T>();
-    merge(&mut full, settings);
-    scene::cli::settings::from_table_naming_key::<T>(full)?.validate()
-}
-
-/// `settings` as a TOML table, through TOML text: the text writer prints an `f32`
-/// field as the shortest decimal that reads back to the same `f32` (`0.0002`), which
-/// then parses to the `f64` of that decimal. `toml::Value::try_from` would widen the
-/// `f32` instead (`0.00019999999494757503`).
-pub fn to_table<T: Serialize>(settings: &T) -> Option<Table> {
-    toml::to_string(settings).ok()?.parse().ok()
+/// Check `table` against the stage `binary`'s settings (`binary settings --check -`):
+/// Ok(the files outside the graph it makes the stage read), or Err(why, naming the key)
+/// for a table the stage refuses; an error when the binary cannot answer.
+pub fn check(binary: &Path, table: &Table) -> Result<std::result::Result<Vec<InputFile>, String>> {
+    let text = canon::to_toml(table);
+    Ok(match ask(binary, &["--check", "-"], &text)? {
+        Ok(out) => {
+            let files: Table = out.parse().map_err(|e: toml::de::Error| {
+                anyhow!(
+                    "{}: `settings --check` printed no TOML: {}",
+                    binary.display(),
+                    e.message().trim()
+                )
+            })?;
+            Ok(files
+                .into_iter()
+                .filter_map(|(k, v)| Some((k, PathBuf::from(v.as_str()?))))
+                .collect())
+        }
+        Err(e) => Err(e),
+    })
 }
 
 /// `[name]` with `table` under it (nested tables as `[name.sub]`).
@@ -71,47 +148,13 @@ pub fn toml_section(name: &str, table: &Table) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use serde::Deserialize;
-
-    #[derive(Default, Serialize, Deserialize)]
-    #[serde(default, deny_unknown_fields)]
-    struct Example {
-        rate: f32,
-        count: u32,
-        inner: Inner,
-    }
-
-    #[derive(Default, Serialize, Deserialize)]
-    #[serde(default, deny_unknown_fields)]
-    struct Inner {
-        on: bool,
-    }
-
-    impl Settings for Example {
-        fn validate(&self) -> Result<(), String> {
-            Ok(())
-        }
-    }
-
-    #[test]
-    fn defaults_and_check_follow_the_type() {
-        let ty = SettingsType::of::<Example>();
-        let d = (ty.defaults)();
-        assert_eq!(d.get("count"), Some(&Value::Integer(0)));
-        assert!(d["inner"].is_table());
-        (ty.check)(&"count = 3\n[inner]\non = true".parse().unwrap()).unwrap();
-        let err = (ty.check)(&"cuont = 3".parse().unwrap()).unwrap_err();
-        assert!(err.contains("cuont"), "{err}");
-        assert!((ty.check)(&"count = \"three\"".parse().unwrap()).is_err());
-    }
 
     #[test]
     fn f32_fields_become_their_shortest_decimal() {
-        let t = to_table(&Example {
-            rate: 0.0002,
-            ..Example::default()
-        })
-        .unwrap();
+        // What a stage's `settings --defaults` prints for an f32 field of 0.0002.
+        let t: Table = "rate = 0.0002\ncount = 0\n[inner]\non = false\n"
+            .parse()
+            .unwrap();
         assert_eq!(t["rate"].as_float(), Some(0.0002));
         assert_eq!(toml_section("x", &t).lines().nth(2), Some("rate = 0.0002"));
     }

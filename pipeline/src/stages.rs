@@ -1,15 +1,14 @@
 //! The stage registry: every external stage, in run order, with everything `degs`
 //! knows about it. The graph, the experiment file's tables, `degs config show`, the
 //! demo's summary and `degs eval` all derive from [`STAGES`]: adding a stage is adding
-//! one entry there.
+//! one entry there. A stage's settings are not here: `degs` asks its binary
+//! (`STAGE settings`, [`crate::settings`]).
 //!
 //! Node 0 of the graph is the scene: a directory (`[scene] dir`, node name `scene`) or
 //! built by the `degs synth` sub-command of this binary (node name `synth`).
 
-use crate::settings::SettingsType;
 use anyhow::{Result, bail};
-use std::path::{Path, PathBuf};
-use toml::Table;
+use std::path::Path;
 
 /// Node name of the scene when it is a directory.
 pub const SCENE: &str = "scene";
@@ -35,12 +34,6 @@ pub struct Stage {
     pub inputs: &'static [Input],
     /// The cargo package that builds the binary (for "how to build it" messages).
     pub package: &'static str,
-    /// Its settings type when this build links the stage's library (defaults for
-    /// `config show`, the check of the experiment's table); None: the table is passed
-    /// through unchecked.
-    pub settings: Option<SettingsType>,
-    /// A file its settings name whose content enters its key.
-    pub key_file: Option<KeyFile>,
     /// Sub-directory holding its renders of the scene's test frames, if it writes them
     /// (its renders of the novel views, when the scene has them, in `novel/` under it).
     /// `degs eval` and the demo use the last stage in run order that has them.
@@ -55,14 +48,6 @@ pub struct Stage {
 pub struct Input {
     pub node: &'static str,
     pub flag: &'static str,
-}
-
-/// A file outside the graph that a stage reads (its base weights), named `name` in
-/// the key; `path` resolves it from the stage's settings (None: not found, and the
-/// stage reports that itself).
-pub struct KeyFile {
-    pub name: &'static str,
-    pub path: fn(&Table) -> Option<PathBuf>,
 }
 
 /// A number at `path` (`/`-separated) of a `report.json`, shown as `label`, times
@@ -109,13 +94,6 @@ pub const STAGES: &[Stage] = &[
         verb: Some("finetune"),
         inputs: &[SCENE_INPUT],
         package: "degs-evflow",
-        settings: Some(SettingsType::of::<evflow::finetune::FlowSettings>()),
-        // The flow network's base weights are an input like any other: replacing the
-        // shipped file (or pointing `weights` elsewhere) re-runs evflow.
-        key_file: Some(KeyFile {
-            name: "weights",
-            path: evflow_base_weights,
-        }),
         renders: None,
         event_flow: Some("flow"),
         figures: &[
@@ -131,8 +109,6 @@ pub const STAGES: &[Stage] = &[
         verb: Some("train"),
         inputs: &[SCENE_INPUT],
         package: "degs-gaussians",
-        settings: Some(SettingsType::of::<gaussians::train::TrainSettings>()),
-        key_file: None,
         renders: Some("renders"),
         event_flow: None,
         figures: &[
@@ -154,8 +130,6 @@ pub const STAGES: &[Stage] = &[
             },
         ],
         package: "degs-assoc",
-        settings: Some(SettingsType::of::<assoc::AssocSettings>()),
-        key_file: None,
         renders: None,
         event_flow: None,
         figures: &[
@@ -183,8 +157,6 @@ pub const STAGES: &[Stage] = &[
             },
         ],
         package: "degs-deform",
-        settings: Some(SettingsType::of::<deform::settings::DeformSettings>()),
-        key_file: None,
         renders: Some("renders"),
         event_flow: None,
         figures: &[
@@ -198,34 +170,7 @@ pub const STAGES: &[Stage] = &[
     },
 ];
 
-/// evflow's base weights: `weights = FILE`, else `$EVFLOW_WEIGHTS`, else the shipped
-/// file.
-fn evflow_base_weights(settings: &Table) -> Option<PathBuf> {
-    let explicit = settings
-        .get("weights")
-        .and_then(|v| v.as_str())
-        .map(PathBuf::from);
-    evflow::net::io::resolve_weights(explicit.as_deref())
-        .ok()
-        .filter(|p| p.is_file())
-}
-
 impl Stage {
-    /// Every default of its settings, or None for a stage whose library this build
-    /// does not link.
-    pub fn defaults(&self) -> Option<Table> {
-        self.settings.map(|s| (s.defaults)())
-    }
-
-    /// Check an experiment's table against its settings type (stages without a known
-    /// type pass).
-    pub fn check_settings(&self, settings: &Table) -> Result<(), String> {
-        match self.settings {
-            Some(s) => (s.check)(settings),
-            None => Ok(()),
-        }
-    }
-
     /// How it is invoked: `evflow finetune`, `assoc`.
     pub fn invocation(&self) -> String {
         match self.verb {
@@ -295,7 +240,6 @@ pub fn parse_stage(name: &str) -> Result<usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use toml::Value;
 
     #[test]
     fn stage_names() {
@@ -320,25 +264,6 @@ mod tests {
             // a stage's name is also an experiment table and a node name
             assert!(![SCENE, SYNTH, "name"].contains(&s.name), "{}", s.name);
         }
-    }
-
-    #[test]
-    fn every_known_stage_has_defaults() {
-        let defaults = |s: &str| find(s).unwrap().defaults();
-        let g = defaults("gaussians").unwrap();
-        assert_eq!(g.get("iterations"), Some(&Value::Integer(3500)));
-        assert!(g["field"].is_table());
-        let e = defaults("evflow").unwrap();
-        assert_eq!(e.get("epochs"), None, "the stopping rule by default");
-        assert_eq!(e["stop"].get("min_steps"), Some(&Value::Integer(10)));
-        assert_eq!(
-            defaults("assoc").unwrap().get("k"),
-            Some(&Value::Integer(3))
-        );
-        assert_eq!(
-            defaults("deform").unwrap().get("iterations"),
-            Some(&Value::Integer(2000))
-        );
     }
 
     #[test]

@@ -64,6 +64,7 @@ pub fn write_experiments(
     sweep: &Sweep,
     ctx: &Context,
 ) -> Result<Vec<(Experiment, BTreeMap<String, serde_json::Value>)>> {
+    sweep.check_stages(ctx)?;
     write_points(&sweep.name, sweep.expand()?, ctx)
 }
 

@@ -7,6 +7,7 @@
 static ALLOC: scene::testing::TrackingAlloc = scene::testing::TrackingAlloc;
 
 use pipeline::cache::{self, BinaryHashes, Cache, Verdict};
+use pipeline::context::Context;
 use pipeline::experiment::Experiment;
 use pipeline::record::{Action, RunRecord, StageRecord};
 use scene::testing::{Plan, fuzz};
@@ -43,6 +44,17 @@ iterations = 30
 rebind_every = 10
 "#;
 
+/// A context whose stage directory holds no binaries: the reader is fuzzed in this
+/// process; the stage tables are each stage binary's to check (`STAGE settings
+/// --check`, fuzzed by the stage crates' own readers).
+fn no_stage_binaries(dir: &Path) -> Context {
+    Context {
+        cache: Cache::new(dir.join("cache")),
+        stage_dir: Some(dir.join("no-binaries")),
+        degs: dir.join("degs"),
+    }
+}
+
 #[test]
 fn experiment_reader_synthetic_scene() {
     let _alone = scene::testing::alloc::exclusive();
@@ -50,7 +62,11 @@ fn experiment_reader_synthetic_scene() {
     let path = dir.path().join("tiny.toml");
     let mut plan = Plan::new(51);
     plan.mutations = 1500;
-    fuzz(&path, SYNTHETIC.as_bytes(), &plan, Experiment::load_checked).assert_clean();
+    let ctx = no_stage_binaries(dir.path());
+    fuzz(&path, SYNTHETIC.as_bytes(), &plan, |p| {
+        Experiment::load_checked(p, &ctx)
+    })
+    .assert_clean();
 }
 
 #[test]
@@ -67,12 +83,10 @@ fn experiment_reader_scene_directory() {
     synth::write_synthetic_scene(&cfg, &dir.path().join("scene")).unwrap();
     let path = dir.path().join("real.toml");
     let text = "name = \"real-1\"\n[scene]\ndir = \"scene\"\n[assoc]\nk = 3\n[deform]\nseed = 4\n";
-    fuzz(
-        &path,
-        text.as_bytes(),
-        &Plan::new(52),
-        Experiment::load_checked,
-    )
+    let ctx = no_stage_binaries(dir.path());
+    fuzz(&path, text.as_bytes(), &Plan::new(52), |p| {
+        Experiment::load_checked(p, &ctx)
+    })
     .assert_clean();
 }
 

@@ -6,8 +6,11 @@ use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-/// A shell script that behaves like a stage: takes an optional verb (`finetune`,
-/// `train`), checks its inputs, records its invocation in $DEGS_FAKE_LOG, writes
+/// A shell script that behaves like a stage: answers `settings --defaults` (one key)
+/// and `settings --check -` (refuses a table with a key `bogus` or `iteratons`, the
+/// misspelling the tests use, naming it; names the file of a
+/// `weights = "…"` line as the file it would read), takes an optional verb
+/// (`finetune`, `train`), checks its inputs, records its invocation in $DEGS_FAKE_LOG, writes
 /// $DEGS_FAKE_REPORTS/<stage>.json as its report when that exists (as `gaussians`, copies
 /// the scene's test images as its renders and its novel views as `renders/novel/`), fails when its settings say `seed = 666`,
 /// sleeps when $DEGS_FAKE_SLEEP names it, meets the other stages named in
@@ -16,6 +19,20 @@ use std::process::{Command, Output};
 pub const FAKE_STAGE: &str = r#"#!/bin/sh
 stage=$(basename "$0")
 all="$*"
+if [ "$1" = settings ]; then
+  case "$2" in
+    --defaults) echo 'seed = 0' ;;
+    --check)
+      input=$(cat)
+      bad=$(printf '%s\n' "$input" | sed -n 's/^\(bogus\|iteratons\) = .*/\1/p' | head -n 1)
+      if [ -n "$bad" ]; then
+        echo "$stage: error: key \`$bad\`: unknown field \`$bad\`" >&2; exit 1
+      fi
+      printf '%s\n' "$input" | grep '^weights = ' || true ;;
+    *) echo "$stage: error: settings: give --defaults or --check FILE" >&2; exit 2 ;;
+  esac
+  exit 0
+fi
 scene=
 verb=
 case "$1" in --*|"") ;; *) verb="$1"; shift ;; esac

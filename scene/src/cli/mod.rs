@@ -1,14 +1,17 @@
 //! What every degs binary does the same way: settings files ([`settings`]) and the
 //! defaults their flags show in `--help` ([`help`]), progress on stderr and Ctrl-C
-//! ([`progress`]), and the one-line error exit ([`exit_on_error`]).
+//! ([`progress`]), the `settings` verb through which the runner learns a stage's
+//! settings ([`verb`]), and the one-line error exit ([`exit_on_error`]).
 
 pub mod help;
 pub mod progress;
 pub mod settings;
+pub mod verb;
 
 pub use help::{parse_with, show_defaults, with_default};
 pub use progress::{Progress, sigint_flag};
 pub use settings::Settings;
+pub use verb::SettingsArgs;
 
 use std::process::ExitCode;
 
