@@ -154,7 +154,7 @@ pub fn execute(command: Command) -> Result<()> {
         Command::Import(args) => import_recording(&args),
         Command::Eval { run, place } => {
             let dir = place.run_dir(&run)?;
-            let m = eval::eval_run(&dir)?;
+            let m = eval::eval_run(&dir, &place.context()?, &Progress::new(false))?;
             for f in &m.scene_findings {
                 eprintln!("[degs] scene {f}");
             }
@@ -215,9 +215,11 @@ pub fn execute(command: Command) -> Result<()> {
             Ok(())
         }
         Command::Compare { runs, place } => {
+            let ctx = place.context()?;
             let mut rows = Vec::new();
             for r in &runs {
-                rows.push((r.clone(), eval::eval_run(&place.run_dir(r)?)?));
+                let m = eval::eval_run(&place.run_dir(r)?, &ctx, &Progress::new(false))?;
+                rows.push((r.clone(), m));
             }
             print!("{}", eval::compare_table(&rows));
             Ok(())

@@ -160,7 +160,7 @@ pub fn demo(opts: &DemoOptions, ctx: &Context, progress: &Progress) -> Result<De
         preview = Some(path);
     }
     let run_dir = ctx.cache.run_dir("demo");
-    let metrics = crate::eval::eval_run(&run_dir).ok();
+    let metrics = crate::eval::eval_run(&run_dir, ctx, &Progress::new(true)).ok();
     let renders = stages::render_stages().find_map(|s| {
         record
             .stage(s.name)

@@ -26,6 +26,9 @@ pub enum NodeKind {
     Synth,
     /// An external stage binary.
     External,
+    /// A finished stage's output read as it is (the inputs of the evaluation that
+    /// `degs eval` runs over a finished run): no stage runs, nothing is reported.
+    Given(PathBuf),
 }
 
 /// An input of a node.
@@ -200,7 +203,7 @@ pub fn descendants(nodes: &[Node], i: usize) -> Vec<bool> {
 /// Output directory of a node: the scene dir, or its cache entry.
 pub fn output_dir(nodes: &[Node], i: usize, cache: &Cache) -> Option<PathBuf> {
     match &nodes[i].kind {
-        NodeKind::SceneDir(d) => Some(d.clone()),
+        NodeKind::SceneDir(d) | NodeKind::Given(d) => Some(d.clone()),
         _ => nodes[i]
             .key
             .as_ref()

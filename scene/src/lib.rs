@@ -9,6 +9,7 @@ pub mod camera;
 pub mod check;
 pub mod cli;
 pub mod error;
+pub mod evaluation;
 pub mod events;
 
 pub use camera::{Camera, Distortion, Intrinsics, Pose, Trajectory};

@@ -172,6 +172,8 @@ fn stage_of(pid: &str) -> Option<String> {
         .to_string();
     match (bin.as_str(), args.next().as_deref()) {
         ("degs", Some("synth")) => Some("synth".into()),
+        // The runner asking a stage binary about its settings is not the stage running.
+        (_, Some("settings")) => None,
         (b, _) if STAGES.contains(&b) => Some(b.to_string()),
         _ => None,
     }

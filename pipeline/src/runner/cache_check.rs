@@ -73,6 +73,10 @@ fn check_node(
         progress.finish(&nd.stage, why);
         return Ok(());
     }
+    if let NodeKind::Given(_) = &nd.kind {
+        st.state = State::Done(Action::Cached);
+        return Ok(());
+    }
     if let NodeKind::SceneDir(d) = &nd.kind {
         st.state = State::Done(Action::Cached);
         progress.finish(&nd.stage, &format!("scene directory {}", d.display()));

@@ -45,7 +45,7 @@ pub fn prepare(exp: &Experiment, ctx: &Context) -> Result<Vec<Node>> {
     let nodes = graph::resolve(exp, ctx, &mut hashes)?;
     hashes.save(&ctx.cache)?;
     for n in &nodes {
-        if matches!(n.kind, NodeKind::SceneDir(_)) || n.binary.is_none() {
+        if matches!(n.kind, NodeKind::SceneDir(_) | NodeKind::Given(_)) || n.binary.is_none() {
             continue;
         }
         let path = settings_path(&ctx.cache, &exp.name, &n.stage);
@@ -91,11 +91,33 @@ pub fn run(
     opts: &RunOptions,
     progress: &Progress,
 ) -> Result<RunRecord> {
-    let started = Instant::now();
     let nodes = prepare(exp, ctx)?;
+    let record_path = ctx.cache.run_record(&exp.name);
+    run_nodes(
+        &nodes,
+        (&exp.name, exp.file.as_deref()),
+        ctx,
+        opts,
+        progress,
+        Some(&record_path),
+    )
+}
+
+/// Run resolved `nodes` (their settings files written) for the experiment `name`
+/// (read from `file`); the record is saved to `record_path` after every change when
+/// given.
+pub fn run_nodes(
+    nodes: &[Node],
+    (name, file): (&str, Option<&std::path::Path>),
+    ctx: &Context,
+    opts: &RunOptions,
+    progress: &Progress,
+    record_path: Option<&std::path::Path>,
+) -> Result<RunRecord> {
+    let started = Instant::now();
     let mut record = RunRecord {
-        experiment: exp.name.clone(),
-        experiment_file: exp.file.clone(),
+        experiment: name.to_string(),
+        experiment_file: file.map(|f| f.to_path_buf()),
         cache_root: ctx.cache.root.clone(),
         status: "running".into(),
         started_unix: now_unix(),
@@ -104,13 +126,15 @@ pub fn run(
         stages: nodes
             .iter()
             .enumerate()
-            .map(|(i, nd)| base_record(nd, i, &nodes, ctx))
+            .map(|(i, nd)| base_record(nd, i, nodes, ctx))
             .collect(),
     };
-    let record_path = ctx.cache.run_record(&exp.name);
     let mut save = |record: &mut RunRecord| -> Result<()> {
         record.wall_s = started.elapsed().as_secs_f64();
-        record.write(&record_path)
+        match record_path {
+            Some(p) => record.write(p),
+            None => Ok(()),
+        }
     };
 
     let request = Request {
@@ -118,11 +142,11 @@ pub fn run(
         force: &opts.force,
         verify_full: opts.verify_full,
     };
-    let mut states = cache_check::check(&nodes, &request, &mut record.stages, progress)?;
+    let mut states = cache_check::check(nodes, &request, &mut record.stages, progress)?;
     let schedule = Schedule {
-        nodes: &nodes,
+        nodes,
         ctx,
-        experiment: &exp.name,
+        experiment: name,
         jobs: opts.jobs,
         progress,
     };

@@ -270,7 +270,8 @@ fn result_of(
         .stage("deform")
         .filter(|s| s.action.has_output())
         .map(|s| s.built_wall_s.unwrap_or(s.wall_s));
-    match crate::eval::eval_run_with(&run_dir, crate::eval_lpips::LpipsUse::Off) {
+    let quiet = crate::progress::Progress::new(true);
+    match crate::eval::eval_run_with(&run_dir, ctx, "off", &quiet) {
         Ok(m) => {
             let mut keep = |name: &str, v: Option<f64>| -> Option<f64> {
                 let v = v?;

@@ -115,7 +115,7 @@ pub struct Fixture {
 }
 
 impl Fixture {
-    /// Fake binaries for every external stage and a scene directory.
+    /// Fake binaries for every external stage (the real `evaluate`) and a scene directory.
     pub fn new() -> Fixture {
         let dir = tempfile::tempdir().unwrap();
         let stages = dir.path().join("bin");
@@ -124,6 +124,12 @@ impl Fixture {
             let p = stages.join(s);
             fs::write(&p, FAKE_STAGE).unwrap();
             fs::set_permissions(&p, fs::Permissions::from_mode(0o755)).unwrap();
+        }
+        // The evaluation is real: this build's `evaluate` (built beside `degs` by
+        // `cargo test --workspace`; without it, `degs eval` says how to build it).
+        let evaluate = Path::new(env!("CARGO_BIN_EXE_degs")).with_file_name("evaluate");
+        if evaluate.is_file() {
+            std::os::unix::fs::symlink(&evaluate, stages.join("evaluate")).unwrap();
         }
         let scene = dir.path().join("scene");
         synth::write_synthetic_scene(&tiny_scene_config(), &scene).unwrap();

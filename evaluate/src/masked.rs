@@ -9,6 +9,7 @@
 //!   [`synth::covis`]; the masked PSNR of Gao et al., NeurIPS 2022).
 
 use anyhow::{Result, bail};
+use scene::evaluation::{MaskFigures, Trajectory};
 use scene::image_io::{Image, read_image};
 use std::path::Path;
 
@@ -94,32 +95,6 @@ impl Pair {
     }
 }
 
-/// A novel frame's figures in `metrics.json` (flattened into its frame record).
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct MaskFigures {
-    /// The pixels moving objects cover in the ground truth, the PSNR and SSIM over them
-    /// and the render's relative depth error there.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub moving_pixels: Option<usize>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub moving_psnr: Option<f64>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub moving_ssim: Option<f64>,
-    /// Mean relative depth error `|d − d_gt| / d_gt` of the render over the moving
-    /// objects' pixels (a pixel the render leaves empty counts 1); None without the
-    /// render's depth (`<renders>/novel_depth/NAME.exr`) or the scene's
-    /// (`gt/novel/depth_NNNN.exr`).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub moving_depth_error: Option<f64>,
-    /// The pixels some train view saw, and the PSNR and SSIM over them.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub covisible_pixels: Option<usize>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub covisible_psnr: Option<f64>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub covisible_ssim: Option<f64>,
-}
-
 /// Mean relative depth error over `mask` (see [`MaskFigures::moving_depth_error`]).
 pub fn depth_error(render: &Path, gt: &Path, mask: &[bool]) -> Result<Option<f64>> {
     let (w, h, d) = scene::image_io::read_exr_depth(render)?;
@@ -199,22 +174,6 @@ pub fn novel_masks(
         out.push(f);
     }
     Ok(out)
-}
-
-/// The render stage's figures of its Gaussians' motion against the moving objects' true
-/// 3D motion (`report.json`: `trajectory`, written by `gaussians::trajectory` for
-/// synthetic scenes); read as the stage wrote them.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Trajectory {
-    pub gaussians: usize,
-    pub on_surface_fraction: f64,
-    pub motion_error_mean: f64,
-    pub true_motion_mean: f64,
-    pub model_motion_mean: f64,
-    /// Absent in reports of stages built before it was added.
-    #[serde(default)]
-    pub seen_motion_mean: Option<f64>,
-    pub relative_error: f64,
 }
 
 /// The `trajectory` of the report in stage entry `entry`; None when absent.

@@ -4,8 +4,9 @@
 
 mod eval_common;
 use eval_common::*;
+use evaluate::baselines;
 use evflow::flowfile::{EvFlow, write_evflow};
-use pipeline::baselines;
+use scene::evaluation as figures;
 use scene::image_io::{read_image, write_png};
 use scene::manifest::Scene;
 use std::fs;
@@ -121,7 +122,7 @@ fn eval_and_compare_report_known_errors() {
             .unwrap_or_else(|| panic!("no {label} line in\n{out}"))
             .to_string()
     };
-    let figures = |s: &baselines::Score| format!("{:.2} {:.4}", s.psnr_mean, s.ssim_mean);
+    let figures = |s: &figures::Score| format!("{:.2} {:.4}", s.psnr_mean, s.ssim_mean);
     let tail = |l: String| {
         l.split_whitespace()
             .rev()
@@ -328,7 +329,7 @@ fn reference_event_pseudo_image(dir: &Path) -> f64 {
 }
 
 /// The 2D baselines of the scene's test frames, computed as the deform stage does.
-fn scene_baselines(dir: &Path) -> baselines::BaselineFigures {
+fn scene_baselines(dir: &Path) -> figures::BaselineFigures {
     baselines::compute(&Scene::open(dir).unwrap())
         .unwrap()
         .unwrap()

@@ -1,4 +1,4 @@
-//! Tests of `eval.rs`: PSNR and SSIM against known values and a brute-force SSIM.
+//! Tests of `images.rs`: PSNR and SSIM against known values and a brute-force SSIM.
 
 use super::*;
 
@@ -100,12 +100,4 @@ fn renders_pair_by_name_then_by_order() {
         PathBuf::from("r/1.png")
     );
     assert!(pair_renders(&t, &r2[..1]).is_err());
-}
-
-#[test]
-fn epe_is_found_nested() {
-    let v: serde_json::Value =
-        serde_json::from_str(r#"{"metrics": {"flow": {"EPE_px_s": 3.5}}}"#).unwrap();
-    assert_eq!(find_epe(&v), Some(3.5));
-    assert_eq!(find_epe(&serde_json::json!({"x": 1})), None);
 }

@@ -1,34 +1,24 @@
-//! LPIPS (VGG16, as the paper reports) in `degs eval`: per held-out image beside PSNR and
-//! SSIM, when the weights can be had (`lpips` crate: fetched and converted at first use).
-//! `DEGS_LPIPS` = `fetch` (default: download at first use), `cached` (only weights
-//! already in the cache) or `off`.
+//! LPIPS (VGG16, as the paper reports) in the evaluation: per held-out image beside PSNR
+//! and SSIM, when the weights can be had (`lpips` crate: fetched and converted at first
+//! use). The setting `lpips` = `fetch` (default: download at first use), `cached` (only
+//! weights already in the cache) or `off`; `degs eval` sets it from `DEGS_LPIPS`.
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use lpips::{Lpips, Rgb, Variant};
 use scene::image_io::{Image, read_image};
 use std::path::Path;
 
-/// The network `degs eval` reports.
+/// The network the evaluation reports.
 pub const EVAL_VARIANT: Variant = Variant::Vgg;
 
-/// How `degs eval` gets the LPIPS weights.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// How the evaluation gets the LPIPS weights.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum LpipsUse {
     Off,
     Cached,
+    #[default]
     Fetch,
-}
-
-impl LpipsUse {
-    /// From `DEGS_LPIPS` (unset: fetch).
-    pub fn from_env() -> Result<LpipsUse> {
-        match std::env::var("DEGS_LPIPS").as_deref() {
-            Err(_) | Ok("") | Ok("fetch") => Ok(LpipsUse::Fetch),
-            Ok("cached") => Ok(LpipsUse::Cached),
-            Ok("off") => Ok(LpipsUse::Off),
-            Ok(v) => bail!("DEGS_LPIPS={v}: expected fetch, cached or off"),
-        }
-    }
 }
 
 /// The metric, or why there is none.

@@ -17,7 +17,7 @@ pub fn degs(args: &[&str]) -> Output {
 }
 
 pub fn degs_lpips(args: &[&str], lpips: &str) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_degs"))
+    Command::new(degs_tests::binary("degs"))
         .args(args)
         .env("DEGS_LPIPS", lpips)
         .output()
