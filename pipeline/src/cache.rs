@@ -18,7 +18,7 @@ use std::os::unix::fs::MetadataExt;
 use std::path::{Path, PathBuf};
 
 /// Name of the manifest inside each entry.
-pub const MANIFEST: &str = ".degs-entry.json";
+pub const MANIFEST: &str = scene::atomic::ENTRY_MANIFEST;
 
 /// Paths of a cache root.
 #[derive(Clone, Debug)]

@@ -10,7 +10,7 @@ pub struct Context {
     pub cache: Cache,
     /// Look for stage binaries only here (tests, custom builds).
     pub stage_dir: Option<PathBuf>,
-    /// The `degs` executable (runs the built-in synth stage).
+    /// The `degs` executable (stage binaries are looked for beside it).
     pub degs: PathBuf,
 }
 

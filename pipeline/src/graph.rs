@@ -22,7 +22,7 @@ use toml::Table;
 pub enum NodeKind {
     /// An existing scene directory: no stage runs, its key is a fingerprint.
     SceneDir(PathBuf),
-    /// `degs synth` (built in, run as a process of this binary).
+    /// A synthetic scene, written by `synth scene` (the `synth` binary).
     Synth,
     /// An external stage binary.
     External,
@@ -102,20 +102,33 @@ pub fn resolve(exp: &Experiment, ctx: &Context, hashes: &mut BinaryHashes) -> Re
                 toml::Value::Table(t) => canon::canonical_table(&t),
                 _ => Table::new(),
             };
-            // Keyed by the code that makes scenes, not by the whole `degs` binary
-            // (pipeline/build.rs): rebuilding the runner keeps synthetic scenes cached.
-            let binary_hash = format!("synth-code-{}", env!("DEGS_SYNTH_CODE"));
-            let key = key_of(stages::SYNTH, &binary_hash, &settings, &[]);
+            let binary = ctx.stage_binary(stages::SYNTH);
+            let binary_hash = match &binary {
+                Some(b) => Some(hashes.hash(b)?),
+                None => None,
+            };
+            let key = binary_hash
+                .as_ref()
+                .map(|bh| key_of(stages::SYNTH, bh, &settings, &[]));
             Node {
                 stage: stages::SYNTH.into(),
                 kind: NodeKind::Synth,
-                verb: Some(stages::SYNTH),
-                binary: Some(ctx.degs.clone()),
-                binary_hash: Some(binary_hash),
+                verb: Some("scene"),
+                unavailable: binary.is_none().then(|| {
+                    format!(
+                        "not built yet: no `synth` binary {} (build it with `cargo build \
+                         --release -p degs-synth`)",
+                        match &ctx.stage_dir {
+                            Some(d) => format!("in {}", d.display()),
+                            None => "next to degs or on PATH".into(),
+                        }
+                    )
+                }),
+                binary,
+                binary_hash,
                 settings,
                 inputs: vec![],
-                key: Some(key),
-                unavailable: None,
+                key,
             }
         }
     });
@@ -228,36 +241,44 @@ mod tests {
         assert_ne!(base, key_of("s", "b", &t, &[("--model", "k")]));
     }
 
-    /// The synth stage's key follows the scene-making code, not the `degs` binary it
-    /// runs in: two different `degs` executables give the same key.
+    /// The synth stage's key follows the `synth` binary, not the `degs` binary that
+    /// runs it: two different `degs` executables give the same key, a rebuilt `synth`
+    /// another.
     #[test]
-    fn synth_key_ignores_the_degs_binary() {
+    fn synth_key_follows_the_synth_binary() {
         let dir = tempfile::tempdir().unwrap();
         let exp = Experiment::parse(
             "name = \"a\"\n[scene]\nsynth = \"rigid\"\n",
             &dir.path().join("a.toml"),
         )
         .unwrap();
-        let key = |bytes: &[u8]| {
-            let degs = dir.path().join("degs");
-            std::fs::write(&degs, bytes).unwrap();
+        let bin = dir.path().join("bin");
+        std::fs::create_dir_all(&bin).unwrap();
+        let key = |degs: &[u8], synth: &[u8]| {
+            use std::os::unix::fs::PermissionsExt;
+            let (d, s) = (dir.path().join("degs"), bin.join("synth"));
+            std::fs::write(&d, degs).unwrap();
+            std::fs::write(&s, synth).unwrap();
+            std::fs::set_permissions(&s, std::fs::Permissions::from_mode(0o755)).unwrap();
             let ctx = Context {
                 cache: Cache::new(dir.path().join("c")),
-                stage_dir: Some(dir.path().join("none")),
-                degs,
+                stage_dir: Some(bin.clone()),
+                degs: d,
             };
-            let mut hashes = BinaryHashes::default();
-            let nodes = resolve(&exp, &ctx, &mut hashes).unwrap();
+            let nodes = resolve(&exp, &ctx, &mut BinaryHashes::default()).unwrap();
             let synth = nodes.iter().find(|n| n.stage == stages::SYNTH).unwrap();
             (
                 synth.key.clone().unwrap(),
                 synth.binary_hash.clone().unwrap(),
             )
         };
-        let (k1, h1) = key(b"one build");
-        let (k2, _) = key(b"another build of the runner");
+        let (k1, h1) = key(b"one build", b"synth one");
+        let (k2, _) = key(b"another build of the runner", b"synth one");
+        let (k3, h3) = key(b"one build", b"synth two");
         assert_eq!(k1, k2);
-        assert_eq!(h1, format!("synth-code-{}", env!("DEGS_SYNTH_CODE")));
-        assert_eq!(env!("DEGS_SYNTH_CODE").len(), 32);
+        assert_ne!(k1, k3);
+        assert_ne!(h1, h3);
+        // the binary's content hash (the last call left "synth two" there)
+        assert_eq!(h3, crate::cache::hash_file(&bin.join("synth")).unwrap());
     }
 }

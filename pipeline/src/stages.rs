@@ -5,7 +5,7 @@
 //! (`STAGE settings`, [`crate::settings`]).
 //!
 //! Node 0 of the graph is the scene: a directory (`[scene] dir`, node name `scene`) or
-//! built by the `degs synth` sub-command of this binary (node name `synth`).
+//! written by the `synth` binary's `synth scene` (node name `synth`).
 
 use anyhow::{Result, bail};
 use std::path::Path;

@@ -14,6 +14,10 @@ use std::path::{Path, PathBuf};
 /// The suffix of every temp name degs writes, before the writer's pid.
 pub const TEMP_SUFFIX: &str = ".degs-tmp-";
 
+/// The manifest the runner writes into each cache entry it seals (a copy of an entry,
+/// e.g. a transformed scene, leaves it out).
+pub const ENTRY_MANIFEST: &str = ".degs-entry.json";
+
 /// `path` with `.degs-tmp-<pid>` appended to its file name.
 pub fn temp_path(path: &Path) -> PathBuf {
     let mut name = path.file_name().unwrap_or_default().to_os_string();

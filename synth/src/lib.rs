@@ -11,6 +11,12 @@
 //!   `gaussians synth-rgb`); the ground-truth file formats ([`gt`]) they write and the
 //!   evaluation tools read.
 //!
+//! - the stress transforms of `degs stress` ([`transform`]): a scene directory made
+//!   worse after the fact (fewer frames, noise, hot pixels, a wrong contrast threshold,
+//!   a gap, a burst, a corrupt file).
+//!
+//! The `synth` binary runs the scene writer and the transform as the runner's stages.
+//!
 //! It builds on `scene` (camera, manifest, event streams, images, atomic files) and
 //! on nothing else of degs.
 
@@ -25,6 +31,7 @@ pub mod rgb;
 pub mod scene_dir;
 pub mod sim;
 pub mod texture;
+pub mod transform;
 pub mod world;
 
 pub use config::{CameraPath, Deform, Motion, ObjectSpec, Pattern, Shape, SynthConfig, Texture};

@@ -5,13 +5,13 @@
 //! shared stages run once, a re-run resumes), evaluates them and writes
 //! `runs/<name>/stress.json`, `report.md` and one chart per stress.
 //!
-//! A transformed scene is a cache entry `cache/stress-scene/<key>/`, its key blake3 of
-//! the transform's settings, the clean scene's key and the transform's code
-//! ([`transform`]); the runs read it as a scene directory.
+//! A transformed scene is a cache entry `cache/stress-scene/<key>/` written by `synth
+//! stress` ([`synth::transform`]), its key blake3 of the `synth` binary's hash, the
+//! transform's settings and the clean scene's key; the runs read it as a scene
+//! directory.
 
 pub mod chart;
 pub mod report;
-pub mod transform;
 pub mod variants;
 
 use crate::context::Context;
@@ -23,39 +23,41 @@ use anyhow::{Context as _, Result, bail};
 use report::{StressRecord, StressResult, VariantScene};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use transform::SceneTransform;
+use synth::transform::{SceneTransform, TransformSummary};
 use variants::{METHODS, Recipe, StressFile, StressKind, Variant};
 
 /// The cache stage name of transformed scenes.
 pub const STAGE: &str = "stress-scene";
 
-/// A fingerprint of the transform's code (its source and the scene crate's, through
-/// the synth fingerprint): rebuilding the runner keeps transformed scenes cached.
-fn code_fingerprint() -> String {
-    let src = blake3::hash(include_str!("transform.rs").as_bytes()).to_hex();
-    format!("{}-{}", env!("DEGS_SYNTH_CODE"), &src[..16])
-}
-
 /// The cache entry of `t` applied to the scene `base` (keyed `base_key`), made when
-/// missing.
+/// missing by `synth stress` (its key from the `synth` binary's hash, the transform's
+/// settings and the clean scene's key).
 pub fn transformed_scene(
     ctx: &Context,
     base: &Path,
     base_key: &str,
     t: &SceneTransform,
-) -> Result<(PathBuf, transform::TransformSummary)> {
+) -> Result<(PathBuf, TransformSummary)> {
     let settings = match toml::Value::try_from(t)? {
         toml::Value::Table(tb) => crate::canon::canonical_table(&tb),
         _ => toml::Table::new(),
     };
-    let key = crate::graph::key_of(
-        STAGE,
-        &code_fingerprint(),
-        &settings,
-        &[("--scene", base_key)],
-    );
+    let synth = ctx.stage_binary(crate::stages::SYNTH).with_context(|| {
+        format!(
+            "cannot transform scenes: no `synth` binary {} (build it with `cargo build \
+             --release -p degs-synth`)",
+            match &ctx.stage_dir {
+                Some(d) => format!("in {}", d.display()),
+                None => "next to degs or on PATH".into(),
+            }
+        )
+    })?;
+    let mut hashes = crate::cache::BinaryHashes::load(&ctx.cache);
+    let binary_hash = hashes.hash(&synth)?;
+    hashes.save(&ctx.cache)?;
+    let key = crate::graph::key_of(STAGE, &binary_hash, &settings, &[("--scene", base_key)]);
     let entry = ctx.cache.entry(STAGE, &key);
-    let summary_of = |dir: &Path| -> Result<transform::TransformSummary> {
+    let summary_of = |dir: &Path| -> Result<TransformSummary> {
         let p = dir.join("stress.json");
         let bytes = std::fs::read(&p).with_context(|| format!("{}: cannot read", p.display()))?;
         serde_json::from_slice(&bytes)
@@ -64,23 +66,41 @@ pub fn transformed_scene(
     if crate::cache::read_manifest(&entry).is_some() {
         return Ok((entry.clone(), summary_of(&entry)?));
     }
-    let started = std::time::Instant::now();
-    if entry.exists() {
-        // An unsealed entry of the cache (ours to replace): a partial or tampered one.
-        std::fs::remove_dir_all(&entry)
-            .with_context(|| format!("{}: cannot remove", entry.display()))?;
+    for old in [&entry, &ctx.cache.temp_entry(STAGE, &key)] {
+        if old.exists() {
+            // An unsealed entry of the cache (ours to replace): a partial or tampered one.
+            std::fs::remove_dir_all(old)
+                .with_context(|| format!("{}: cannot remove", old.display()))?;
+        }
     }
-    let dir = scene::atomic::AtomicDir::new(&entry, &scene::atomic::OutputRule::new(STAGE))?;
-    let summary = transform::apply(base, dir.path(), t)?;
-    crate::cache::seal(
-        dir.path(),
-        STAGE,
-        &key,
-        started.elapsed().as_secs_f64(),
-        None,
-    )?;
-    dir.commit()?;
-    Ok((entry, summary))
+    let tmp = ctx.cache.temp_entry(STAGE, &key);
+    std::fs::create_dir_all(ctx.cache.stage_dir(STAGE))?;
+    let config = scene::atomic::temp_path(&entry.with_extension("toml"));
+    scene::atomic::write_bytes_atomic(&config, crate::canon::to_toml(&settings).as_bytes())?;
+    let args: Vec<String> = [
+        synth.as_os_str(),
+        "stress".as_ref(),
+        "--scene".as_ref(),
+        base.as_os_str(),
+        "--config".as_ref(),
+        config.as_os_str(),
+        "--out".as_ref(),
+        tmp.as_os_str(),
+    ]
+    .iter()
+    .map(|a| a.to_string_lossy().to_string())
+    .collect();
+    let outcome = crate::process::run(&args, &|_| {});
+    let _ = std::fs::remove_file(&config);
+    let out = outcome?;
+    if !out.success() {
+        let _ = std::fs::remove_dir_all(&tmp);
+        bail!("synth stress: {}", out.error_line());
+    }
+    crate::cache::seal(&tmp, STAGE, &key, out.wall_s, out.peak_rss_kib)?;
+    std::fs::rename(&tmp, &entry)
+        .with_context(|| format!("{}: cannot move into place", entry.display()))?;
+    Ok((entry.clone(), summary_of(&entry)?))
 }
 
 /// Run the stress file; the record is also written to `runs/<name>/stress.json`.

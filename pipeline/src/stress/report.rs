@@ -2,9 +2,9 @@
 //! figures or its error, a table per stress, where DEGS falls below RGB-only, and any
 //! NaN.
 
-use super::transform::TransformSummary;
 use super::variants::StressKind;
 use serde::{Deserialize, Serialize};
+use synth::transform::TransformSummary;
 
 /// One variant run with one method.
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]

@@ -1,12 +1,12 @@
 //! The after-the-fact transforms on a tiny synthetic scene, and the variant expansion.
 
-use super::transform::{Corruption, SceneTransform, apply};
 use super::variants::{Recipe, StressFile, StressKind};
 use crate::cache::{BinaryHashes, Cache};
 use crate::context::Context;
 use scene::manifest::Scene;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
+use synth::transform::{Corruption, SceneTransform, apply};
 
 /// A 24×16 `rigid` scene, 0.25 s, train frames at 40 fps (11 of them), written once.
 fn base_scene() -> &'static Path {
@@ -28,7 +28,7 @@ fn base_scene() -> &'static Path {
 
 fn transformed(
     t: SceneTransform,
-) -> (tempfile::TempDir, Scene, super::transform::TransformSummary) {
+) -> (tempfile::TempDir, Scene, synth::transform::TransformSummary) {
     let d = tempfile::tempdir().unwrap();
     let out = d.path().join("out");
     let s = apply(base_scene(), &out, &t).unwrap();
@@ -208,7 +208,7 @@ fn variants_are_named_by_level_and_share_what_they_should() {
     let dir = tempfile::tempdir().unwrap();
     let ctx = Context {
         cache: Cache::new(dir.path().join("c")),
-        stage_dir: Some(dir.path().join("no-stages")),
+        stage_dir: Some(build_dir()),
         degs: dir.path().join("degs"),
     };
     let scene_key = |e: &crate::experiment::Experiment| {
@@ -236,12 +236,30 @@ fn variants_are_named_by_level_and_share_what_they_should() {
     );
 }
 
+/// This build's binaries (`target/<profile>/`, above the test executable in `deps/`):
+/// the real `synth` writes and transforms scenes (`cargo test --workspace` builds it).
+fn build_dir() -> PathBuf {
+    let exe = std::env::current_exe().unwrap();
+    let deps = exe.parent().unwrap();
+    let dir = if deps.ends_with("deps") {
+        deps.parent().unwrap()
+    } else {
+        deps
+    };
+    assert!(
+        dir.join("synth").is_file(),
+        "{}: no `synth` binary: build the workspace's binaries (`cargo test --workspace`)",
+        dir.display()
+    );
+    dir.to_path_buf()
+}
+
 #[test]
 fn a_transformed_scene_is_a_cache_entry_keyed_by_its_settings() {
     let dir = tempfile::tempdir().unwrap();
     let ctx = Context {
         cache: Cache::new(dir.path()),
-        stage_dir: None,
+        stage_dir: Some(build_dir()),
         degs: dir.path().join("degs"),
     };
     let t = |g: f64| SceneTransform {

@@ -28,12 +28,12 @@
 //! after-the-fact [`SceneTransform`] of the clean scene. Each variant runs twice: DEGS
 //! (the base's settings) and RGB-only (`deform` with `schedule.gamma1 = gamma2_max = 0`).
 
-use super::transform::{Corruption, SceneTransform};
 use crate::experiment::{Experiment, SceneSource};
 use crate::sweep::{self, Sweep};
 use anyhow::{Result, anyhow, bail};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
+use synth::transform::{Corruption, SceneTransform};
 use toml::{Table, Value};
 
 /// One kind of stress.
@@ -136,7 +136,7 @@ pub enum Recipe {
     Clean,
     /// The base's synthetic scene with these `scene.settings.*` values.
     Synth(Vec<(String, Value)>),
-    /// The clean scene through [`super::transform::apply`].
+    /// The clean scene through [`synth::transform::apply`].
     Transform(SceneTransform),
 }
 

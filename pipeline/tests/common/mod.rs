@@ -115,7 +115,8 @@ pub struct Fixture {
 }
 
 impl Fixture {
-    /// Fake binaries for every external stage (the real `evaluate`) and a scene directory.
+    /// Fake binaries for every external stage (the real `evaluate` and `synth`) and a
+    /// scene directory.
     pub fn new() -> Fixture {
         let dir = tempfile::tempdir().unwrap();
         let stages = dir.path().join("bin");
@@ -125,11 +126,14 @@ impl Fixture {
             fs::write(&p, FAKE_STAGE).unwrap();
             fs::set_permissions(&p, fs::Permissions::from_mode(0o755)).unwrap();
         }
-        // The evaluation is real: this build's `evaluate` (built beside `degs` by
-        // `cargo test --workspace`; without it, `degs eval` says how to build it).
-        let evaluate = Path::new(env!("CARGO_BIN_EXE_degs")).with_file_name("evaluate");
-        if evaluate.is_file() {
-            std::os::unix::fs::symlink(&evaluate, stages.join("evaluate")).unwrap();
+        // The evaluation and the synthetic scenes are real: this build's `evaluate`
+        // and `synth` (built beside `degs` by `cargo test --workspace`; without them,
+        // `degs` says how to build them).
+        for real in ["evaluate", "synth"] {
+            let bin = Path::new(env!("CARGO_BIN_EXE_degs")).with_file_name(real);
+            if bin.is_file() {
+                std::os::unix::fs::symlink(&bin, stages.join(real)).unwrap();
+            }
         }
         let scene = dir.path().join("scene");
         synth::write_synthetic_scene(&tiny_scene_config(), &scene).unwrap();

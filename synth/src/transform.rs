@@ -1,4 +1,4 @@
-//! The after-the-fact scene transform of `degs stress`: a pure function from a scene
+//! The after-the-fact scene transform of `degs stress` (`synth stress`): a pure function from a scene
 //! directory and [`SceneTransform`] settings to a new scene directory. It applies the
 //! stresses a recording can be given after it was made (fewer train frames, added
 //! noise events, a wrong claimed contrast threshold, a gap without events, a burst of
@@ -335,7 +335,9 @@ fn copy_tree(
         let src = e.path();
         let dst = to.join(e.file_name());
         if skip.contains(&src)
-            || src.file_name().is_some_and(|n| n == crate::cache::MANIFEST)
+            || src
+                .file_name()
+                .is_some_and(|n| n == scene::atomic::ENTRY_MANIFEST)
             || (drop_train_gt && src.ends_with("gt/train"))
         {
             continue;
