@@ -26,8 +26,7 @@
 //! **Conventions.** Camera axes OpenGL (−Z forward, +Y up), poses camera-to-world, pixel
 //! `v` downwards (`scene::camera`); Eq. 9's computer-vision frame is converted inside
 //! [`flow`]. Camera velocity: `v = Rᵀċ`, `Ṙ = R[ω]×` (camera frame). Pose gradients are
-//! camera-right twists `T·[Exp(ω) | v]`; [`lie`] converts the rasterizer's world-left
-//! ones. Images planar `C × H × W`, linear intensity. Event times are `f64` seconds on
+//! camera-right twists `T·[Exp(ω) | v]` ([`lie`]), the rasterizer's included. Images planar `C × H × W`, linear intensity. Event times are `f64` seconds on
 //! the frames' clock, windows half-open `[t_a, t_b)`, polarity ±1. Reductions are summed
 //! per fixed chunk in order, so results do not depend on the thread count.
 //!

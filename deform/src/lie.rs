@@ -1,19 +1,14 @@
 //! Rotations and rigid motions in `f64`: SO(3) exponential and logarithm, their
-//! Jacobians, and the two pose perturbations this crate's gradients are expressed in.
+//! Jacobians, and the pose perturbation every pose gradient of degs is expressed in.
 //!
 //! A pose is `scene::Pose` (camera-to-world: rotation `R`, camera centre `c`, OpenGL
 //! camera axes). A *pose gradient* is a `[f64; 6]` ordered `[v_x, v_y, v_z, ω_x, ω_y,
-//! ω_z]`: the derivative of a loss with respect to a small twist `ε = (v, ω)` at zero,
-//! for one of two perturbations:
-//!
-//! - **camera-right** (this crate's convention): `R' = R·Exp(ω)`, `c' = c + R·v`, i.e.
-//!   `T' = T·[Exp(ω) | v]`: the camera rotates about its own centre and moves by `v`,
-//!   both expressed in its own (OpenGL) axes. [`perturb_camera_right`].
-//! - **world-left** (the `gaussians` rasterizer's convention, `raster::apply_twist`):
-//!   `R' = Exp(ω)·R`, `c' = Exp(ω)·c + v`. [`perturb_world_left`].
-//!
-//! [`world_left_grad_to_camera_right`] and [`camera_right_grad_to_world_left`] convert
-//! a gradient between them (exact at `ε = 0`).
+//! ω_z]`: the derivative of a loss with respect to a small twist `ε = (v, ω)` at zero
+//! of the **camera-right** perturbation `R' = R·Exp(ω)`, `c' = c + R·v`, i.e.
+//! `T' = T·[Exp(ω) | v]`: the camera rotates about its own centre and moves by `v`,
+//! both expressed in its own (OpenGL) axes ([`perturb_camera_right`]; the `gaussians`
+//! rasterizer's `raster::apply_twist` is the same perturbation, so its camera gradient
+//! enters the PoseNet as it is).
 
 use glam::{DMat3, DQuat, DVec3};
 use scene::Pose;
@@ -110,35 +105,4 @@ pub fn perturb_camera_right(pose: &Pose, eps: [f64; 6]) -> Pose {
         rotation: (pose.rotation * exp_so3(w)).normalize(),
         translation: pose.translation + pose.rotation * v,
     }
-}
-
-/// `[Exp(ω) | v]·T`: `R' = Exp(ω)·R`, `c' = Exp(ω)·c + v` (the rasterizer's twist).
-pub fn perturb_world_left(pose: &Pose, eps: [f64; 6]) -> Pose {
-    let (v, w) = split(eps);
-    let dq = exp_so3(w);
-    Pose {
-        rotation: (dq * pose.rotation).normalize(),
-        translation: dq * pose.translation + v,
-    }
-}
-
-/// A gradient w.r.t. the world-left twist (what `gaussians`' rasterizer returns) as a
-/// gradient w.r.t. the camera-right twist of the same pose.
-///
-/// A camera-right twist `b` equals the world-left twist `a = (R·b_v + c × (R·b_ω),
-/// R·b_ω)` to first order, so `g_b = (Rᵀ·g_av, Rᵀ·(g_aω − c × g_av))`.
-pub fn world_left_grad_to_camera_right(pose: &Pose, g: [f64; 6]) -> [f64; 6] {
-    let (gv, gw) = split(g);
-    let rt = pose.rotation.inverse();
-    let c = pose.translation;
-    join(rt * gv, rt * (gw - c.cross(gv)))
-}
-
-/// Inverse of [`world_left_grad_to_camera_right`]: `g_a = (R·g_bv, R·g_bω + c × (R·g_bv))`.
-pub fn camera_right_grad_to_world_left(pose: &Pose, g: [f64; 6]) -> [f64; 6] {
-    let (gv, gw) = split(g);
-    let r = pose.rotation;
-    let c = pose.translation;
-    let rgv = r * gv;
-    join(rgv, r * gw + c.cross(rgv))
 }

@@ -17,9 +17,8 @@
 //! `6 × hidden`, `b₂`), so an Adam over flat slices updates them. The backward chain is
 //! `∂L/∂ε` (camera-right twist of the corrected pose, [`crate::lie`]) →
 //! [`correction_backward`] → `∂L/∂ξ` → [`PoseNet::backward`] → `∂L/∂params`. A gradient
-//! from the `gaussians` rasterizer (world-left twist) converts first with
-//! `lie::world_left_grad_to_camera_right`; one from a symmetric-difference velocity
-//! comes from `camera_path::velocity_between_backward`.
+//! from the `gaussians` rasterizer is in that twist already; one from a
+//! symmetric-difference velocity comes from `camera_path::velocity_between_backward`.
 
 use crate::lie::{exp_so3, join, right_jacobian, split};
 use glam::DVec3;

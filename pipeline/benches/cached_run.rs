@@ -17,10 +17,13 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
-/// Writes `$count` files of `$kib` KiB under `$out/$dir/` for each "DIR COUNT KIB" spec.
+/// Writes `$count` files of `$kib` KiB under `$out/$dir/` for each "DIR COUNT KIB" spec;
+/// accepts any settings (`settings --check` prints no file, as the real stages' do but
+/// evflow's).
 const STAGE: &str = r#"#!/bin/sh
 stage=$(basename "$0")
-case "$stage" in evflow|gaussians) shift ;; esac
+[ "$1" = settings ] && { cat > /dev/null; exit 0; }
+case "$stage" in evflow|gaussians|deform) shift ;; esac
 out=
 while [ $# -gt 0 ]; do
   case "$1" in --out) out="$2"; shift 2 ;; *) shift 2 ;; esac
@@ -109,6 +112,14 @@ fn main() {
         fs::write(&p, STAGE).unwrap();
         fs::set_permissions(&p, fs::Permissions::from_mode(0o755)).unwrap();
     }
+    // The scene is real: this build's `synth` writes it.
+    let synth = Path::new(env!("CARGO_BIN_EXE_degs")).with_file_name("synth");
+    assert!(
+        synth.is_file(),
+        "{}: build the workspace's binaries first",
+        synth.display()
+    );
+    std::os::unix::fs::symlink(&synth, stages.join("synth")).unwrap();
     let exp = dir.path().join("bench.toml");
     fs::write(
         &exp,

@@ -250,10 +250,24 @@ impl Experiment {
     /// stage runs. A stage whose binary is not built is not checked here: the run
     /// says it is not built.
     pub fn check_stage_settings(&self, ctx: &context::Context) -> Result<()> {
-        for stage in STAGES {
-            if let Some(binary) = ctx.stage_binary(stage.binary) {
-                self.check_stage(stage.name, &binary)?;
-            }
+        // One process per stage, asked at once; the answers are remembered for the
+        // graph's resolution ([`crate::settings`]).
+        let checks: Vec<Result<Vec<InputFile>>> = std::thread::scope(|scope| {
+            let handles: Vec<_> = STAGES
+                .iter()
+                .filter_map(|stage| Some((stage, ctx.stage_binary(stage.binary)?)))
+                .map(|(stage, binary)| scope.spawn(move || self.check_stage(stage.name, &binary)))
+                .collect();
+            handles
+                .into_iter()
+                .map(|h| {
+                    h.join()
+                        .unwrap_or_else(|_| Err(anyhow!("a settings check panicked")))
+                })
+                .collect()
+        });
+        for c in checks {
+            c?;
         }
         Ok(())
     }

@@ -2,7 +2,7 @@ use super::{Rng, assert_close, fd_grad};
 use crate::camera_path::{
     CameraPath, CameraVelocity, Interp, velocity_between, velocity_between_backward,
 };
-use crate::lie::{perturb_camera_right, perturb_world_left, world_left_grad_to_camera_right};
+use crate::lie::perturb_camera_right;
 use crate::posenet::{PoseNet, PoseNetSettings, apply_correction, correction_backward};
 use glam::DVec3;
 use scene::Pose;
@@ -167,7 +167,7 @@ fn correction_backward_matches_finite_differences() {
 }
 
 /// The whole chain the training loop will use: camera velocity of the corrected path
-/// (symmetric difference) and a rasterizer-style world-left pose gradient, back to the
+/// (symmetric difference) and a rasterizer-style (camera-right) pose gradient, back to the
 /// PoseNet's weights.
 #[test]
 fn end_to_end_gradient_to_the_weights() {
@@ -208,15 +208,14 @@ fn end_to_end_gradient_to_the_weights() {
         correction_backward(xb, gb),
         &mut grad,
     );
-    // The pose term's gradient as the rasterizer would return it (world-left twist).
-    let g_world: [f64; 6] = fd_grad(&[0.0; 6], 1e-6, |e| {
-        perturb_world_left(&pt, e.try_into().unwrap())
+    // The pose term's gradient as the rasterizer returns it (camera-right twist).
+    let g_cam: [f64; 6] = fd_grad(&[0.0; 6], 1e-6, |e| {
+        perturb_camera_right(&pt, e.try_into().unwrap())
             .to_camera(target)
             .length_squared()
     })
     .try_into()
     .unwrap();
-    let g_cam = world_left_grad_to_camera_right(&pt, g_world);
     net.backward(
         p.normalised_time(t),
         correction_backward(xt, g_cam),

@@ -415,8 +415,7 @@ impl JointTrainer {
         if self.iteration >= self.settings.posenet_warmup || self.posenet.is_none() {
             add_scaled(grads, &ge, 1.0);
         }
-        let g_eps = crate::lie::world_left_grad_to_camera_right(&camera.cam_to_world, ge.camera);
-        self.posenet_backward(d, t_e, xi, g_eps);
+        self.posenet_backward(d, t_e, xi, ge.camera);
         self.inner.recycle_grads(ge);
         el.loss as f64
     }

@@ -325,8 +325,10 @@ fn sum_pairs(pairs: &[ScreenGrad], list: &[u32], nv: usize, screen: &mut Vec<Scr
         });
 }
 
-/// `∂L/∂(W, t_w, C)` → `∂L/∂δ` for the left twist of the module docs. With
-/// `W' ≈ W(I − [ω]×)`, `t_w' ≈ t_w − W v`, `C' ≈ C + ω×C + v`.
+/// `∂L/∂(W, t_w, C)` → `∂L/∂δ` for the right (camera-frame) twist of the module docs.
+/// First for the world-frame left twist `a` (`W' ≈ W(I − [ω]×)`, `t_w' ≈ t_w − W v`,
+/// `C' ≈ C + ω×C + v`); a right twist `b` is the left twist `a = (R·b_v + C × (R·b_ω),
+/// R·b_ω)` to first order, so `∂L/∂b = (Rᵀ·∂L/∂a_v, Rᵀ·(∂L/∂a_ω − C × ∂L/∂a_v))`.
 fn pose_twist_grad(cam: &Camera, c: &[f64; 15]) -> [f64; 6] {
     let inv = cam.cam_to_world.inverse();
     let wm = DMat3::from_quat(inv.rotation);
@@ -339,5 +341,7 @@ fn pose_twist_grad(cam: &Camera, c: &[f64; 15]) -> [f64; 6] {
     let e = |i: usize, j: usize| m.col(j)[i];
     let g_omega =
         -DVec3::new(e(2, 1) - e(1, 2), e(0, 2) - e(2, 0), e(1, 0) - e(0, 1)) + centre.cross(g_c);
-    [g_v.x, g_v.y, g_v.z, g_omega.x, g_omega.y, g_omega.z]
+    // `wm` is Rᵀ (world-to-camera rotation).
+    let (b_v, b_omega) = (wm * g_v, wm * (g_omega - centre.cross(g_v)));
+    [b_v.x, b_v.y, b_v.z, b_omega.x, b_omega.y, b_omega.z]
 }

@@ -11,12 +11,12 @@
 //! skipped, a pixel stops before the Gaussian that would take its transmittance below
 //! `1e-4`.
 //!
-//! **Pose gradient convention**: the camera twist `δ = (v, ω)` perturbs the
-//! camera-to-world pose on the left, `T(δ) = [exp([ω]×) | v] · T`, i.e.
-//! `R' = exp([ω]×)·R`, `t' = exp([ω]×)·t + v` (world-frame rotation about the world origin,
-//! then translation); [`apply_twist`] implements it. The gradient returned by
-//! [`TileRasterizer::backward_full`] is `∂L/∂δ` at `δ = 0`, ordered `[v_x, v_y, v_z,
-//! ω_x, ω_y, ω_z]`. To first order this is the SE(3) exponential's left perturbation.
+//! **Pose gradient convention** (the one of every crate of degs): the camera twist
+//! `δ = (v, ω)` perturbs the camera-to-world pose on the right, `T(δ) = T · [exp([ω]×) |
+//! v]`, i.e. `R' = R·exp([ω]×)`, `c' = c + R·v`: the camera turns about its own centre
+//! and moves by `v`, both in its own (OpenGL) axes; [`apply_twist`] implements it. The
+//! gradient returned by [`TileRasterizer::backward_full`] is `∂L/∂δ` at `δ = 0`,
+//! ordered `[v_x, v_y, v_z, ω_x, ω_y, ω_z]`.
 
 // Index loops mirror the math; negated comparisons deliberately reject NaN.
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
@@ -41,15 +41,15 @@ use glam::{DQuat, DVec3};
 use project::CamSetup;
 use scene::{Camera, Pose};
 
-/// Apply a twist `δ = (v, ω)` to a camera-to-world pose by left perturbation (see the
-/// module docs): `R' = exp([ω]×)·R`, `t' = exp([ω]×)·t + v`.
+/// Apply a twist `δ = (v, ω)` to a camera-to-world pose by right perturbation (see the
+/// module docs): `R' = R·exp([ω]×)`, `c' = c + R·v`.
 pub fn apply_twist(pose: &Pose, twist: [f64; 6]) -> Pose {
     let v = DVec3::new(twist[0], twist[1], twist[2]);
     let w = DVec3::new(twist[3], twist[4], twist[5]);
     let dq = DQuat::from_scaled_axis(w);
     Pose {
-        rotation: (dq * pose.rotation).normalize(),
-        translation: dq * pose.translation + v,
+        rotation: (pose.rotation * dq).normalize(),
+        translation: pose.translation + pose.rotation * v,
     }
 }
 

@@ -57,7 +57,7 @@ pub trait Rasterizer: Sync {
         background: [f32; 3],
     ) -> (RenderedImage, Self::State);
     /// Backward from `∂L/∂rgb` (planar `3×H×W`) and optionally `∂L/∂depth` (`H×W`) to
-    /// every Gaussian parameter and to the camera as a world-frame left twist
+    /// every Gaussian parameter and to the camera as a camera-frame right twist
     /// (`raster::apply_twist`).
     fn backward_view(
         &self,

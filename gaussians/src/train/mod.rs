@@ -50,7 +50,7 @@ pub struct ViewRender<S> {
 
 /// Gradients of a loss on the model: canonical Gaussians (with the densification
 /// statistics of the render they came from), the field's parameters (empty when the
-/// field is off) and the camera (world-frame left twist).
+/// field is off) and the camera (camera-frame right twist, `raster::apply_twist`).
 #[derive(Clone, Debug, Default)]
 pub struct ModelGrads {
     pub splats: SplatGrads,
