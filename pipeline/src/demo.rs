@@ -160,7 +160,14 @@ pub fn demo(opts: &DemoOptions, ctx: &Context, progress: &Progress) -> Result<De
         preview = Some(path);
     }
     let run_dir = ctx.cache.run_dir("demo");
-    let metrics = crate::eval::eval_run(&run_dir, ctx, &Progress::new(true)).ok();
+    let metrics = match crate::eval::eval_run(&run_dir, ctx, &Progress::new(true)) {
+        Ok(m) => Some(m),
+        Err(e) => {
+            // The summary then has no evaluation figures: say why.
+            progress.note(&format!("no evaluation: {e:#}"));
+            None
+        }
+    };
     let renders = stages::render_stages().find_map(|s| {
         record
             .stage(s.name)
