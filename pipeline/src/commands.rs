@@ -367,18 +367,7 @@ fn synth_scene(
     }
     let cfg = synth::load_config(config, Some(preset), set)?;
     let s = synth::write_scene(&cfg, out, &rule)?;
-    eprintln!(
-        "[degs] synth: {} {}x{}, {} train + {} test frames + {} novel views, {} events in {:.2} s → {}",
-        s.preset,
-        s.width,
-        s.height,
-        s.train_frames,
-        s.test_frames,
-        s.novel_frames,
-        s.events,
-        s.total_s,
-        out.display()
-    );
+    eprintln!("[degs] synth: {} → {}", s.line(), out.display());
     Ok(())
 }
 

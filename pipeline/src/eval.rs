@@ -122,12 +122,8 @@ pub fn eval_run_with(
     };
     let binary = ctx.stage_binary(BINARY).with_context(|| {
         format!(
-            "cannot evaluate: no `{BINARY}` binary {} (build it with `cargo build --release \
-             -p {PACKAGE}`)",
-            match &ctx.stage_dir {
-                Some(d) => format!("in {}", d.display()),
-                None => "next to degs or on PATH".into(),
-            }
+            "cannot evaluate: {}",
+            stages::not_built(BINARY, PACKAGE, ctx.stage_dir.as_deref())
         )
     })?;
     let mut settings = Table::new();

@@ -115,14 +115,7 @@ pub fn resolve(exp: &Experiment, ctx: &Context, hashes: &mut BinaryHashes) -> Re
                 kind: NodeKind::Synth,
                 verb: Some("scene"),
                 unavailable: binary.is_none().then(|| {
-                    format!(
-                        "not built yet: no `synth` binary {} (build it with `cargo build \
-                         --release -p degs-synth`)",
-                        match &ctx.stage_dir {
-                            Some(d) => format!("in {}", d.display()),
-                            None => "next to degs or on PATH".into(),
-                        }
-                    )
+                    stages::not_built(stages::SYNTH, "degs-synth", ctx.stage_dir.as_deref())
                 }),
                 binary,
                 binary_hash,

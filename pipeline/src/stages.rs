@@ -181,15 +181,22 @@ impl Stage {
 
     /// Why it cannot run when its binary is missing, and how to build it.
     pub fn not_built_message(&self, stage_dir: Option<&Path>) -> String {
-        let place = match stage_dir {
-            Some(d) => format!("in {}", d.display()),
-            None => "next to degs or on PATH".into(),
-        };
-        format!(
-            "not built yet: no `{}` binary {place} (build it with `cargo build --release -p {}`)",
-            self.binary, self.package
-        )
+        not_built(self.binary, self.package, stage_dir)
     }
+}
+
+/// Why a node cannot run when its binary `binary` (of cargo package `package`) is not
+/// found (only in `stage_dir` when given, else next to degs or on `PATH`), and how to
+/// build it.
+pub fn not_built(binary: &str, package: &str, stage_dir: Option<&Path>) -> String {
+    let place = match stage_dir {
+        Some(d) => format!("in {}", d.display()),
+        None => "next to degs or on PATH".into(),
+    };
+    format!(
+        "not built yet: no `{binary}` binary {place} (build it with `cargo build --release -p \
+         {package}`)"
+    )
 }
 
 /// The stage named `name`.

@@ -66,19 +66,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 .force(force)
                 .source(&config);
             let s = synth::write_synthetic_scene_with(&cfg, &out, &rule)?;
-            eprintln!(
-                "synth: {} {}x{}, {} train + {} test frames + {} novel views, {} events in \
-                 {:.2} s -> {}",
-                s.preset,
-                s.width,
-                s.height,
-                s.train_frames,
-                s.test_frames,
-                s.novel_frames,
-                s.events,
-                s.total_s,
-                out.display()
-            );
+            eprintln!("synth: {} -> {}", s.line(), out.display());
             Ok(ExitCode::SUCCESS)
         }
         Verb::Stress { scene, config, out } => {

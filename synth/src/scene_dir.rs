@@ -77,6 +77,24 @@ pub struct Summary {
     pub total_s: f64,
 }
 
+impl Summary {
+    /// One line for people: `rigid 128x128, 9 train + 8 test frames + 8 novel views,
+    /// 511087 events in 11.14 s`.
+    pub fn line(&self) -> String {
+        format!(
+            "{} {}x{}, {} train + {} test frames + {} novel views, {} events in {:.2} s",
+            self.preset,
+            self.width,
+            self.height,
+            self.train_frames,
+            self.test_frames,
+            self.novel_frames,
+            self.events,
+            self.total_s
+        )
+    }
+}
+
 /// Render the recording at the internal rate and simulate its events, with the
 /// per-event ground truth (see the module doc).
 pub fn simulate_scene(world: &SynthWorld) -> Result<(EventStream, EventFlowGt)> {

@@ -44,12 +44,8 @@ pub fn transformed_scene(
     };
     let synth = ctx.stage_binary(crate::stages::SYNTH).with_context(|| {
         format!(
-            "cannot transform scenes: no `synth` binary {} (build it with `cargo build \
-             --release -p degs-synth`)",
-            match &ctx.stage_dir {
-                Some(d) => format!("in {}", d.display()),
-                None => "next to degs or on PATH".into(),
-            }
+            "cannot transform scenes: {}",
+            crate::stages::not_built(crate::stages::SYNTH, "degs-synth", ctx.stage_dir.as_deref())
         )
     })?;
     let mut hashes = crate::cache::BinaryHashes::load(&ctx.cache);
