@@ -138,7 +138,7 @@ fn main() {
             .unwrap()
             .flatten()
         {
-            let m = pipeline::cache::read_manifest(&entry.path()).unwrap();
+            let m = runner::cache::read_manifest(&entry.path()).unwrap();
             files += m.files.len();
             bytes += m.files.iter().map(|f| f.size).sum::<u64>();
         }

@@ -3,11 +3,11 @@
 // The doc comments below are the help text clap prints, written for a terminal.
 #![allow(rustdoc::broken_intra_doc_links, rustdoc::invalid_html_tags)]
 
-use crate::cache::Cache;
-use crate::context::Context;
-use crate::runner::RunOptions;
 use anyhow::{Result, anyhow};
 use clap::{Args, Parser, Subcommand};
+use runner::cache::Cache;
+use runner::context::Context;
+use runner::run::RunOptions;
 use std::path::PathBuf;
 
 /// Reconstruct a dynamic scene as 3D Gaussians from events + sparse RGB frames.

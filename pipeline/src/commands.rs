@@ -2,15 +2,16 @@
 
 use crate::cli::{Command, ConfigCommand, EncodingArg, EventsCommand, ImportArgs, Where};
 use crate::demo::{self, DemoOptions};
-use crate::experiment::Experiment;
-use crate::plan::Plan;
-use crate::progress::Progress;
-use crate::record::Action;
-use crate::runner::{self, RunOptions};
-use crate::sweep::Sweep;
-use crate::{chart, config_show, eval, plan, stages, status, sweep_run, synth};
 use anyhow::{Context as _, Result, anyhow, bail};
+use runner::experiment::Experiment;
+use runner::plan::Plan;
+use runner::progress::Progress;
+use runner::record::Action;
+use runner::run::{self, RunOptions};
+use runner::{config_show, eval, plan, stages, status, synth};
 use std::path::{Path, PathBuf};
+use studies::sweep::Sweep;
+use studies::sweep_run;
 
 /// Run one parsed `degs` command.
 pub fn execute(command: Command) -> Result<()> {
@@ -82,7 +83,7 @@ pub fn execute(command: Command) -> Result<()> {
         Command::Chart { runs, place, out } => {
             let (curves, runs): (Vec<String>, Vec<String>) = runs
                 .into_iter()
-                .partition(|r| chart::curve::is_curve_file(r));
+                .partition(|r| charts::curve::is_curve_file(r));
             let records = chart_runs(&runs, &place)?;
             let out = match out {
                 Some(o) => o,
@@ -90,11 +91,11 @@ pub fn execute(command: Command) -> Result<()> {
             };
             let mut files = Vec::new();
             if !records.is_empty() {
-                files.extend(chart::write_charts(&records, &out)?);
+                files.extend(charts::write_charts(&records, &out)?);
             }
             if !curves.is_empty() {
                 let paths: Vec<PathBuf> = curves.iter().map(PathBuf::from).collect();
-                files.extend(chart::curve_draw::write_curve_charts(&paths, &out)?);
+                files.extend(charts::curve_draw::write_curve_charts(&paths, &out)?);
             }
             for f in &files {
                 println!("{}", f.display());
@@ -232,7 +233,7 @@ pub fn execute(command: Command) -> Result<()> {
 fn run(experiment: &Path, place: &Where, opts: &RunOptions, quiet: bool) -> Result<()> {
     let ctx = place.context()?;
     let exp = Experiment::load_checked(experiment, &ctx)?;
-    let record = runner::run(&exp, &ctx, opts, &Progress::new(quiet))?;
+    let record = run::run(&exp, &ctx, opts, &Progress::new(quiet))?;
     match record.stages.iter().find(|s| s.action == Action::Failed) {
         Some(f) => Err(anyhow!(
             "stage {} failed: {} (log: {})",
@@ -250,9 +251,9 @@ fn run(experiment: &Path, place: &Where, opts: &RunOptions, quiet: bool) -> Resu
 /// `degs stress`: failed variants are the point of it, so only a broken stress file or
 /// an unmakeable clean scene is an error.
 fn run_stress(file: &Path, place: &Where, opts: &RunOptions, quiet: bool) -> Result<()> {
-    let stress = crate::stress::variants::StressFile::load(file)?;
+    let stress = studies::stress::variants::StressFile::load(file)?;
     let ctx = place.context()?;
-    let record = crate::stress::run(&stress, &ctx, opts, &Progress::new(quiet))?;
+    let record = studies::stress::run(&stress, &ctx, opts, &Progress::new(quiet))?;
     let dir = ctx.cache.run_dir(&stress.name);
     let failed = record.results.iter().filter(|r| r.error.is_some()).count();
     println!(
@@ -297,7 +298,7 @@ fn plan(file: &Path, place: &Where, all: bool) -> Result<()> {
     let mut ctx = place.context()?;
     ctx.cache.root = std::path::absolute(&ctx.cache.root)?;
     ctx.stage_dir = ctx.stage_dir.map(std::path::absolute).transpose()?;
-    let p = if crate::sweep::is_sweep_file(file) {
+    let p = if studies::sweep::is_sweep_file(file) {
         let sweep = Sweep::load(file)?;
         let exps: Vec<Experiment> = sweep_run::write_experiments(&sweep, &ctx)?
             .into_iter()
@@ -322,8 +323,8 @@ fn plan(file: &Path, place: &Where, all: bool) -> Result<()> {
 
 /// The run records named by `runs`: run directories, experiment names, or sweep names
 /// (`runs/<sweep>/sweep.json`: every experiment of the sweep that has a record).
-fn chart_runs(runs: &[String], place: &Where) -> Result<Vec<crate::record::RunRecord>> {
-    let mut out: Vec<crate::record::RunRecord> = Vec::new();
+fn chart_runs(runs: &[String], place: &Where) -> Result<Vec<runner::record::RunRecord>> {
+    let mut out: Vec<runner::record::RunRecord> = Vec::new();
     for r in runs {
         let sweep = [PathBuf::from(r), place.context()?.cache.run_dir(r)]
             .into_iter()
@@ -345,7 +346,7 @@ fn chart_runs(runs: &[String], place: &Where) -> Result<Vec<crate::record::RunRe
             None => vec![place.run_dir(r)?],
         };
         for d in dirs {
-            let rec = crate::record::RunRecord::read(&d.join("run.json"))?;
+            let rec = runner::record::RunRecord::read(&d.join("run.json"))?;
             if !out.iter().any(|o| o.experiment == rec.experiment) {
                 out.push(rec);
             }

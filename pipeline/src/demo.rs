@@ -2,14 +2,14 @@
 //! run every stage that is built through the runner, and end with a summary table
 //! (stage, time, cached?, key figures), an event preview and summary.json.
 
-use crate::context::Context;
-use crate::experiment::Experiment;
-use crate::process::fmt_kib;
-use crate::progress::Progress;
-use crate::record::{Action, RunRecord};
-use crate::runner::{self, RunOptions};
-use crate::stages;
 use anyhow::{Context as _, Result};
+use runner::context::Context;
+use runner::experiment::Experiment;
+use runner::process::fmt_kib;
+use runner::progress::Progress;
+use runner::record::{Action, RunRecord};
+use runner::run::{self, RunOptions};
+use runner::stages;
 use scene::events::EventStream;
 use scene::image_io::{Image, write_png};
 use scene::manifest::Scene;
@@ -144,7 +144,7 @@ pub fn demo(opts: &DemoOptions, ctx: &Context, progress: &Progress) -> Result<De
         jobs: opts.jobs,
         ..Default::default()
     };
-    let record = runner::run(&exp, ctx, &run_opts, progress)?;
+    let record = run::run(&exp, ctx, &run_opts, progress)?;
     let scene_dir = record
         .stages
         .first()
@@ -160,7 +160,7 @@ pub fn demo(opts: &DemoOptions, ctx: &Context, progress: &Progress) -> Result<De
         preview = Some(path);
     }
     let run_dir = ctx.cache.run_dir("demo");
-    let metrics = match crate::eval::eval_run(&run_dir, ctx, &Progress::new(true)) {
+    let metrics = match runner::eval::eval_run(&run_dir, ctx, &Progress::new(true)) {
         Ok(m) => Some(m),
         Err(e) => {
             // The summary then has no evaluation figures: say why.
@@ -177,7 +177,7 @@ pub fn demo(opts: &DemoOptions, ctx: &Context, progress: &Progress) -> Result<De
             .map(|(e, dir)| e.join(dir))
             .filter(|r| r.is_dir())
     });
-    let charts = crate::chart::write_charts(std::slice::from_ref(&record), &out.join("charts"))
+    let charts = charts::write_charts(std::slice::from_ref(&record), &out.join("charts"))
         .unwrap_or_else(|e| {
             eprintln!("[degs] demo: no charts: {e:#}");
             Vec::new()

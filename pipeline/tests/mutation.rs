@@ -6,10 +6,10 @@
 #[global_allocator]
 static ALLOC: scene::testing::TrackingAlloc = scene::testing::TrackingAlloc;
 
-use pipeline::cache::{self, BinaryHashes, Cache, Verdict};
-use pipeline::context::Context;
-use pipeline::experiment::Experiment;
-use pipeline::record::{Action, RunRecord, StageRecord};
+use runner::cache::{self, BinaryHashes, Cache, Verdict};
+use runner::context::Context;
+use runner::experiment::Experiment;
+use runner::record::{Action, RunRecord, StageRecord};
 use scene::testing::{Plan, fuzz};
 use std::collections::BTreeMap;
 use std::convert::Infallible;
@@ -79,7 +79,7 @@ fn experiment_reader_scene_directory() {
                             test_frames = 2\nsupersample = 1\nframe_supersample = 1\n"
         .parse()
         .unwrap();
-    let cfg = pipeline::experiment::synth_config("static", &cfg).unwrap();
+    let cfg = runner::experiment::synth_config("static", &cfg).unwrap();
     synth::write_synthetic_scene(&cfg, &dir.path().join("scene")).unwrap();
     let path = dir.path().join("real.toml");
     let text = "name = \"real-1\"\n[scene]\ndir = \"scene\"\n[assoc]\nk = 3\n[deform]\nseed = 4\n";

@@ -13,7 +13,7 @@
 //! end.
 
 use degs_tests::{Workspace, entry, stage_record, stderr};
-use pipeline::cache::{self, Cache, Verdict};
+use runner::cache::{self, Cache, Verdict};
 use std::collections::BTreeMap;
 use std::os::unix::process::CommandExt;
 use std::path::Path;
@@ -137,7 +137,7 @@ fn assert_consistent(w: &Workspace, when: &str) {
     }
     let record = w.cache.join("runs/resume/run.json");
     if record.exists() {
-        pipeline::record::RunRecord::read(&record).unwrap_or_else(|e| panic!("{when}: {e:#}"));
+        runner::record::RunRecord::read(&record).unwrap_or_else(|e| panic!("{when}: {e:#}"));
     }
 }
 

@@ -3,10 +3,10 @@
 //! experiment's tables and the files outside the graph that enter a stage's key.
 
 use degs_tests::{bin_dir, binary};
-use pipeline::cache::Cache;
-use pipeline::context::Context;
-use pipeline::experiment::Experiment;
-use pipeline::settings::defaults;
+use runner::cache::Cache;
+use runner::context::Context;
+use runner::experiment::Experiment;
+use runner::settings::defaults;
 use std::path::Path;
 use toml::Value;
 
@@ -73,10 +73,10 @@ fn show_lists_every_default_and_round_trips() {
         "name = \"a\"\n[scene]\nsynth = \"rigid\"\n[gaussians]\niterations = 10\n\
          [gaussians.field]\nwidth = 32\n[evflow]\nepochs = 1\n",
     );
-    let text = pipeline::config_show::show(&e, &ctx).unwrap();
+    let text = runner::config_show::show(&e, &ctx).unwrap();
     for stage in ["evflow", "gaussians", "assoc"] {
         let defaults = defaults(&binary(stage)).unwrap();
-        for (key, _) in pipeline::canon::flatten(&defaults) {
+        for (key, _) in runner::canon::flatten(&defaults) {
             let leaf = key.rsplit('.').next().unwrap();
             assert!(
                 text.contains(&format!("#   {leaf} = ")),
@@ -105,7 +105,7 @@ fn f32_defaults_print_as_their_shortest_decimal() {
         Some(grad.to_string().parse().unwrap())
     );
     let e = parse("name = \"a\"\n[scene]\nsynth = \"rigid\"\n");
-    let text = pipeline::config_show::show(&e, &ctx(dir.path())).unwrap();
+    let text = runner::config_show::show(&e, &ctx(dir.path())).unwrap();
     assert!(text.contains("#   grad_threshold = 0.0002\n"), "{text}");
     assert!(!text.contains("0.000199999"), "{text}");
 }
@@ -124,7 +124,7 @@ fn bad_stage_axes_of_a_sweep_name_the_file_and_the_key() {
             "name = \"s\"\n[base]\n{}\n{body}",
             base.replace("[", "[base.")
         );
-        let sweep = pipeline::sweep::Sweep::parse(&text, Path::new("/sw/s.toml")).unwrap();
+        let sweep = studies::sweep::Sweep::parse(&text, Path::new("/sw/s.toml")).unwrap();
         let msg = format!("{:#}", sweep.check_stages(&ctx).unwrap_err());
         assert!(msg.contains("/sw/s.toml"), "{msg}");
         assert!(msg.contains(want), "{want}: {msg}");

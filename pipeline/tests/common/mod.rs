@@ -103,7 +103,7 @@ pub fn tiny_scene_config() -> synth::SynthConfig {
                             test_frames = 2\nsupersample = 1\nframe_supersample = 1\n"
         .parse()
         .unwrap();
-    pipeline::experiment::synth_config("rigid", &set).unwrap()
+    runner::experiment::synth_config("rigid", &set).unwrap()
 }
 
 pub struct Fixture {

@@ -2,8 +2,8 @@
 //! with a known error.
 #![allow(dead_code)]
 
-use pipeline::experiment::synth_config;
-use pipeline::record::{Action, RunRecord, StageRecord};
+use runner::experiment::synth_config;
+use runner::record::{Action, RunRecord, StageRecord};
 use scene::image_io::{read_image, write_png};
 use scene::manifest::Scene;
 use std::collections::BTreeMap;

@@ -17,9 +17,9 @@
 //! stage binaries, [`Sweep::check_stages`]), so an unknown or mistyped key is an error
 //! naming the sweep file and the axis before anything runs.
 
-use crate::experiment::Experiment;
-use crate::stages;
 use anyhow::{Context, Result, anyhow, bail};
+use runner::experiment::Experiment;
+use runner::stages;
 use std::path::{Path, PathBuf};
 use toml::{Table, Value};
 
@@ -151,7 +151,7 @@ impl Sweep {
             let mut seen: Vec<String> = Vec::new();
             for v in &axis.values {
                 let text =
-                    crate::canon::canonical_string(&Table::from_iter([("v".into(), v.clone())]));
+                    runner::canon::canonical_string(&Table::from_iter([("v".into(), v.clone())]));
                 if seen.contains(&text) {
                     bail!("{file}: axis \"{}\": value {v} appears twice", axis.key);
                 }
@@ -166,7 +166,7 @@ impl Sweep {
     /// Every stage table of the base and of each axis value, checked by the stage's
     /// binary ([`Experiment::check_stage_settings`]); an error names the file, the
     /// axis and its value, the stage and the key.
-    pub fn check_stages(&self, ctx: &crate::context::Context) -> Result<()> {
+    pub fn check_stages(&self, ctx: &runner::context::Context) -> Result<()> {
         let file = self.file.display();
         self.experiment(&self.name, &[])?
             .check_stage_settings(ctx)
@@ -191,9 +191,9 @@ impl Sweep {
         }
         let text = toml::to_string(&t).map_err(|e| anyhow!("{e}"))?;
         let mut exp = Experiment::parse(&text, &self.base_file)?;
-        if let crate::experiment::SceneSource::Dir(d) = &exp.scene {
+        if let runner::experiment::SceneSource::Dir(d) = &exp.scene {
             let abs = std::path::absolute(d).unwrap_or_else(|_| d.clone());
-            exp.scene = crate::experiment::SceneSource::Dir(abs);
+            exp.scene = runner::experiment::SceneSource::Dir(abs);
         }
         exp.file = None;
         Ok(exp)
@@ -402,7 +402,7 @@ mod tests {
             p.settings("gaussians")["field"]["width"].as_integer(),
             Some(32)
         );
-        let crate::experiment::SceneSource::Synth(cfg) = &p.scene else {
+        let runner::experiment::SceneSource::Synth(cfg) = &p.scene else {
             panic!("synthetic scene expected")
         };
         assert_eq!(cfg.width, 16, "the axis overrides the base's 32");
@@ -417,7 +417,7 @@ mod tests {
         let presets: Vec<(String, u32)> = pts
             .iter()
             .map(|p| match &p.experiment.scene {
-                crate::experiment::SceneSource::Synth(c) => (c.preset.clone(), c.width),
+                runner::experiment::SceneSource::Synth(c) => (c.preset.clone(), c.width),
                 other => panic!("{other:?}"),
             })
             .collect();
@@ -509,7 +509,7 @@ mod tests {
         assert_eq!(pts.len(), 2);
         assert_eq!(
             pts[1].experiment.scene,
-            crate::experiment::SceneSource::Dir(d.path().join("scenes/x"))
+            runner::experiment::SceneSource::Dir(d.path().join("scenes/x"))
         );
         assert_eq!(
             short_keys(&["a.k".into(), "b.k".into(), "c.j".into()]),

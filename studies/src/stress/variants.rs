@@ -28,9 +28,9 @@
 //! after-the-fact [`SceneTransform`] of the clean scene. Each variant runs twice: DEGS
 //! (the base's settings) and RGB-only (`deform` with `schedule.gamma1 = gamma2_max = 0`).
 
-use crate::experiment::{Experiment, SceneSource};
 use crate::sweep::{self, Sweep};
 use anyhow::{Result, anyhow, bail};
+use runner::experiment::{Experiment, SceneSource};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use synth::transform::{Corruption, SceneTransform};

@@ -24,9 +24,9 @@ pub mod draw;
 mod labels;
 pub mod legend;
 
-use crate::record::RunRecord;
-use crate::stages;
 use anyhow::{Context, Result};
+use runner::record::RunRecord;
+use runner::stages;
 use serde::Serialize;
 use serde_json::Value;
 use std::collections::BTreeMap;
@@ -143,10 +143,10 @@ pub fn model_bytes(entry: &Path) -> u64 {
     const NOT_MODEL: [&str; 4] = [
         "report.json",
         "settings.toml",
-        crate::cache::MANIFEST,
+        runner::cache::MANIFEST,
         "log",
     ];
-    crate::cache::list_files(entry)
+    runner::cache::list_files(entry)
         .unwrap_or_default()
         .iter()
         .filter(|rel| {

@@ -54,7 +54,7 @@ impl Plan {
             ..Plan::default()
         };
         for exp in exps {
-            let nodes = crate::runner::prepare(exp, ctx)?;
+            let nodes = crate::run::prepare(exp, ctx)?;
             for (i, n) in nodes.iter().enumerate() {
                 if let NodeKind::SceneDir(d) = &n.kind {
                     let note = format!("scene: {}", d.display());

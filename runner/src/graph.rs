@@ -57,12 +57,7 @@ pub struct Node {
     pub unavailable: Option<String>,
 }
 
-pub(crate) fn key_of(
-    stage: &str,
-    binary_hash: &str,
-    settings: &Table,
-    inputs: &[(&str, &str)],
-) -> String {
+pub fn key_of(stage: &str, binary_hash: &str, settings: &Table, inputs: &[(&str, &str)]) -> String {
     let mut h = blake3::Hasher::new();
     for part in [
         "degs-key-v1",

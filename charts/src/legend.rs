@@ -9,7 +9,7 @@ const LEGEND_FONT: (&str, u32) = ("sans-serif", 14);
 /// The legend of `labels` (the series' labels, in the order they were added) on a
 /// translucent white box where it covers the fewest of `anchors` (pixel positions of what
 /// was drawn; lines as [`polyline_anchors`]): see [`legend_place`].
-pub(crate) fn draw_legend<'a, DB: DrawingBackend + 'a, CT: plotters::coord::CoordTranslate>(
+pub fn draw_legend<'a, DB: DrawingBackend + 'a, CT: plotters::coord::CoordTranslate>(
     chart: &mut ChartContext<'a, DB, CT>,
     anchors: &[(i32, i32)],
     labels: &[String],
@@ -53,7 +53,7 @@ pub struct LegendPlace {
 
 /// Size in pixels of the legend box of `labels`, laid out as plotters lays it out (the
 /// labels' text block, a 30-pixel sample of the series and a 10-pixel margin around).
-pub(crate) fn legend_size(labels: &[String]) -> (i32, i32) {
+pub fn legend_size(labels: &[String]) -> (i32, i32) {
     // Measured with the bundled font (`draw::register_font`, before any chart is drawn).
     let font: TextStyle = LEGEND_FONT.into_font().into();
     let mut text = MultiLineText::<(i32, i32), &str>::new((0, 0), &font);
@@ -113,7 +113,7 @@ pub fn legend_place(
 
 /// Points every few pixels along the polyline through `points` (pixels), so that a
 /// legend avoids a line and not only its vertices.
-pub(crate) fn polyline_anchors(points: &[(i32, i32)]) -> Vec<(i32, i32)> {
+pub fn polyline_anchors(points: &[(i32, i32)]) -> Vec<(i32, i32)> {
     const STEP: f64 = 4.0;
     let mut out: Vec<(i32, i32)> = points.first().copied().into_iter().collect();
     for w in points.windows(2) {

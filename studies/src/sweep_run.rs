@@ -7,13 +7,13 @@
 //! file: `degs run`, `status` and `plan` take it). Interrupting and re-running resumes:
 //! finished stages are cached, an interrupted one leaves only a temp dir.
 
-use crate::context::Context;
-use crate::experiment::Experiment;
-use crate::progress::Progress;
-use crate::record::{Action, RunRecord};
-use crate::runner::{self, RunOptions};
 use crate::sweep::Sweep;
 use anyhow::{Context as _, Result};
+use runner::context::Context;
+use runner::experiment::Experiment;
+use runner::progress::Progress;
+use runner::record::{Action, RunRecord};
+use runner::run::{self, RunOptions};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -157,7 +157,7 @@ pub fn run_experiments(
             exps.len(),
             exp.name
         ));
-        let run = runner::run(exp, ctx, opts, progress)?;
+        let run = run::run(exp, ctx, opts, progress)?;
         note_run(&mut record, i, &run);
         scene::atomic::write_json_atomic(&path, &record)?;
     }

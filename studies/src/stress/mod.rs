@@ -14,13 +14,13 @@ pub mod chart;
 pub mod report;
 pub mod variants;
 
-use crate::context::Context;
-use crate::experiment::Experiment;
-use crate::progress::Progress;
-use crate::record::{Action, RunRecord};
-use crate::runner::{self, RunOptions};
 use anyhow::{Context as _, Result, bail};
 use report::{StressRecord, StressResult, VariantScene};
+use runner::context::Context;
+use runner::experiment::Experiment;
+use runner::progress::Progress;
+use runner::record::{Action, RunRecord};
+use runner::run::{self, RunOptions};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use synth::transform::{SceneTransform, TransformSummary};
@@ -39,19 +39,23 @@ pub fn transformed_scene(
     t: &SceneTransform,
 ) -> Result<(PathBuf, TransformSummary)> {
     let settings = match toml::Value::try_from(t)? {
-        toml::Value::Table(tb) => crate::canon::canonical_table(&tb),
+        toml::Value::Table(tb) => runner::canon::canonical_table(&tb),
         _ => toml::Table::new(),
     };
-    let synth = ctx.stage_binary(crate::stages::SYNTH).with_context(|| {
+    let synth = ctx.stage_binary(runner::stages::SYNTH).with_context(|| {
         format!(
             "cannot transform scenes: {}",
-            crate::stages::not_built(crate::stages::SYNTH, "degs-synth", ctx.stage_dir.as_deref())
+            runner::stages::not_built(
+                runner::stages::SYNTH,
+                "degs-synth",
+                ctx.stage_dir.as_deref()
+            )
         )
     })?;
-    let mut hashes = crate::cache::BinaryHashes::load(&ctx.cache);
+    let mut hashes = runner::cache::BinaryHashes::load(&ctx.cache);
     let binary_hash = hashes.hash(&synth)?;
     hashes.save(&ctx.cache)?;
-    let key = crate::graph::key_of(STAGE, &binary_hash, &settings, &[("--scene", base_key)]);
+    let key = runner::graph::key_of(STAGE, &binary_hash, &settings, &[("--scene", base_key)]);
     let entry = ctx.cache.entry(STAGE, &key);
     let summary_of = |dir: &Path| -> Result<TransformSummary> {
         let p = dir.join("stress.json");
@@ -59,7 +63,7 @@ pub fn transformed_scene(
         serde_json::from_slice(&bytes)
             .with_context(|| format!("{}: not a transform summary", p.display()))
     };
-    if crate::cache::read_manifest(&entry).is_some() {
+    if runner::cache::read_manifest(&entry).is_some() {
         return Ok((entry.clone(), summary_of(&entry)?));
     }
     for old in [&entry, &ctx.cache.temp_entry(STAGE, &key)] {
@@ -72,7 +76,7 @@ pub fn transformed_scene(
     let tmp = ctx.cache.temp_entry(STAGE, &key);
     std::fs::create_dir_all(ctx.cache.stage_dir(STAGE))?;
     let config = scene::atomic::temp_path(&entry.with_extension("toml"));
-    scene::atomic::write_bytes_atomic(&config, crate::canon::to_toml(&settings).as_bytes())?;
+    scene::atomic::write_bytes_atomic(&config, runner::canon::to_toml(&settings).as_bytes())?;
     let args: Vec<String> = [
         synth.as_os_str(),
         "stress".as_ref(),
@@ -86,14 +90,14 @@ pub fn transformed_scene(
     .iter()
     .map(|a| a.to_string_lossy().to_string())
     .collect();
-    let outcome = crate::process::run(&args, &|_| {});
+    let outcome = runner::process::run(&args, &|_| {});
     let _ = std::fs::remove_file(&config);
     let out = outcome?;
     if !out.success() {
         let _ = std::fs::remove_dir_all(&tmp);
         bail!("synth stress: {}", out.error_line());
     }
-    crate::cache::seal(&tmp, STAGE, &key, out.wall_s, out.peak_rss_kib)?;
+    runner::cache::seal(&tmp, STAGE, &key, out.wall_s, out.peak_rss_kib)?;
     std::fs::rename(&tmp, &entry)
         .with_context(|| format!("{}: cannot move into place", entry.display()))?;
     Ok((entry.clone(), summary_of(&entry)?))
@@ -119,7 +123,7 @@ pub fn run(
         until: Some(0),
         ..opts.clone()
     };
-    let rec = runner::run(&clean_exps[0], ctx, &scene_only, progress)?;
+    let rec = run::run(&clean_exps[0], ctx, &scene_only, progress)?;
     let scene_stage = &rec.stages[0];
     let (Some(base_dir), Some(base_key)) = (scene_stage.entry.clone(), scene_stage.key.clone())
     else {
@@ -208,8 +212,8 @@ pub fn run(
         stress: file.name.clone(),
         stress_file: file.file.clone(),
         base: match &file.base.scene {
-            crate::experiment::SceneSource::Synth(c) => format!("synthetic `{}`", c.preset),
-            crate::experiment::SceneSource::Dir(d) => d.display().to_string(),
+            runner::experiment::SceneSource::Synth(c) => format!("synthetic `{}`", c.preset),
+            runner::experiment::SceneSource::Dir(d) => d.display().to_string(),
         },
         sensor: file.sensor,
         neutral_levels: StressKind::ALL
@@ -286,8 +290,8 @@ fn result_of(
         .stage("deform")
         .filter(|s| s.action.has_output())
         .map(|s| s.built_wall_s.unwrap_or(s.wall_s));
-    let quiet = crate::progress::Progress::new(true);
-    match crate::eval::eval_run_with(&run_dir, ctx, "off", &quiet) {
+    let quiet = runner::progress::Progress::new(true);
+    match runner::eval::eval_run_with(&run_dir, ctx, "off", &quiet) {
         Ok(m) => {
             let mut keep = |name: &str, v: Option<f64>| -> Option<f64> {
                 let v = v?;

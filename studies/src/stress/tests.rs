@@ -1,8 +1,8 @@
 //! The after-the-fact transforms on a tiny synthetic scene, and the variant expansion.
 
 use super::variants::{Recipe, StressFile, StressKind};
-use crate::cache::{BinaryHashes, Cache};
-use crate::context::Context;
+use runner::cache::{BinaryHashes, Cache};
+use runner::context::Context;
 use scene::manifest::Scene;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
@@ -18,7 +18,7 @@ fn base_scene() -> &'static Path {
              novel_angle_deg = 0\n"
             .parse()
             .unwrap();
-        let cfg = crate::experiment::synth_config("rigid", &overrides).unwrap();
+        let cfg = runner::experiment::synth_config("rigid", &overrides).unwrap();
         let out = d.path().join("base");
         synth::write_synthetic_scene(&cfg, &out).unwrap();
         (d, out)
@@ -211,8 +211,8 @@ fn variants_are_named_by_level_and_share_what_they_should() {
         stage_dir: Some(build_dir()),
         degs: dir.path().join("degs"),
     };
-    let scene_key = |e: &crate::experiment::Experiment| {
-        let nodes = crate::graph::resolve(e, &ctx, &mut BinaryHashes::default()).unwrap();
+    let scene_key = |e: &runner::experiment::Experiment| {
+        let nodes = runner::graph::resolve(e, &ctx, &mut BinaryHashes::default()).unwrap();
         nodes[0].key.clone().unwrap()
     };
     let exps: Vec<Vec<_>> = v
@@ -232,7 +232,7 @@ fn variants_are_named_by_level_and_share_what_they_should() {
     // a transformed variant reads the directory it is given
     assert_eq!(
         exps[3][0].scene,
-        crate::experiment::SceneSource::Dir(PathBuf::from("/scenes/x"))
+        runner::experiment::SceneSource::Dir(PathBuf::from("/scenes/x"))
     );
 }
 

@@ -11,7 +11,7 @@ use crate::context::Context;
 use crate::graph::{Input, Node, NodeKind, key_of};
 use crate::progress::Progress;
 use crate::record::{Action, RunRecord};
-use crate::runner::{RunOptions, run_nodes};
+use crate::run::{RunOptions, run_nodes};
 use crate::stages;
 use anyhow::{Context as _, Result, bail};
 pub use scene::evaluation::{FrameMetrics, Metrics, PSNR_CAP};

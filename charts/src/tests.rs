@@ -60,7 +60,7 @@ fn locm_time_is_the_finetune_phase() {
 /// A run record over entries in `root` whose reports are given; `built` is each
 /// stage's build time, `cached` whether this run found it cached.
 fn record(root: &Path, name: &str, stages: &[(&str, &str, f64, &str)]) -> RunRecord {
-    use crate::record::{Action, StageRecord};
+    use runner::record::{Action, StageRecord};
     let mut recs = vec![StageRecord {
         stage: "synth".into(),
         action: Action::Cached,

@@ -9,16 +9,16 @@ use plotters::prelude::*;
 use std::path::{Path, PathBuf};
 
 /// The font every chart's text is drawn with (DejaVu Sans, its licence in
-/// `pipeline/fonts/LICENSE-DejaVu.txt`): plotters' ab_glyph text needs one registered,
+/// `charts/fonts/LICENSE-DejaVu.txt`): plotters' ab_glyph text needs one registered,
 /// and a bundled one does not depend on the machine's fonts.
-static FONT: &[u8] = include_bytes!("../../fonts/DejaVuSans.ttf");
+static FONT: &[u8] = include_bytes!("../fonts/DejaVuSans.ttf");
 
 /// Pixel size of the PNG charts.
 pub const SIZE: (u32, u32) = (960, 640);
 /// The same with the channel count, as the PNG reads back.
 pub const SIZE_RGB: (u32, u32, u32) = (SIZE.0, SIZE.1, 3);
 
-pub(crate) fn register_font() -> Result<()> {
+pub fn register_font() -> Result<()> {
     static DONE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
     let ok = *DONE.get_or_init(|| {
         plotters::style::register_font("sans-serif", FontStyle::Normal, FONT).is_ok()
@@ -28,7 +28,7 @@ pub(crate) fn register_font() -> Result<()> {
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub(crate) enum Marker {
+pub enum Marker {
     Circle,
     Triangle,
     Cross,
@@ -57,14 +57,14 @@ struct Spec {
 }
 
 /// Colours of the 2D baselines' dashed lines.
-pub(crate) const LINE_COLOURS: [RGBColor; 3] = [
+pub const LINE_COLOURS: [RGBColor; 3] = [
     RGBColor(120, 120, 120),
     RGBColor(44, 160, 44),
     RGBColor(148, 103, 189),
 ];
 
 /// The colour and marker of a method's points.
-pub(crate) fn method_style(m: Method) -> (RGBColor, Marker) {
+pub fn method_style(m: Method) -> (RGBColor, Marker) {
     match m {
         Method::Degs => (RGBColor(214, 39, 40), Marker::Circle),
         Method::RgbJoint => (RGBColor(255, 127, 14), Marker::Cross),
@@ -254,7 +254,7 @@ fn spread(series: &[Series]) -> f64 {
 }
 
 /// A chart that can draw itself on any plotters backend.
-pub(crate) trait Drawing {
+pub trait Drawing {
     fn draw_on<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String>;
 }
 
@@ -270,7 +270,7 @@ fn write_both(spec: &Spec, stem: &Path) -> Result<Vec<PathBuf>> {
 }
 
 /// Draw `chart` to `<stem>.png` ([`SIZE`], the bundled font) and `<stem>.svg`.
-pub(crate) fn write_png_and_svg(chart: &impl Drawing, stem: &Path) -> Result<Vec<PathBuf>> {
+pub fn write_png_and_svg(chart: &impl Drawing, stem: &Path) -> Result<Vec<PathBuf>> {
     register_font()?;
     let png = stem.with_extension("png");
     let (w, h) = SIZE;
@@ -320,7 +320,7 @@ fn tick(v: f64) -> String {
 
 /// A tick value on a linear axis spanning `span`: enough decimals to tell the
 /// ticks (about ten of them) apart.
-pub(crate) fn linear_tick(v: f64, span: f64) -> String {
+pub fn linear_tick(v: f64, span: f64) -> String {
     let decimals = (1.0 - span.max(1e-12).log10()).ceil().clamp(0.0, 6.0) as usize;
     format!("{v:.decimals$}")
 }
@@ -332,11 +332,7 @@ pub(crate) fn linear_tick(v: f64, span: f64) -> String {
 const MIN_RELATIVE_SPAN: f64 = 0.1;
 
 /// Padded range of `values` (a unit either side when they are all equal).
-pub(crate) fn range(
-    values: impl Iterator<Item = f64>,
-    pad: f64,
-    clamp_at_zero: bool,
-) -> (f64, f64) {
+pub fn range(values: impl Iterator<Item = f64>, pad: f64, clamp_at_zero: bool) -> (f64, f64) {
     let (mut lo, mut hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
         (a.min(v), b.max(v))
     });

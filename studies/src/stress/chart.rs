@@ -5,12 +5,12 @@
 
 use super::report::{StressRecord, StressResult};
 use super::variants::StressKind;
-use crate::chart::Method;
-use crate::chart::draw::{
+use anyhow::Result;
+use charts::Method;
+use charts::draw::{
     Drawing, LINE_COLOURS, Marker, linear_tick, method_style, range, write_png_and_svg,
 };
-use crate::chart::legend::{draw_legend, polyline_anchors};
-use anyhow::Result;
+use charts::legend::{draw_legend, polyline_anchors};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
