@@ -4,8 +4,8 @@
 use serde::Serialize;
 
 use crate::{AssocSettings, Bindings, bind_nearest, footprint_radii, lift_events};
-use scene::cli::Settings;
 use scene::{Camera, EventSlice};
+use stagekit::Settings;
 
 /// Per-frame figures for `report.json`.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]

@@ -44,7 +44,7 @@ impl Default for AssocSettings {
     }
 }
 
-impl scene::cli::Settings for AssocSettings {
+impl stagekit::Settings for AssocSettings {
     /// Checks every setting is in range; the message names the setting.
     fn validate(&self) -> Result<(), String> {
         if !(self.delta_t.is_finite() && self.delta_t > 0.0) {

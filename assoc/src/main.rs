@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use clap::Parser;
 
 use assoc::AssocSettings;
-use scene::cli::{Progress, exit_on_error, parse_with, settings, show_defaults};
+use stagekit::{Progress, exit_on_error, parse_with, settings, show_defaults};
 
 /// Tie events to the Gaussians that caused them: each event near a train-frame time is
 /// lifted to 3D through the warm-up's depth map, and every Gaussian binds to its k
@@ -90,7 +90,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
 
 fn main() -> ExitCode {
     if let Some(code) =
-        scene::cli::verb::intercept::<AssocSettings>("assoc", scene::cli::verb::no_files)
+        stagekit::verb::intercept::<AssocSettings>("assoc", stagekit::verb::no_files)
     {
         return code;
     }

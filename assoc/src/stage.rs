@@ -16,10 +16,10 @@ use crate::frame::{FrameStats, associate_frame};
 use crate::{AssocSettings, Bindings, FrameBindings, write_assoc};
 use gaussians::model::Model;
 use scene::atomic::{AtomicDir, OutputRule, write_json_atomic};
-use scene::cli::{Settings, settings::write_resolved};
 use scene::image_io::{Image, read_exr_depth, read_image, write_png};
-use scene::report::{Phases, peak_rss_mib};
 use scene::{Error, Result, Scene};
+use stagekit::report::{Phases, peak_rss_mib};
+use stagekit::{Settings, settings::write_resolved};
 
 /// Depth map the warm-up wrote at train frame `index`.
 pub fn depth_path(model_dir: &Path, index: usize) -> PathBuf {

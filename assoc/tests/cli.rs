@@ -4,7 +4,7 @@
 //! renders itself go in; the output directory, its `report.json` figures and the exit
 //! status of bad inputs are checked.
 
-use scene::cli::help::flag_help;
+use stagekit::help::flag_help;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 

@@ -1,13 +1,13 @@
 //! `assoc.bin` against thousands of damaged copies of a valid file
-//! (`scene::testing::mutate`, docs/DESIGN.md "Inputs that cannot hurt"), with and
+//! (`testkit::mutate`, docs/DESIGN.md "Inputs that cannot hurt"), with and
 //! without its checksum recomputed (so the damage also reaches the parser behind it).
 
 #[global_allocator]
-static ALLOC: scene::testing::TrackingAlloc = scene::testing::TrackingAlloc;
+static ALLOC: testkit::TrackingAlloc = testkit::TrackingAlloc;
 
 use assoc::{Bindings, FrameBindings, read_assoc, read_assoc_for, write_assoc};
-use scene::testing::{Plan, fuzz};
 use std::fs;
+use testkit::{Plan, fuzz};
 
 /// Two frames of bindings for a model of 6 Gaussians.
 fn frames() -> Vec<FrameBindings> {
@@ -46,7 +46,7 @@ fn rehash(b: &mut [u8]) {
 
 #[test]
 fn assoc_reader() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("assoc.bin");
     write_assoc(&path, &frames()).unwrap();
@@ -64,7 +64,7 @@ fn assoc_reader() {
 /// model's counts a header that disagrees is refused before any allocation.
 #[test]
 fn frames_claiming_huge_models_are_refused() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("assoc.bin");
     let mut b = b"DEGSASC\0".to_vec();
@@ -80,7 +80,7 @@ fn frames_claiming_huge_models_are_refused() {
     b.extend_from_slice(&[0; 32]);
     rehash(&mut b);
     fs::write(&path, &b).unwrap();
-    let (r, peak) = scene::testing::alloc::peak_during(|| read_assoc(&path));
+    let (r, peak) = testkit::alloc::peak_during(|| read_assoc(&path));
     let msg = r.unwrap_err().to_string();
     assert!(msg.contains(&path.display().to_string()), "{msg}");
     assert!(
@@ -88,7 +88,7 @@ fn frames_claiming_huge_models_are_refused() {
         "{msg}"
     );
     assert!(peak <= (4 << 25) + (1 << 20), "{peak} bytes");
-    let (r, peak) = scene::testing::alloc::peak_during(|| read_assoc_for(&path, 3, 1000));
+    let (r, peak) = testkit::alloc::peak_during(|| read_assoc_for(&path, 3, 1000));
     let msg = r.unwrap_err().to_string();
     assert!(
         msg.contains("frame 0: bindings for 33554432 Gaussians but the model has 1000"),

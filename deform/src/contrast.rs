@@ -29,8 +29,8 @@
 
 use rand::{RngExt, SeedableRng};
 use scene::EventSlice;
-use scene::optim::Adam;
 use serde::{Deserialize, Serialize};
+use stagekit::optim::Adam;
 
 pub use crate::event_image::LUMA;
 

@@ -172,7 +172,7 @@ impl Inputs {
         let model = Model::load(model_dir)?;
         // The warm-up's resolved settings, validated like the warm-up's own input.
         let warmup: TrainSettings =
-            scene::cli::settings::read_file(&model_dir.join("settings.toml"))?;
+            stagekit::settings::read_file(&model_dir.join("settings.toml"))?;
         let assoc_file = assoc_dir.join("assoc.bin");
         // Counts checked against the model before the reader allocates for them.
         let frames = assoc::read_assoc_for(&assoc_file, views.len(), model.splats.len())?;

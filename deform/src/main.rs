@@ -3,7 +3,7 @@
 
 use clap::{Parser, Subcommand};
 use deform::stage::{self, TrainArgs};
-use scene::cli::{Progress, exit_on_error, sigint_flag};
+use stagekit::{Progress, exit_on_error, sigint_flag};
 use std::process::ExitCode;
 
 #[derive(Parser)]
@@ -23,15 +23,14 @@ enum Verb {
     Train(TrainArgs),
     /// The settings of `deform train`: `--defaults` prints them as TOML, `--check FILE`
     /// checks a settings file. The runner learns the settings this way.
-    Settings(scene::cli::SettingsArgs),
+    Settings(stagekit::SettingsArgs),
 }
 
 fn main() -> ExitCode {
     exit_on_error("deform", || match Cli::parse().verb {
-        Verb::Settings(a) => scene::cli::verb::run::<deform::settings::DeformSettings>(
-            &a,
-            scene::cli::verb::no_files,
-        ),
+        Verb::Settings(a) => {
+            stagekit::verb::run::<deform::settings::DeformSettings>(&a, stagekit::verb::no_files)
+        }
         Verb::Train(args) => {
             let total = stage::resolve_settings(&args)?.iterations;
             let progress = Progress::new("deform", total as u64);

@@ -176,11 +176,11 @@ impl DeformSettings {
         if self.log_every == 0 {
             return Err("log_every must be at least 1".into());
         }
-        scene::cli::Settings::validate(&self.assoc).map_err(|e| format!("assoc: {e}"))
+        stagekit::Settings::validate(&self.assoc).map_err(|e| format!("assoc: {e}"))
     }
 }
 
-impl scene::cli::Settings for DeformSettings {
+impl stagekit::Settings for DeformSettings {
     fn validate(&self) -> Result<(), String> {
         DeformSettings::validate(self)
     }

@@ -33,8 +33,8 @@ use gaussians::stage::{Evaluation, evaluate, evaluate_novel, write_depths};
 use safetensors::{Dtype, tensor::TensorView};
 use scene::atomic::{AtomicDir, OutputRule, write_bytes_atomic, write_json_atomic};
 use scene::error::{Error, Result};
-use scene::report::{Phases, peak_rss_mib};
 use serde::Serialize;
+use stagekit::report::{Phases, peak_rss_mib};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -82,7 +82,7 @@ pub struct TrainArgs {
 
 /// Settings from the config file (if any) with the flags applied, validated.
 pub fn resolve_settings(a: &TrainArgs) -> Result<DeformSettings> {
-    scene::cli::settings::resolve(a.config.as_deref(), |s: &mut DeformSettings| {
+    stagekit::settings::resolve(a.config.as_deref(), |s: &mut DeformSettings| {
         if let Some(n) = a.iterations {
             s.iterations = n;
         }
@@ -222,7 +222,7 @@ pub fn train(
     if let Some(p) = &tr.posenet {
         save_posenet(p, out.path())?;
     }
-    scene::cli::settings::write_resolved(out.path(), &settings)?;
+    stagekit::settings::write_resolved(out.path(), &settings)?;
     phases.start("depth");
     write_depths(&model, &d.views, &out.path().join("depth"))?;
     phases.start("evaluate");

@@ -311,7 +311,7 @@ fn implausible_flows_are_dropped_from_the_motion_loss_and_counted() {
 #[test]
 fn duplicate_frame_times_are_refused_by_the_cli_and_survived_by_the_trainer() {
     let fx = build(Variant::Normal);
-    let settings: DeformSettings = scene::cli::settings::parse(SETTINGS, Path::new("x")).unwrap();
+    let settings: DeformSettings = stagekit::settings::parse(SETTINGS, Path::new("x")).unwrap();
     let mut d = Inputs::load(&fx.scene, &fx.model, &fx.flows, &fx.assoc, &settings).unwrap();
 
     // In memory: frame 2 moved to frame 1's time (0.1 s).
@@ -383,7 +383,7 @@ fn duplicate_frame_times_are_refused_by_the_cli_and_survived_by_the_trainer() {
 #[test]
 fn the_joint_training_may_regrow_a_sized_warm_up_to_its_cap_before_sizing() {
     let fx = build(Variant::Normal);
-    let settings: DeformSettings = scene::cli::settings::parse(SETTINGS, Path::new("x")).unwrap();
+    let settings: DeformSettings = stagekit::settings::parse(SETTINGS, Path::new("x")).unwrap();
     assert!(settings.regrow, "regrow is the default");
     let mut d = Inputs::load(&fx.scene, &fx.model, &fx.flows, &fx.assoc, &settings).unwrap();
     let pixels = d.views[0].rgb.len() / 3;

@@ -4,7 +4,7 @@
 use clap::{Parser, Subcommand};
 use evaluate::settings::EvalSettings;
 use evaluate::stage::{self, Inputs};
-use scene::cli::{SettingsArgs, exit_on_error, settings};
+use stagekit::{SettingsArgs, exit_on_error, settings};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -51,9 +51,9 @@ struct Args {
 
 fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     if let Some(Verb::Settings(a)) = &cli.verb {
-        return Ok(scene::cli::verb::run::<EvalSettings>(
+        return Ok(stagekit::verb::run::<EvalSettings>(
             a,
-            scene::cli::verb::no_files,
+            stagekit::verb::no_files,
         )?);
     }
     let a = cli.args;

@@ -11,7 +11,7 @@ pub struct EvalSettings {
     pub lpips: LpipsUse,
 }
 
-impl scene::cli::Settings for EvalSettings {
+impl stagekit::Settings for EvalSettings {
     fn validate(&self) -> Result<(), String> {
         Ok(())
     }

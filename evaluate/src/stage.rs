@@ -43,7 +43,7 @@ pub fn run(inputs: Inputs, s: &EvalSettings, out: &Path, force: bool) -> Result<
     rule.check(out)?;
     let dir = AtomicDir::new(out, &rule)?;
     let metrics = evaluate(inputs, s, dir.path())?;
-    scene::cli::settings::write_resolved(dir.path(), s)?;
+    stagekit::settings::write_resolved(dir.path(), s)?;
     write_json_atomic(&dir.path().join("metrics.json"), &metrics)?;
     dir.commit()?;
     Ok(metrics)

@@ -12,7 +12,7 @@
 use burn::tensor::{DType, Device};
 use evflow::net::FlowNet;
 use evflow::pretrain::{PretrainSettings, evaluate, make_held_out};
-use scene::cli::settings::resolve;
+use stagekit::settings::resolve;
 use std::path::Path;
 
 fn main() -> anyhow::Result<()> {

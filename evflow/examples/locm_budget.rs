@@ -32,7 +32,7 @@ fn main() -> anyhow::Result<()> {
         _ => anyhow::bail!("usage: locm_budget ecd|scene DIR [SETTINGS.toml]"),
     };
     let mut s: FlowSettings = match args.get(2) {
-        Some(p) => scene::cli::settings::parse(&std::fs::read_to_string(p)?, Path::new(p))?,
+        Some(p) => stagekit::settings::parse(&std::fs::read_to_string(p)?, Path::new(p))?,
         None => FlowSettings::default(),
     };
     s.epochs = None;

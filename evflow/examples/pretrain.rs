@@ -3,7 +3,7 @@
 //! `-` for the defaults). Progress every 25 steps on stderr; the held-out figures at the end.
 
 use evflow::pretrain::{PretrainSettings, run};
-use scene::cli::settings::resolve;
+use stagekit::settings::resolve;
 use std::path::Path;
 use std::time::Instant;
 

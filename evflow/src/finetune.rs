@@ -17,10 +17,10 @@ use crate::net::io::BareWeights;
 use crate::net::{FlowNet, NetConfig, adam_step, adam_step_conv, to_f64};
 use crate::source::Source;
 use burn::tensor::Tensor;
-use scene::cli::Settings;
 use scene::error::{Error, Result};
-use scene::optim::Adam;
 use serde::{Deserialize, Serialize};
+use stagekit::Settings;
+use stagekit::optim::Adam;
 use std::path::PathBuf;
 use std::time::Instant;
 

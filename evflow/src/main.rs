@@ -43,7 +43,7 @@ enum Cmd {
     /// The settings of `evflow finetune` (the pipeline's stage): `--defaults` prints
     /// them as TOML, `--check FILE` checks a settings file and prints the base weights
     /// it makes the stage read. The runner learns the settings this way.
-    Settings(scene::cli::SettingsArgs),
+    Settings(stagekit::SettingsArgs),
 }
 
 fn run(cli: Cli) -> anyhow::Result<ExitCode> {
@@ -54,7 +54,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Cmd::Eval(a) => a.run(),
         Cmd::Pretrain(a) => a.run(),
         Cmd::Settings(a) => {
-            return Ok(scene::cli::verb::run::<evflow::finetune::FlowSettings>(
+            return Ok(stagekit::verb::run::<evflow::finetune::FlowSettings>(
                 &a,
                 evflow::finetune::FlowSettings::input_files,
             )?);
@@ -64,6 +64,6 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
 }
 
 fn main() -> ExitCode {
-    let cli: Cli = scene::cli::parse_with(evflow::cli::show_defaults);
-    scene::cli::exit_on_error("evflow", || run(cli))
+    let cli: Cli = stagekit::parse_with(evflow::cli::show_defaults);
+    stagekit::exit_on_error("evflow", || run(cli))
 }

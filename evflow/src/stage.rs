@@ -15,9 +15,9 @@ use crate::finetune::{FinetuneReport, FlowSettings, Mode, Step, for_inference};
 use crate::predict::PredictReport;
 use crate::source::{Source, WindowSpec};
 use burn::tensor::{DType, Device};
-use scene::cli::Settings;
 use scene::error::{Error, IoContext, Result};
 use serde::Serialize;
+use stagekit::Settings;
 use std::path::{Path, PathBuf};
 
 /// Where the events come from.
@@ -149,7 +149,7 @@ pub fn run(
     }
     rule.check(out)?;
     let start = std::time::Instant::now();
-    let mut phases = scene::report::Phases::new();
+    let mut phases = stagekit::report::Phases::new();
     phases.start("load");
     emit(Event::Phase("load"));
     let src = input.open(s.frame_window)?;
@@ -224,7 +224,7 @@ pub fn run(
     phases.start("write");
     let mut resolved = s.clone();
     resolved.weights = Some(weights.clone());
-    scene::cli::settings::write_resolved(dir.path(), &resolved)?;
+    stagekit::settings::write_resolved(dir.path(), &resolved)?;
     phases.stop();
     let report = StageReport {
         stage: if train { "finetune" } else { "predict" }.into(),
@@ -240,7 +240,7 @@ pub fn run(
         warp_gain: pr.warp_gain_mean,
         phases: phases.seconds.clone(),
         wall_s: start.elapsed().as_secs_f64(),
-        peak_rss_mib: scene::report::peak_rss_mib(),
+        peak_rss_mib: stagekit::report::peak_rss_mib(),
         finetune: ft,
         predict: pr,
     };

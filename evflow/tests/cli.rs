@@ -2,7 +2,7 @@
 //! bare-event-file source (calibration, window tiling).
 
 use evflow::source::{Source, WindowSpec, parse_sensor, parse_window, read_calib};
-use scene::cli::help::flag_help;
+use stagekit::help::flag_help;
 use std::process::Command;
 
 fn evflow() -> Command {

@@ -10,7 +10,7 @@ const W: usize = 240;
 const H: usize = 180;
 
 fn data_dir() -> std::path::PathBuf {
-    scene::testdata::shared_data(DIR)
+    testkit::testdata::shared_data(DIR)
 }
 
 fn intrinsics() -> Intrinsics {

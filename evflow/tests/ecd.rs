@@ -20,7 +20,7 @@ fn shipped_weights_score_zero_shot_on_the_ecd_slice() {
     let net = FlowNet::load(&weights, None, &Device::flex(), DType::F32).unwrap();
     assert_eq!(net.config.bins, 5);
     assert!(net.param_count() < 4_000_000, "shipped weights stay small");
-    let s = EcdSlice::read(&scene::testdata::shared_data("ecd_shapes_rotation")).unwrap();
+    let s = EcdSlice::read(&testkit::testdata::shared_data("ecd_shapes_rotation")).unwrap();
     let score = s.score_net(&net).unwrap();
     eprintln!(
         "ECD zero-shot (C={}): masked EPE {:.3} px, {:.1}% > 3 px (zero flow {:.3}); \

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 fn data() -> PathBuf {
-    scene::testdata::shared_data("ecd_shapes_rotation")
+    testkit::testdata::shared_data("ecd_shapes_rotation")
 }
 
 fn evflow(args: &[&str], paths: &[(&str, &Path)]) -> String {

@@ -6,7 +6,7 @@ use evflow::eval::{EcdSlice, flow_metrics, flow_warp_loss, read_flow_npy, scale}
 use std::path::PathBuf;
 
 fn ecd_dir() -> PathBuf {
-    scene::testdata::shared_data("ecd_shapes_rotation")
+    testkit::testdata::shared_data("ecd_shapes_rotation")
 }
 
 #[test]

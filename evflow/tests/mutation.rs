@@ -1,22 +1,22 @@
 //! The flow crate's readers against thousands of damaged copies of a valid file
-//! (`scene::testing::mutate`, docs/DESIGN.md "Inputs that cannot hurt"): `.evflow`,
+//! (`testkit::mutate`, docs/DESIGN.md "Inputs that cannot hurt"): `.evflow`,
 //! Middlebury `.flo`, network weights (safetensors) and their JSON sidecars, LoRA
 //! adapters and theirs, and the ECD ground truth (`flow.npy`, `calib.txt`).
 
 #[global_allocator]
-static ALLOC: scene::testing::TrackingAlloc = scene::testing::TrackingAlloc;
+static ALLOC: testkit::TrackingAlloc = testkit::TrackingAlloc;
 
 use burn::tensor::{DType, Device};
 use evflow::flowfile::{EvFlow, read_evflow, read_flo, write_evflow, write_flo};
 use evflow::net::io::{BareWeights, load, load_adapters, save_adapters, sidecar};
 use evflow::net::{FlowNet, NetConfig};
-use scene::testing::{Plan, fuzz};
 use std::fs;
 use std::path::{Path, PathBuf};
+use testkit::{Plan, fuzz};
 
 #[test]
 fn evflow_reader() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("0000.evflow");
     let n = 120;
@@ -40,7 +40,7 @@ fn evflow_reader() {
 
 #[test]
 fn flo_reader() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("flow.flo");
     let u: Vec<f32> = (0..12 * 9).map(|k| k as f32 * 0.25).collect();
@@ -71,7 +71,7 @@ fn load_weights(path: &Path) -> scene::Result<FlowNet> {
 
 #[test]
 fn weights_reader() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let (_, path) = tiny_net(dir.path());
     let bytes = fs::read(&path).unwrap();
@@ -85,7 +85,7 @@ fn weights_reader() {
 /// Bare weights (no sidecar): the settings come from the damaged tensors themselves.
 #[test]
 fn bare_weights_reader() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let (_, path) = tiny_net(dir.path());
     fs::remove_file(sidecar(&path)).unwrap();
@@ -98,7 +98,7 @@ fn bare_weights_reader() {
 
 #[test]
 fn weights_sidecar_reader() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let (_, path) = tiny_net(dir.path());
     let side = sidecar(&path);
@@ -110,7 +110,7 @@ fn weights_sidecar_reader() {
 
 #[test]
 fn adapter_and_sidecar_readers() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let (mut net, _) = tiny_net(dir.path());
     net.attach_lora(2, 4.0, 5);
@@ -135,10 +135,10 @@ fn adapter_and_sidecar_readers() {
 /// The real ECD ground truth: `flow.npy` (1×2×180×240 float64) and `calib.txt`.
 #[test]
 fn ecd_ground_truth_readers() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let real = |f: &str| {
-        fs::read(scene::testdata::shared_data(&format!(
+        fs::read(testkit::testdata::shared_data(&format!(
             "ecd_shapes_rotation/{f}"
         )))
     };
@@ -161,7 +161,7 @@ fn ecd_ground_truth_readers() {
 /// both now name the sidecar.
 #[test]
 fn sidecar_errors_name_the_sidecar() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let (net, path) = tiny_net(dir.path());
     let side = sidecar(&path);

@@ -11,7 +11,7 @@ pub mod densify;
 pub mod field;
 pub mod model;
 pub mod motion;
-pub use scene::optim;
+pub use stagekit::optim;
 pub mod ply;
 pub mod progress;
 pub mod raster;

@@ -5,7 +5,7 @@ use clap::{Parser, Subcommand};
 use gaussians::progress::TrainProgress;
 use gaussians::stage::{self, Split, TrainArgs};
 use gaussians::train::TrainSettings;
-use scene::cli::{exit_on_error, parse_with, show_defaults, sigint_flag};
+use stagekit::{exit_on_error, parse_with, show_defaults, sigint_flag};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -26,7 +26,7 @@ enum Verb {
     Train(TrainArgs),
     /// The settings of `gaussians train`: `--defaults` prints them as TOML, `--check
     /// FILE` checks a settings file. The runner learns the settings this way.
-    Settings(scene::cli::SettingsArgs),
+    Settings(stagekit::SettingsArgs),
     /// Render a saved model at the frames of a scene split, with PSNR/SSIM.
     Render {
         /// Model directory written by `gaussians train`
@@ -71,7 +71,7 @@ fn main() -> ExitCode {
 
 fn run(verb: Verb) -> scene::Result<ExitCode> {
     match verb {
-        Verb::Settings(a) => scene::cli::verb::run::<TrainSettings>(&a, scene::cli::verb::no_files),
+        Verb::Settings(a) => stagekit::verb::run::<TrainSettings>(&a, stagekit::verb::no_files),
         Verb::Train(args) => {
             let total = stage::resolve_settings(&args)?.iterations;
             let progress = TrainProgress::new(total);

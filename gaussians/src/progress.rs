@@ -1,8 +1,8 @@
-//! The `gaussians train` progress display: [`scene::cli::Progress`] over the iterations,
+//! The `gaussians train` progress display: [`stagekit::Progress`] over the iterations,
 //! each shown with its loss, PSNR and Gaussian count.
 
 use crate::train::StepInfo;
-use scene::cli::Progress;
+use stagekit::Progress;
 
 /// Training progress on stderr (a bar on a terminal, a plain line every twentieth of
 /// the iterations otherwise).

@@ -15,13 +15,13 @@ use crate::splats::Splats;
 use crate::train::settings::Init;
 use crate::train::{StepInfo, TrainSettings, Trainer, View, init};
 use scene::atomic::{AtomicDir, OutputRule, write_json_atomic};
-use scene::cli::settings::{resolve, write_resolved};
 use scene::error::{Error, Result};
 use scene::image_io::{read_image, write_exr_depth, write_png};
 use scene::manifest::{Manifest, Scene};
 use scene::metrics;
-use scene::report::{Phases, peak_rss_mib};
 use serde::Serialize;
+use stagekit::report::{Phases, peak_rss_mib};
+use stagekit::settings::{resolve, write_resolved};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
@@ -71,7 +71,7 @@ pub struct TrainArgs {
 }
 
 /// The flags of [`TrainArgs`] that override a setting, each with its key in
-/// [`TrainSettings`] (their `--help` shows its default: [`scene::cli::show_defaults`]).
+/// [`TrainSettings`] (their `--help` shows its default: [`stagekit::show_defaults`]).
 pub const SETTING_FLAGS: &[(&str, &str)] = &[
     ("iterations", "iterations"),
     ("seed", "seed"),

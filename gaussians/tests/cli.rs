@@ -3,7 +3,7 @@
 //! `gaussians: error: …` naming the file.
 
 use gaussians::train::TrainSettings;
-use scene::cli::help::flag_help;
+use stagekit::help::flag_help;
 use std::process::Command;
 
 fn gaussians() -> Command {

@@ -1,19 +1,19 @@
 //! The model readers against thousands of damaged copies of a valid file
-//! (`scene::testing::mutate`, docs/DESIGN.md "Inputs that cannot hurt"): the 3DGS PLY
+//! (`testkit::mutate`, docs/DESIGN.md "Inputs that cannot hurt"): the 3DGS PLY
 //! (binary as written, and ASCII), `model.json`, the deformation field
 //! (`field.safetensors` + `field.json`), the dynamic flags (`dynamic.safetensors`) and
 //! the warm-up's `settings.toml` (which `deform` reads).
 
 #[global_allocator]
-static ALLOC: scene::testing::TrackingAlloc = scene::testing::TrackingAlloc;
+static ALLOC: testkit::TrackingAlloc = testkit::TrackingAlloc;
 
 use gaussians::field::{FieldSettings, Mlp};
 use gaussians::model::{FLAGS_FILE, INFO_FILE, Model, ModelInfo, PLY_FILE};
 use gaussians::train::TrainSettings;
 use gaussians::train::init::random_splats;
-use scene::testing::{Plan, fuzz};
 use std::fs;
 use std::path::Path;
+use testkit::{Plan, fuzz};
 
 /// A saved model of 40 Gaussians (SH degree 1) with dynamic flags and a small field.
 fn save_model(dir: &Path) {
@@ -54,33 +54,33 @@ fn fuzz_model_file(name: &str, seed: u64, mutations: usize, length_fields: Vec<(
 
 #[test]
 fn ply_reader() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     fuzz_model_file(PLY_FILE, 31, 2000, vec![]);
 }
 
 #[test]
 fn model_json_reader() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     fuzz_model_file(INFO_FILE, 32, 2000, vec![]);
 }
 
 #[test]
 fn field_readers() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     fuzz_model_file("field.safetensors", 33, 1000, vec![(0, 8)]);
     fuzz_model_file("field.json", 34, 1000, vec![]);
 }
 
 #[test]
 fn dynamic_flags_reader() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     fuzz_model_file(FLAGS_FILE, 35, 1000, vec![(0, 8)]);
 }
 
 /// An ASCII PLY (other tools write these): its vertex count is text.
 #[test]
 fn ascii_ply_reader() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("ascii.ply");
     let names = gaussians::ply::property_names(0);
@@ -102,15 +102,15 @@ fn ascii_ply_reader() {
 
 #[test]
 fn warmup_settings_reader() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
-    scene::cli::settings::write_resolved(dir.path(), &TrainSettings::default()).unwrap();
+    stagekit::settings::write_resolved(dir.path(), &TrainSettings::default()).unwrap();
     let path = dir.path().join("settings.toml");
     let bytes = fs::read(&path).unwrap();
     let mut plan = Plan::new(37);
     plan.mutations = 1500;
     fuzz(&path, &bytes, &plan, |p| {
-        scene::cli::settings::resolve::<TrainSettings>(Some(p), |_| {})
+        stagekit::settings::resolve::<TrainSettings>(Some(p), |_| {})
     })
     .assert_clean();
 }
@@ -120,7 +120,7 @@ fn warmup_settings_reader() {
 /// parameters before looking at the weights file. Now the count is checked against it.
 #[test]
 fn field_settings_larger_than_the_weights_are_refused_before_allocating() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     save_model(dir.path());
     let path = dir.path().join("field.json");
@@ -130,7 +130,7 @@ fn field_settings_larger_than_the_weights_are_refused_before_allocating() {
         .replace("\"width\": 8", "\"width\": 8192");
     assert!(text.contains("8192") && text.contains("64"), "{text}");
     fs::write(&path, text).unwrap();
-    let (r, peak) = scene::testing::alloc::peak_during(|| Model::load(dir.path()));
+    let (r, peak) = testkit::alloc::peak_during(|| Model::load(dir.path()));
     let msg = r.unwrap_err().to_string();
     assert!(msg.contains(&path.display().to_string()), "{msg}");
     assert!(
@@ -144,7 +144,7 @@ fn field_settings_larger_than_the_weights_are_refused_before_allocating() {
 /// field panic (a uniform range of ±1/√0); now it is refused naming the file.
 #[test]
 fn field_of_width_zero_is_refused() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     save_model(dir.path());
     let path = dir.path().join("field.json");

@@ -68,7 +68,7 @@ fn tiny_settings(dir: &Path) -> std::path::PathBuf {
     s.densify.until_iter = 250;
     s.size.at = 350;
     let p = dir.join("settings.toml");
-    std::fs::write(&p, scene::cli::settings::to_toml(&s).unwrap()).unwrap();
+    std::fs::write(&p, stagekit::settings::to_toml(&s).unwrap()).unwrap();
     p
 }
 
@@ -185,7 +185,7 @@ fn trains_writes_every_output_and_reloads_identically() {
     assert!(report["test"]["psnr"].as_array().unwrap().len() == 3);
     let file = out.join("settings.toml");
     let settings = std::fs::read_to_string(&file).unwrap();
-    let back: TrainSettings = scene::cli::settings::parse(&settings, &file).unwrap();
+    let back: TrainSettings = stagekit::settings::parse(&settings, &file).unwrap();
     assert_eq!(back, r.settings);
     // the automatic Gaussian cap (2 per pixel of 40×40, at least the 2000 initial
     // Gaussians: 3200, `sizing.gaussians_before`) became the sized count

@@ -12,7 +12,7 @@ use gaussians::train::{TrainSettings, Trainer, View};
 use glam::DVec3;
 use raster_common::*;
 #[global_allocator]
-static ALLOC: scene::testing::TrackingAlloc = scene::testing::TrackingAlloc;
+static ALLOC: testkit::TrackingAlloc = testkit::TrackingAlloc;
 
 const W: u32 = 64;
 const H: u32 = 48;
@@ -67,7 +67,7 @@ fn bytes_per_step(n: usize) -> usize {
     for _ in 0..6 {
         t.step(&r, &views);
     }
-    let ((), bytes) = scene::testing::alloc::allocated_during(|| {
+    let ((), bytes) = testkit::alloc::allocated_during(|| {
         for _ in 0..6 {
             t.step(&r, &views);
         }
@@ -77,8 +77,8 @@ fn bytes_per_step(n: usize) -> usize {
 
 #[test]
 fn a_warm_step_allocates_little_per_gaussian() {
-    let _alone = scene::testing::alloc::exclusive();
-    assert!(scene::testing::alloc::installed());
+    let _alone = testkit::alloc::exclusive();
+    assert!(testkit::alloc::installed());
     let small = bytes_per_step(2_000);
     let large = bytes_per_step(8_000);
     let image = (W * H) as usize * 3 * 4;

@@ -8,7 +8,7 @@ use scene::manifest::FrameEncoding;
 
 #[test]
 fn the_sample_imports_with_its_frames_and_events() {
-    let file = scene::testdata::shared_data("aedat4_sample/sample.aedat4");
+    let file = testkit::testdata::shared_data("aedat4_sample/sample.aedat4");
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("scene");
     let e = import(Layout::Aedat4, &file, &ImportOptions::default(), &out)

@@ -73,7 +73,7 @@ fn train_fps_thins_the_train_frames() {
 /// The real ECD sample (calib.txt, events.txt) plus frames and a ground truth made here:
 /// the camera turning at the constant angular velocity of motion.txt.
 fn real_sample_with_frames(dir: &Path) -> (std::path::PathBuf, DVec3) {
-    let sample = scene::testdata::shared_data("ecd_shapes_rotation");
+    let sample = testkit::testdata::shared_data("ecd_shapes_rotation");
     let src = dir.join("shapes");
     std::fs::create_dir_all(src.join("images")).unwrap();
     for f in ["calib.txt", "events.txt"] {
@@ -180,7 +180,7 @@ fn the_real_ecd_sample_imports_with_interpolated_converted_poses() {
 fn missing_and_bad_files_are_named() {
     let dir = tempfile::tempdir().unwrap();
     // The sample as shipped has no frames: the missing file is named.
-    let sample = scene::testdata::shared_data("ecd_shapes_rotation");
+    let sample = testkit::testdata::shared_data("ecd_shapes_rotation");
     let e = read_ecd(&sample).unwrap_err().to_string();
     assert!(e.contains("images.txt") && e.contains("missing"), "{e}");
 

@@ -7,7 +7,7 @@ use std::process::ExitCode;
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    scene::cli::exit_on_error("degs", || {
+    stagekit::exit_on_error("degs", || {
         pipeline::commands::execute(cli.command).map(|()| ExitCode::SUCCESS)
     })
 }

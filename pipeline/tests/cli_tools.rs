@@ -266,7 +266,7 @@ fn synth_writes_every_preset_in_the_scene_layout() {
 #[test]
 fn import_prints_what_it_found_and_refuses_an_aedat4_without_poses() {
     let dir = tempfile::tempdir().unwrap();
-    let sample = scene::testdata::shared_data("aedat4_sample/sample.aedat4");
+    let sample = testkit::testdata::shared_data("aedat4_sample/sample.aedat4");
     let sample = sample.to_str().unwrap();
     let out = dir.path().join("davis");
     let o = degs(&["import", "aedat4", sample, out.to_str().unwrap()]);

@@ -1,20 +1,20 @@
 //! The runner's readers against thousands of damaged copies of a valid file
-//! (`scene::testing::mutate`, docs/DESIGN.md "Inputs that cannot hurt"): experiment
+//! (`testkit::mutate`, docs/DESIGN.md "Inputs that cannot hurt"): experiment
 //! files (a synthetic scene with overrides, and a scene directory), run records, cache
 //! entry manifests and the remembered binary hashes.
 
 #[global_allocator]
-static ALLOC: scene::testing::TrackingAlloc = scene::testing::TrackingAlloc;
+static ALLOC: testkit::TrackingAlloc = testkit::TrackingAlloc;
 
 use runner::cache::{self, BinaryHashes, Cache, Verdict};
 use runner::context::Context;
 use runner::experiment::Experiment;
 use runner::record::{Action, RunRecord, StageRecord};
-use scene::testing::{Plan, fuzz};
 use std::collections::BTreeMap;
 use std::convert::Infallible;
 use std::fs;
 use std::path::{Path, PathBuf};
+use testkit::{Plan, fuzz};
 
 const SYNTHETIC: &str = r#"name = "tiny"
 
@@ -57,7 +57,7 @@ fn no_stage_binaries(dir: &Path) -> Context {
 
 #[test]
 fn experiment_reader_synthetic_scene() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("tiny.toml");
     let mut plan = Plan::new(51);
@@ -71,7 +71,7 @@ fn experiment_reader_synthetic_scene() {
 
 #[test]
 fn experiment_reader_scene_directory() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     // A real scene (loading the experiment checks it), small enough to read thousands
     // of times.
@@ -111,7 +111,7 @@ fn stage(name: &str, action: Action) -> StageRecord {
 
 #[test]
 fn run_record_reader() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("run.json");
     RunRecord {
@@ -138,7 +138,7 @@ fn run_record_reader() {
 /// checked here.
 #[test]
 fn cache_entry_manifest_reader() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let entry = dir.path().join("entry");
     fs::create_dir_all(entry.join("renders")).unwrap();
@@ -153,7 +153,7 @@ fn cache_entry_manifest_reader() {
 
 #[test]
 fn binary_hashes_reader() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let c = Cache::new(dir.path());
     let bin = dir.path().join("gaussians");

@@ -30,9 +30,9 @@ pub use crate::overrides::{merge, parse_set};
 use crate::settings::{InputFile, toml_section};
 use crate::stages::{self, STAGES};
 use anyhow::{Context, Result, anyhow, bail};
-use scene::cli::Settings;
 use serde::Deserialize;
 use serde::de::{self, Deserializer, MapAccess, Visitor};
+use stagekit::Settings;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::LazyLock;
@@ -151,7 +151,7 @@ impl Experiment {
     /// Parse experiment text; `path` names it in errors and anchors relative `dir`s.
     pub fn parse(text: &str, path: &Path) -> Result<Experiment> {
         let raw: RawExperiment = toml::from_str(text).map_err(|e| {
-            let where_what = scene::cli::settings::toml_error(text, &e);
+            let where_what = stagekit::settings::toml_error(text, &e);
             anyhow!("{}: {where_what}", path.display())
         })?;
         check_name(&raw.name).map_err(|e| anyhow!("{}: {e}", path.display()))?;

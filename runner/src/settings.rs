@@ -1,5 +1,5 @@
 //! Stage settings as `degs` sees them: each stage binary is the one authority on its
-//! settings, asked through its `settings` verb ([`scene::cli::verb`]): `STAGE settings
+//! settings, asked through its `settings` verb ([`stagekit::verb`]): `STAGE settings
 //! --defaults` for every default, `STAGE settings --check -` for the check of an
 //! experiment's table (and the files outside the graph it makes the stage read, which
 //! enter the stage's key). `degs` links no stage library. Answers are remembered per

@@ -22,7 +22,7 @@ pub fn load_config(
                 anyhow!("{}: {}", path.display(), e.message().trim())
             })?;
             merge(&mut table, &overrides);
-            Ok(scene::cli::settings::from_table(table, path)?)
+            Ok(stagekit::settings::from_table(table, path)?)
         }
         None => {
             let preset = preset.unwrap_or("rigid");

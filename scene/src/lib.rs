@@ -1,13 +1,12 @@
 //! `scene` — the shared data layer of degs (docs/DESIGN.md §2–§3): camera model, scene
 //! manifest, event streams and their readers/writers, image and EXR helpers, image
-//! metrics (PSNR, SSIM) and the losses built on them, atomic outputs, Adam, and the
-//! plumbing every binary shares (settings files, progress, errors). Synthetic scenes
-//! live in the `synth` crate.
+//! metrics (PSNR, SSIM) and the losses built on them, atomic outputs, errors, the
+//! evaluation figures' file format and the scene checks. Synthetic scenes live in the
+//! `synth` crate, the plumbing every binary shares in `stagekit`.
 
 pub mod atomic;
 pub mod camera;
 pub mod check;
-pub mod cli;
 pub mod error;
 pub mod evaluation;
 pub mod events;
@@ -19,11 +18,7 @@ pub mod formats;
 pub mod image_io;
 pub mod manifest;
 pub mod metrics;
-pub mod optim;
 pub mod real;
-pub mod report;
-pub mod testdata;
-pub mod testing;
 pub use formats::{ReadOptions, read_events, write_evs};
 pub use image_io::Image;
 pub use manifest::{EventsRef, Frame, Manifest, Scene};

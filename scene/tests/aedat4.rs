@@ -9,7 +9,7 @@ use std::path::Path;
 mod common;
 
 fn sample() -> std::path::PathBuf {
-    scene::testdata::shared_data("aedat4_sample/sample.aedat4")
+    testkit::testdata::shared_data("aedat4_sample/sample.aedat4")
 }
 
 fn err_text<T: std::fmt::Debug>(r: scene::Result<T>) -> String {

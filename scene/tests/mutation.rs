@@ -1,21 +1,21 @@
 //! Every reader of the data layer against thousands of damaged copies of a valid file
-//! (`scene::testing::mutate`, docs/DESIGN.md "Inputs that cannot hurt"): an error that
+//! (`testkit::mutate`, docs/DESIGN.md "Inputs that cannot hurt"): an error that
 //! names the file or a valid result, never a panic, never an allocation beyond a bound
 //! tied to the file's size. The regression tests at the end hold the minimal inputs of
 //! the faults the harness found.
 
 #[global_allocator]
-static ALLOC: scene::testing::TrackingAlloc = scene::testing::TrackingAlloc;
+static ALLOC: testkit::TrackingAlloc = testkit::TrackingAlloc;
 
 mod common;
 
 use scene::formats::{self, ReadOptions, aedat4, read_evs, read_npz, read_text};
 use scene::image_io::{self, Image};
 use scene::manifest::{EventsRef, Frame, Manifest, Scene};
-use scene::testing::{Plan, fuzz};
 use scene::{Intrinsics, Pose};
 use std::fs;
 use std::path::Path;
+use testkit::{Plan, fuzz};
 
 fn sensor(w: u32, h: u32) -> ReadOptions {
     ReadOptions {
@@ -26,7 +26,7 @@ fn sensor(w: u32, h: u32) -> ReadOptions {
 
 #[test]
 fn evs_reader() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("events.evs");
     formats::write_evs(&path, &common::stream(300, 64, 48, 1)).unwrap();
@@ -51,7 +51,7 @@ fn evs_reader() {
 /// The first 1500 lines of the real ECD recording (240×180, no header line).
 #[test]
 fn text_reader_on_real_ecd_events() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("events.txt");
     let text = fs::read_to_string(common::ecd()).unwrap();
@@ -67,7 +67,7 @@ fn text_reader_on_real_ecd_events() {
 /// A file of [`formats::write_text`], whose header line gives the sensor.
 #[test]
 fn text_reader_with_header() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("events.txt");
     formats::write_text(&path, &common::stream(200, 64, 48, 3)).unwrap();
@@ -81,7 +81,7 @@ fn text_reader_with_header() {
 
 #[test]
 fn npz_reader() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("events.npz");
     formats::write_npz(&path, &common::microsecond_stream(200)).unwrap();
@@ -93,10 +93,13 @@ fn npz_reader() {
 /// The real DAVIS346 recording (429 kB: events, frames, IMU).
 #[test]
 fn aedat4_reader_on_real_recording() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("sample.aedat4");
-    let bytes = fs::read(scene::testdata::shared_data("aedat4_sample/sample.aedat4")).unwrap();
+    let bytes = fs::read(testkit::testdata::shared_data(
+        "aedat4_sample/sample.aedat4",
+    ))
+    .unwrap();
     let mut plan = Plan::new(5);
     plan.mutations = 1000;
     // the header length (after the 14-byte magic)
@@ -154,7 +157,7 @@ fn write_scene(dir: &Path) {
 
 #[test]
 fn manifest_reader() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     write_scene(dir.path());
     let path = dir.path().join(scene::manifest::TRAIN_FILE);
@@ -166,7 +169,7 @@ fn manifest_reader() {
 /// `transforms_train.json`.
 #[test]
 fn scene_directory_with_damaged_manifest() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     write_scene(dir.path());
     let path = dir.path().join(scene::manifest::TRAIN_FILE);
@@ -181,7 +184,7 @@ fn scene_directory_with_damaged_manifest() {
 
 #[test]
 fn png_reader() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("frame.png");
     let mut img = Image::new(24, 16, 3);
@@ -199,7 +202,7 @@ fn png_reader() {
 
 #[test]
 fn exr_depth_reader() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("depth.exr");
     let depth: Vec<f32> = (0..24 * 16).map(|k| 1.0 + k as f32 * 0.01).collect();
@@ -213,7 +216,7 @@ fn exr_depth_reader() {
 
 #[test]
 fn exr_flow_reader() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("flow.exr");
     let u: Vec<f32> = (0..20 * 10).map(|k| k as f32 * 0.5 - 20.0).collect();
@@ -232,7 +235,7 @@ fn exr_flow_reader() {
 /// the directory claimed (up to 1 GiB) before reading a byte.
 #[test]
 fn npz_member_claiming_a_huge_size_is_refused_without_allocating_it() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("events.npz");
     formats::write_npz(&path, &common::microsecond_stream(20)).unwrap();
@@ -241,7 +244,7 @@ fn npz_member_claiming_a_huge_size_is_refused_without_allocating_it() {
     let cd = bytes.windows(4).position(|w| w == b"PK\x01\x02").unwrap();
     bytes[cd + 24..cd + 28].copy_from_slice(&0xFFFF_FFF0u32.to_le_bytes());
     fs::write(&path, &bytes).unwrap();
-    let (result, peak) = scene::testing::alloc::peak_during(|| read_npz(&path, &sensor(346, 260)));
+    let (result, peak) = testkit::alloc::peak_during(|| read_npz(&path, &sensor(346, 260)));
     let msg = result.unwrap_err().to_string();
     assert!(msg.contains(&path.display().to_string()), "{msg}");
     assert!(
@@ -255,7 +258,7 @@ fn npz_member_claiming_a_huge_size_is_refused_without_allocating_it() {
 /// decoder allocated 2.6 GB. Now its declared size is checked against the file first.
 #[test]
 fn exr_declaring_more_pixels_than_it_can_hold_is_refused_before_decoding() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("flow.exr");
     let u: Vec<f32> = (0..20 * 10).map(|k| k as f32 * 0.5 - 20.0).collect();
@@ -263,14 +266,14 @@ fn exr_declaring_more_pixels_than_it_can_hold_is_refused_before_decoding() {
     image_io::write_exr_flow(&path, 20, 10, &u, &v).unwrap();
     let bytes = fs::read(&path).unwrap();
     assert_eq!(bytes.len(), 911);
-    let damaged = scene::testing::Mutation::SetWord {
+    let damaged = testkit::Mutation::SetWord {
         at: 304,
         width: 4,
         value: 1,
     }
     .apply(&bytes);
     fs::write(&path, &damaged).unwrap();
-    let (result, peak) = scene::testing::alloc::peak_during(|| image_io::read_exr_flow(&path));
+    let (result, peak) = testkit::alloc::peak_during(|| image_io::read_exr_flow(&path));
     let msg = result.unwrap_err().to_string();
     assert!(msg.contains(&path.display().to_string()), "{msg}");
     assert!(msg.contains("more than its 911 bytes can hold"), "{msg}");

@@ -1,21 +1,21 @@
 //! The readers added after `mutation.rs` against thousands of damaged copies of a valid
-//! file (`scene::testing::mutate`, docs/DESIGN.md "Inputs that cannot hurt"):
+//! file (`testkit::mutate`, docs/DESIGN.md "Inputs that cannot hurt"):
 //! Prophesee `.raw` (EVT 2.0, EVT 3.0 with vector words), Event Stream `.es` (DVS, and
 //! a hand-made ATIS file) and the APS frames of the real AEDAT4 recording. An error
 //! naming the file or a valid result, never a panic, never an allocation beyond a bound
 //! tied to the file's size. Regression tests for the faults found are at the end.
 
 #[global_allocator]
-static ALLOC: scene::testing::TrackingAlloc = scene::testing::TrackingAlloc;
+static ALLOC: testkit::TrackingAlloc = testkit::TrackingAlloc;
 
 mod common;
 
 use common::aedat4_file::{aedat4, frame_packet};
 use scene::events::EventStream;
 use scene::formats::{self, RawEncoding, ReadOptions, read_es, read_raw};
-use scene::testing::{Plan, fuzz};
 use std::fs;
 use std::path::Path;
+use testkit::{Plan, fuzz};
 
 /// A stream whose microsecond times `write_raw` and `write_es` can store: the common
 /// test stream, 64×48, moved to start 46 ms after 0 (an `.es` file spends a byte per
@@ -43,7 +43,7 @@ fn fuzz_file<T>(
 
 #[test]
 fn raw_evt2_reader() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("events.raw");
     formats::write_raw(&path, &stream(300, 11), RawEncoding::Evt2).unwrap();
@@ -75,7 +75,7 @@ fn evt3_with_vectors(dir: &Path) -> Vec<u8> {
 
 #[test]
 fn raw_evt3_reader_with_vectors() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let bytes = evt3_with_vectors(dir.path());
     let p = dir.path().join("check.raw");
@@ -91,7 +91,7 @@ fn raw_evt3_reader_with_vectors() {
 
 #[test]
 fn es_dvs_reader() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("events.es");
     formats::write_es(&path, &stream(300, 13)).unwrap();
@@ -130,7 +130,7 @@ fn atis_file() -> (Vec<u8>, usize) {
 
 #[test]
 fn es_atis_reader() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let (bytes, dvs) = atis_file();
     let p = dir.path().join("check.es");
@@ -149,7 +149,7 @@ fn es_atis_reader() {
 /// recording (below) keeps LZ4-compressed.
 #[test]
 fn aedat4_frame_reader_on_uncompressed_frames() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let xml = r#"<node name="1" path="/o/1/"><attr key="typeIdentifier" type="string">FRME</attr></node>"#;
     let px = |n: usize| (0..n).map(|k| (k * 37 % 256) as u8).collect::<Vec<u8>>();
@@ -180,9 +180,12 @@ fn aedat4_frame_reader_on_uncompressed_frames() {
 /// The real DAVIS346 recording's four APS frames (LZ4-compressed packets).
 #[test]
 fn aedat4_frame_reader_on_real_recording() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
-    let bytes = fs::read(scene::testdata::shared_data("aedat4_sample/sample.aedat4")).unwrap();
+    let bytes = fs::read(testkit::testdata::shared_data(
+        "aedat4_sample/sample.aedat4",
+    ))
+    .unwrap();
     let mut plan = Plan::new(25);
     plan.mutations = 1000;
     plan.length_fields = vec![(14, 4)];

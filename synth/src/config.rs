@@ -214,7 +214,7 @@ impl ObjectSpec {
     }
 }
 
-impl scene::cli::Settings for SynthConfig {
+impl stagekit::Settings for SynthConfig {
     /// `Err` with a sentence when a setting is out of range.
     fn validate(&self) -> Result<(), String> {
         if self.width == 0 || self.height == 0 || self.width > 8192 || self.height > 8192 {

@@ -3,10 +3,10 @@
 //! [`crate::sim::Simulator`].
 
 use crate::sim::{SimConfig, Simulator, luminance};
-use scene::cli::Settings;
 use scene::error::{Error, IoContext, Result};
 use scene::events::EventStream;
 use serde::{Deserialize, Serialize};
+use stagekit::Settings;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 

@@ -6,7 +6,7 @@
 
 use clap::{Parser, Subcommand};
 use scene::atomic::OutputRule;
-use scene::cli::{SettingsArgs, exit_on_error, settings};
+use stagekit::{SettingsArgs, exit_on_error, settings};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use synth::SynthConfig;
@@ -56,9 +56,9 @@ enum Verb {
 
 fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.verb {
-        Verb::Settings(a) => Ok(scene::cli::verb::run::<SynthConfig>(
+        Verb::Settings(a) => Ok(stagekit::verb::run::<SynthConfig>(
             &a,
-            scene::cli::verb::no_files,
+            stagekit::verb::no_files,
         )?),
         Verb::Scene { config, out, force } => {
             let cfg: SynthConfig = settings::read_file(&config)?;

@@ -40,7 +40,6 @@ use crate::gt::{EventFlowGt, NOISE_ID, write_event_flow_gt, write_object_png};
 use crate::sim::{Simulator, luminance};
 use crate::world::{Render, SynthWorld};
 use scene::atomic::{AtomicDir, OutputRule, write_json_atomic};
-use scene::cli::Settings;
 use scene::error::{Error, Result};
 use scene::events::EventStream;
 use scene::image_io::{Image, write_exr_depth, write_exr_flow, write_png};
@@ -48,6 +47,7 @@ use scene::manifest::{
     EventsRef, Frame, FrameEncoding, Manifest, NOVEL_FILE, TEST_FILE, TRAIN_FILE,
 };
 use serde::{Deserialize, Serialize};
+use stagekit::Settings;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 

@@ -29,10 +29,10 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Poisson, StandardNormal};
 use rayon::prelude::*;
-use scene::cli::Settings;
 use scene::error::{Error, Result};
 use scene::events::EventStream;
 use serde::{Deserialize, Serialize};
+use stagekit::Settings;
 
 /// Rec. 709 luminance weights of linear RGB.
 pub const LUMA: [f32; 3] = [0.2126, 0.7152, 0.0722];
@@ -85,7 +85,7 @@ impl SimConfig {
     }
 }
 
-impl scene::cli::Settings for SimConfig {
+impl stagekit::Settings for SimConfig {
     /// `Err` with a sentence (starting with the key) when a setting is out of range.
     fn validate(&self) -> std::result::Result<(), String> {
         let checks = [

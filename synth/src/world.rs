@@ -35,7 +35,7 @@ use crate::texture;
 use glam::{DMat3, DQuat, DVec2, DVec3};
 use rayon::prelude::*;
 use scene::camera::{Camera, Intrinsics, Pose};
-use scene::cli::Settings;
+use stagekit::Settings;
 use std::f64::consts::{PI, TAU};
 
 /// Everything [`SynthWorld::render`] returns for one time. Arrays are row-major,

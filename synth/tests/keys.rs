@@ -1,7 +1,7 @@
 //! The keys of a synthetic config: the simulator's settings nested under `events`, the
 //! flat keys of older files still read, defaults from the `rigid` preset.
 
-use scene::cli::Settings;
+use stagekit::Settings;
 use synth::{SimConfig, SynthConfig};
 
 fn from_toml(text: &str) -> Result<SynthConfig, String> {

@@ -1,24 +1,24 @@
 //! The synthetic scenes' ground-truth readers against thousands of damaged copies of a
-//! file the writer made (`scene::testing::mutate`, docs/DESIGN.md "Inputs that cannot
+//! file the writer made (`testkit::mutate`, docs/DESIGN.md "Inputs that cannot
 //! hurt"): `gt/event_flow.bin`, the 16-bit object-id PNGs, and `timestamps.txt` of a
 //! frame folder. (Depth and flow EXRs and the pose manifests are `scene` readers,
 //! fuzzed in `scene/tests/mutation.rs`.) An error naming the file or a valid result,
 //! never a panic, never an allocation beyond a bound tied to the file's size.
 
 #[global_allocator]
-static ALLOC: scene::testing::TrackingAlloc = scene::testing::TrackingAlloc;
+static ALLOC: testkit::TrackingAlloc = testkit::TrackingAlloc;
 
-use scene::testing::{Plan, fuzz};
 use std::fs;
 use synth::frames::read_timestamps;
 use synth::gt::{
     EventFlowGt, NOISE_ID, read_event_flow_gt, read_object_png, write_event_flow_gt,
     write_object_png,
 };
+use testkit::{Plan, fuzz};
 
 #[test]
 fn event_flow_gt_reader() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("event_flow.bin");
     let n = 150;
@@ -41,7 +41,7 @@ fn event_flow_gt_reader() {
 
 #[test]
 fn object_png_reader() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("object_0000.png");
     let (w, h) = (24u32, 16u32);
@@ -58,7 +58,7 @@ fn object_png_reader() {
 
 #[test]
 fn timestamps_reader() {
-    let _alone = scene::testing::alloc::exclusive();
+    let _alone = testkit::alloc::exclusive();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("timestamps.txt");
     let mut text = String::from("# frame times, seconds\n");

@@ -125,7 +125,7 @@ fn novel_flow_is_the_motion_of_static_points_seen_by_the_moving_novel_camera() {
 
 #[test]
 fn the_novel_angle_is_validated() {
-    use scene::cli::Settings;
+    use stagekit::Settings;
     for bad in [91.0, -120.0, f64::NAN] {
         let cfg = SynthConfig {
             novel_angle_deg: bad,

@@ -1,7 +1,7 @@
 //! Event simulator: exact crossings on ramps, determinism, noise, refractory period.
 
 use scene::EventStream;
-use scene::cli::Settings;
+use stagekit::Settings;
 use synth::frames::{read_timestamps, simulate_frames};
 use synth::sim::{SimConfig, Simulator, luminance};
 

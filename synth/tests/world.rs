@@ -2,7 +2,7 @@
 //! points, depth against closed-form plane/sphere depths, presets.
 
 use glam::{DVec2, DVec3};
-use scene::cli::Settings;
+use stagekit::Settings;
 use synth::{
     CameraPath, Motion, ObjectSpec, PRESETS, Render, Shape, SynthConfig, SynthWorld, Texture,
 };

@@ -23,7 +23,7 @@ use gaussians::{Rasterizer, TileRasterizer};
 use rand::{RngExt, SeedableRng};
 use scene::Camera;
 use scene::metrics::psnr_u8;
-use scene::optim::Adam;
+use stagekit::optim::Adam;
 use std::time::Instant;
 
 mod motion;

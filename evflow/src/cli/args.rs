@@ -101,7 +101,7 @@ impl CommonArgs {
     /// The settings of `--config` (or the defaults) with these flags and then `more`
     /// (the command's own flags) applied, validated; errors name the file.
     pub fn settings(&self, more: impl FnOnce(&mut FlowSettings)) -> scene::Result<FlowSettings> {
-        scene::cli::settings::resolve(self.config.as_deref(), |s: &mut FlowSettings| {
+        stagekit::settings::resolve(self.config.as_deref(), |s: &mut FlowSettings| {
             if let Some(w) = &self.weights {
                 s.weights = Some(w.clone());
             }

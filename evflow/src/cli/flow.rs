@@ -5,7 +5,7 @@ use super::args::{CommonArgs, InputArgs};
 use crate::finetune::{FlowSettings, Mode};
 use crate::stage::{Event, Input};
 use clap::Args;
-use scene::cli::Progress;
+use stagekit::Progress;
 use std::path::{Path, PathBuf};
 
 #[derive(Args, Debug)]
@@ -42,7 +42,7 @@ pub struct FinetuneArgs {
 }
 
 /// The flags of [`FinetuneArgs`] that override a setting, each with its key in
-/// [`FlowSettings`] (their `--help` shows its default: [`scene::cli::show_defaults`]).
+/// [`FlowSettings`] (their `--help` shows its default: [`stagekit::show_defaults`]).
 pub const FINETUNE_SETTING_FLAGS: &[(&str, &str)] = &[
     ("mode", "mode"),
     ("min_steps", "stop.min_steps"),
@@ -128,7 +128,7 @@ impl EvalArgs {
         let settings = self.flows.join("settings.toml");
         let frame_window = if settings.is_file() {
             let text = std::fs::read_to_string(&settings)?;
-            scene::cli::settings::parse::<crate::finetune::FlowSettings>(&text, &settings)?
+            stagekit::settings::parse::<crate::finetune::FlowSettings>(&text, &settings)?
                 .frame_window
         } else {
             crate::finetune::FlowSettings::default().frame_window

@@ -3,8 +3,8 @@
 
 use crate::pretrain::PretrainSettings;
 use clap::Args;
-use scene::cli::Progress;
-use scene::cli::settings::{resolve, write_resolved};
+use stagekit::Progress;
+use stagekit::settings::{resolve, write_resolved};
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]

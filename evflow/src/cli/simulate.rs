@@ -23,7 +23,7 @@ pub struct SimulateArgs {
 impl SimulateArgs {
     /// Simulate and write the event file.
     pub fn run(&self) -> anyhow::Result<()> {
-        let cfg = scene::cli::settings::resolve::<SimConfig>(self.config.as_deref(), |_| {})?;
+        let cfg = stagekit::settings::resolve::<SimConfig>(self.config.as_deref(), |_| {})?;
         let s = synth::frames::simulate_frames(&self.frames, &self.out, &cfg, self.seed)?;
         eprintln!(
             "evflow: {} frames -> {} events ({}x{}) in {:.2} s -> {}",

@@ -1,10 +1,10 @@
-//! Adam on the network's burn tensors: [`scene::optim::Adam`] (f32 moments, PyTorch's
+//! Adam on the network's burn tensors: [`stagekit::optim::Adam`] (f32 moments, PyTorch's
 //! update) with one group per tensor, named after it.
 
 use super::flownet::Conv;
 use super::tensor::to_f32;
 use burn::tensor::{Gradients, Tensor, TensorData};
-use scene::optim::Adam;
+use stagekit::optim::Adam;
 
 /// Adam's ε (PyTorch's default).
 pub const ADAM_EPS: f64 = 1e-8;

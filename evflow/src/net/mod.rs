@@ -3,7 +3,7 @@
 //! - [`flownet`]: the network itself ([`FlowNet`], [`NetConfig`], the layer [`layout`]);
 //! - [`lora`]: LoRA adapters on its convolutions, the math only;
 //! - [`tensor`]: conversions between burn tensors and plain vectors;
-//! - [`adam`]: Adam steps on the trainable tensors (`scene::optim::Adam`);
+//! - [`adam`]: Adam steps on the trainable tensors (`stagekit::optim::Adam`);
 //! - [`io`]: every weight and adapter file (safetensors, JSON sidecars, bare weights).
 //!
 //! Dependencies point one way: `io` → `flownet` → `lora`, never back.

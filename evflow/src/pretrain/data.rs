@@ -6,9 +6,9 @@ use crate::cm::CmEvents;
 use glam::DVec3;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use scene::cli::Settings;
 use scene::error::{Error, Result};
 use scene::events::EventStream;
+use stagekit::Settings;
 use synth::gt::NOISE_ID;
 use synth::{Pattern, SynthConfig, SynthWorld, simulate_scene};
 

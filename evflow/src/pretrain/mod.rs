@@ -32,10 +32,10 @@ use crate::net::{FlowNet, NetConfig, adam_step_conv, tensor4, to_f64};
 use burn::tensor::{DType, Device};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use scene::cli::Settings;
 use scene::error::{Error, Result};
-use scene::optim::Adam;
 use serde::{Deserialize, Serialize};
+use stagekit::Settings;
+use stagekit::optim::Adam;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 

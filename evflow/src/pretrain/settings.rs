@@ -104,7 +104,7 @@ impl Default for PretrainSettings {
     }
 }
 
-impl scene::cli::Settings for PretrainSettings {
+impl stagekit::Settings for PretrainSettings {
     /// `Err` with a sentence naming the first bad setting.
     fn validate(&self) -> std::result::Result<(), String> {
         if self.base == 0 || self.bins < 2 {

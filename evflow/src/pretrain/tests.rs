@@ -1,7 +1,7 @@
 //! Unit tests of the pretraining loop (split out of `mod.rs`).
 
 use super::*;
-use scene::cli::Settings;
+use stagekit::Settings;
 
 fn tiny() -> PretrainSettings {
     PretrainSettings {

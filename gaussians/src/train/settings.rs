@@ -144,7 +144,7 @@ impl TrainSettings {
     }
 }
 
-impl scene::cli::Settings for TrainSettings {
+impl stagekit::Settings for TrainSettings {
     /// Reject settings that cannot train.
     fn validate(&self) -> Result<(), String> {
         if self.iterations == 0 {
@@ -204,12 +204,12 @@ impl scene::cli::Settings for TrainSettings {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use scene::cli::Settings;
-    use scene::cli::settings::to_toml;
+    use stagekit::Settings;
+    use stagekit::settings::to_toml;
 
     /// Parse a `settings.toml`; unknown keys are errors.
     fn from_toml(text: &str) -> scene::Result<TrainSettings> {
-        scene::cli::settings::parse(text, std::path::Path::new("settings.toml"))
+        stagekit::settings::parse(text, std::path::Path::new("settings.toml"))
     }
 
     #[test]

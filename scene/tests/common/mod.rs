@@ -8,7 +8,7 @@ pub mod aedat4_file;
 
 /// The real ECD `shapes_rotation` slice shared by the tests.
 pub fn ecd() -> std::path::PathBuf {
-    scene::testdata::shared_data("ecd_shapes_rotation/events.txt")
+    testkit::testdata::shared_data("ecd_shapes_rotation/events.txt")
 }
 
 /// A sorted pseudo-random stream with awkward timestamps (full f64 mantissas, ties).

@@ -3,7 +3,7 @@
 //! never panic, and never allocate more than a bound tied to the file's size.
 //!
 //! ```ignore
-//! let report = scene::testing::fuzz_reader(&path, &valid_bytes, 7, |p| read_evs(p, &opts));
+//! let report = testkit::fuzz_reader(&path, &valid_bytes, 7, |p| read_evs(p, &opts));
 //! report.assert_clean();
 //! ```
 //!
@@ -401,8 +401,8 @@ pub fn fuzz<T, E: Display>(
     let _guard = alloc::exclusive();
     assert!(
         alloc::installed(),
-        "declare `#[global_allocator] static A: scene::testing::TrackingAlloc = \
-         scene::testing::TrackingAlloc;` in this test binary"
+        "declare `#[global_allocator] static A: testkit::TrackingAlloc = \
+         testkit::TrackingAlloc;` in this test binary"
     );
     // A new file each time: on ext4, truncating and rewriting a file forces its data to
     // disk on close (auto_da_alloc), 40x slower than unlinking it first.

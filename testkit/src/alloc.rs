@@ -5,7 +5,7 @@
 //!
 //! ```ignore
 //! #[global_allocator]
-//! static ALLOC: scene::testing::TrackingAlloc = scene::testing::TrackingAlloc;
+//! static ALLOC: testkit::TrackingAlloc = testkit::TrackingAlloc;
 //! ```
 //!
 //! The counters are process-wide (a reader's rayon workers count too), so measurements

@@ -2,8 +2,8 @@
 //! line's overrides, validate, and write the resolved settings beside the outputs. Every
 //! stage binary does this the same way (docs/DESIGN.md §4).
 
-use crate::atomic::write_bytes_atomic;
-use crate::error::{Error, Result};
+use scene::atomic::write_bytes_atomic;
+use scene::error::{Error, Result};
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 use std::path::Path;

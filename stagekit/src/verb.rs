@@ -11,7 +11,7 @@
 //!   naming the key.
 
 use super::settings::{Settings, from_table_naming_key, to_toml, toml_error};
-use crate::error::{Error, Result};
+use scene::error::{Error, Result};
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;

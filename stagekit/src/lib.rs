@@ -1,10 +1,14 @@
-//! What every degs binary does the same way: settings files ([`settings`]) and the
+//! The stage kit: what every degs binary does the same way: settings files ([`settings`]) and the
 //! defaults their flags show in `--help` ([`help`]), progress on stderr and Ctrl-C
 //! ([`progress`]), the `settings` verb through which the runner learns a stage's
-//! settings ([`verb`]), and the one-line error exit ([`exit_on_error`]).
+//! settings ([`verb`]), the one-line error exit ([`exit_on_error`]), the phase timings and
+//! peak memory of each stage's `report.json` ([`report`]), and Adam with its learning-rate
+//! schedule, shared by every trainer ([`optim`]).
 
 pub mod help;
+pub mod optim;
 pub mod progress;
+pub mod report;
 pub mod settings;
 pub mod verb;
 
