@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use clap::Parser;
 
 use assoc::AssocSettings;
-use stagekit::{Progress, exit_on_error, parse_with, settings, show_defaults};
+use stagekit::{Progress, StageArgs, exit_on_error, parse_with, settings, show_defaults};
 
 /// Tie events to the Gaussians that caused them: each event near a train-frame time is
 /// lifted to 3D through the warm-up's depth map, and every Gaussian binds to its k
@@ -19,22 +19,12 @@ use stagekit::{Progress, exit_on_error, parse_with, settings, show_defaults};
 #[derive(Parser, Debug)]
 #[command(name = "assoc", version)]
 struct Cli {
-    /// Scene directory (transforms_train.json with an events entry).
-    #[arg(long)]
-    scene: PathBuf,
+    #[command(flatten)]
+    stage: StageArgs,
     /// Warm-up model directory written by `gaussians train` (point_cloud.ply, field,
     /// depth/NNNN.exr).
     #[arg(long)]
     model: PathBuf,
-    /// Output directory (appears complete or not at all).
-    #[arg(long)]
-    out: PathBuf,
-    /// Replace an earlier output of `assoc` at OUT (never a folder holding an input).
-    #[arg(long)]
-    force: bool,
-    /// Settings file (TOML with the keys below); flags override it.
-    #[arg(long)]
-    config: Option<PathBuf>,
     /// Half-width of the event window around each frame time, seconds.
     #[arg(long)]
     delta_t: Option<f64>,
@@ -58,7 +48,7 @@ const SETTING_FLAGS: &[(&str, &str)] = &[
 ];
 
 fn run(cli: Cli) -> anyhow::Result<ExitCode> {
-    let s = settings::resolve::<AssocSettings>(cli.config.as_deref(), |s| {
+    let s = settings::resolve::<AssocSettings>(cli.stage.output.config.as_deref(), |s| {
         s.delta_t = cli.delta_t.unwrap_or(s.delta_t);
         s.k = cli.k.unwrap_or(s.k);
         s.radius_px = cli.radius_px.unwrap_or(s.radius_px);
@@ -66,11 +56,11 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     })?;
     let mut progress = Progress::new("frame", 0);
     let report = assoc::stage::run(
-        &cli.scene,
+        &cli.stage.scene,
         &cli.model,
-        &cli.out,
+        &cli.stage.output.out,
         &s,
-        cli.force,
+        cli.stage.output.force,
         |done, total| {
             progress.set_length(total as u64);
             progress.set(done as u64, String::new);
@@ -83,7 +73,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         100.0 * report.bound_fraction_mean,
         report.gaussians,
         report.wall_s,
-        cli.out.display()
+        cli.stage.output.out.display()
     );
     Ok(ExitCode::SUCCESS)
 }

@@ -41,9 +41,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 /// Options of `deform train` (flags override the config file).
 #[derive(Clone, Debug, Default, clap::Args)]
 pub struct TrainArgs {
-    /// Scene directory (manifests, images, events)
-    #[arg(long)]
-    pub scene: PathBuf,
+    #[command(flatten)]
+    pub stage: stagekit::StageArgs,
     /// The warm-up's output directory (`gaussians train`)
     #[arg(long)]
     pub model: PathBuf,
@@ -53,22 +52,8 @@ pub struct TrainArgs {
     /// The bindings (`assoc` output directory)
     #[arg(long)]
     pub assoc: PathBuf,
-    /// Output directory (written under a temporary name, renamed when complete)
-    #[arg(long)]
-    pub out: PathBuf,
-    /// Replace an earlier output of `deform train` at OUT (never a folder that holds an
-    /// input, nor one some other program wrote)
-    #[arg(long)]
-    pub force: bool,
-    /// settings.toml with any DeformSettings (flags below override it)
-    #[arg(long)]
-    pub config: Option<PathBuf>,
-    /// Joint iterations after the warm-up
-    #[arg(long)]
-    pub iterations: Option<u32>,
-    /// Seed of the sampling and of the PoseNet
-    #[arg(long)]
-    pub seed: Option<u64>,
+    #[command(flatten)]
+    pub training: stagekit::TrainingArgs,
     /// Plain interpolation of the camera path (no PoseNet)
     #[arg(long)]
     pub no_posenet: bool,
@@ -82,23 +67,26 @@ pub struct TrainArgs {
 
 /// Settings from the config file (if any) with the flags applied, validated.
 pub fn resolve_settings(a: &TrainArgs) -> Result<DeformSettings> {
-    stagekit::settings::resolve(a.config.as_deref(), |s: &mut DeformSettings| {
-        if let Some(n) = a.iterations {
-            s.iterations = n;
-        }
-        if let Some(n) = a.seed {
-            s.seed = n;
-        }
-        if a.no_posenet {
-            s.posenet = false;
-        }
-        if a.no_event_loss {
-            s.schedule.gamma1 = 0.0;
-        }
-        if a.no_motion_loss {
-            s.schedule.gamma2_max = 0.0;
-        }
-    })
+    stagekit::settings::resolve(
+        a.stage.output.config.as_deref(),
+        |s: &mut DeformSettings| {
+            if let Some(n) = a.training.iterations {
+                s.iterations = n;
+            }
+            if let Some(n) = a.training.seed {
+                s.seed = n;
+            }
+            if a.no_posenet {
+                s.posenet = false;
+            }
+            if a.no_event_loss {
+                s.schedule.gamma1 = 0.0;
+            }
+            if a.no_motion_loss {
+                s.schedule.gamma2_max = 0.0;
+            }
+        },
+    )
 }
 
 /// `report.json` of `deform train`.
@@ -181,20 +169,20 @@ pub fn train(
     phases.start("load");
     let settings = resolve_settings(args)?;
     let rule = OutputRule::new("deform train")
-        .force(args.force)
-        .source(&args.scene)
+        .force(args.stage.output.force)
+        .source(&args.stage.scene)
         .source(&args.model)
         .source(&args.flows)
         .source(&args.assoc);
-    rule.check(&args.out)?;
+    rule.check(&args.stage.output.out)?;
     let d = Inputs::load(
-        &args.scene,
+        &args.stage.scene,
         &args.model,
         &args.flows,
         &args.assoc,
         &settings,
     )?;
-    let out = AtomicDir::new(&args.out, &rule)?;
+    let out = AtomicDir::new(&args.stage.output.out, &rule)?;
     phases.start("train");
     let mut tr = JointTrainer::new(&d, settings.clone());
     let warmup_iterations = tr.inner.iteration;
@@ -242,7 +230,7 @@ pub fn train(
     let report = TrainReport {
         stage: "deform train",
         version: env!("CARGO_PKG_VERSION"),
-        scene: args.scene.clone(),
+        scene: args.stage.scene.clone(),
         phases,
         wall_seconds: start.elapsed().as_secs_f64(),
         peak_memory_mib: peak_rss_mib(),

@@ -28,26 +28,10 @@ use std::sync::atomic::AtomicBool;
 /// Options of `gaussians train` (flags override the config file).
 #[derive(Clone, Debug, Default, clap::Args)]
 pub struct TrainArgs {
-    /// Scene directory (transforms_train.json, transforms_test.json, images/)
-    #[arg(long)]
-    pub scene: PathBuf,
-    /// Output directory (written under a temporary name, renamed when complete)
-    #[arg(long)]
-    pub out: PathBuf,
-    /// Replace an earlier output of this command at OUT (never a folder that holds an
-    /// input, nor one some other program wrote)
-    #[arg(long)]
-    pub force: bool,
-    /// settings.toml with any TrainSettings (flags below override it; the resolved
-    /// settings are written to OUT/settings.toml)
-    #[arg(long)]
-    pub config: Option<PathBuf>,
-    /// Training iterations (the default is the DEGS warm-up; more = the RGB-only baseline)
-    #[arg(long)]
-    pub iterations: Option<u32>,
-    /// Seed of the initialisation, frame order and field weights
-    #[arg(long)]
-    pub seed: Option<u64>,
+    #[command(flatten)]
+    pub stage: stagekit::StageArgs,
+    #[command(flatten)]
+    pub training: stagekit::TrainingArgs,
     /// Initial Gaussians from a 3DGS PLY (e.g. SfM points) instead of `--init`
     #[arg(long)]
     pub init_ply: Option<PathBuf>,
@@ -82,27 +66,30 @@ pub const SETTING_FLAGS: &[(&str, &str)] = &[
 
 /// Settings from the config file (if any) with the flags applied, validated.
 pub fn resolve_settings(args: &TrainArgs) -> Result<TrainSettings> {
-    resolve(args.config.as_deref(), |s: &mut TrainSettings| {
-        if let Some(n) = args.iterations {
-            s.iterations = n;
-        }
-        if let Some(seed) = args.seed {
-            s.seed = seed;
-            s.field.seed = seed;
-        }
-        if let Some(init) = args.init {
-            s.init = init;
-        }
-        if let Some(w) = args.field_width {
-            s.field.width = w;
-        }
-        if let Some(d) = args.field_depth {
-            s.field.depth = d;
-        }
-        if args.no_deform {
-            s.deform = false;
-        }
-    })
+    resolve(
+        args.stage.output.config.as_deref(),
+        |s: &mut TrainSettings| {
+            if let Some(n) = args.training.iterations {
+                s.iterations = n;
+            }
+            if let Some(seed) = args.training.seed {
+                s.seed = seed;
+                s.field.seed = seed;
+            }
+            if let Some(init) = args.init {
+                s.init = init;
+            }
+            if let Some(w) = args.field_width {
+                s.field.width = w;
+            }
+            if let Some(d) = args.field_depth {
+                s.field.depth = d;
+            }
+            if args.no_deform {
+                s.deform = false;
+            }
+        },
+    )
 }
 
 /// PSNR / SSIM of renders against the frames of a split.
@@ -421,13 +408,13 @@ pub fn train(
     phases.start("load");
     let settings = resolve_settings(args)?;
     let mut rule = OutputRule::new("gaussians train")
-        .force(args.force)
-        .source(&args.scene);
+        .force(args.stage.output.force)
+        .source(&args.stage.scene);
     for p in args.init_ply.iter().chain(&args.init_motion) {
         rule = rule.source(p);
     }
-    rule.check(&args.out)?;
-    let scene = Scene::open(&args.scene)?;
+    rule.check(&args.stage.output.out)?;
+    let scene = Scene::open(&args.stage.scene)?;
     let views = load_views(&scene, &scene.train)?;
     let test_views = load_views(&scene, &scene.test)?;
     let inputs = input_hashes(
@@ -452,7 +439,7 @@ pub fn train(
     }
     let cams: Vec<_> = views.iter().map(|v| v.camera).collect();
     let extent = scene_extent(&settings, &cams);
-    let out = AtomicDir::new(&args.out, &rule)?;
+    let out = AtomicDir::new(&args.stage.output.out, &rule)?;
 
     phases.start("train");
     let mut trainer = Trainer::new(settings, splats, extent);
@@ -483,7 +470,7 @@ pub fn train(
     let report = TrainReport {
         stage: "gaussians train",
         version: env!("CARGO_PKG_VERSION"),
-        scene: args.scene.clone(),
+        scene: args.stage.scene.clone(),
         inputs,
         phases,
         wall_seconds: start.elapsed().as_secs_f64(),

@@ -3,6 +3,7 @@
 use gaussians::model::Model;
 use gaussians::stage::{self, Split, TrainArgs};
 use gaussians::train::TrainSettings;
+use stagekit::{StageArgs, TrainingArgs};
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use synth::{SynthConfig, SynthWorld};
@@ -86,10 +87,11 @@ fn trains_writes_every_output_and_reloads_identically() {
     tiny_scene(&scene_dir);
     let out = tmp.path().join("out");
     let args = TrainArgs {
-        scene: scene_dir.clone(),
-        out: out.clone(),
-        config: Some(tiny_settings(tmp.path())),
-        seed: Some(1),
+        stage: StageArgs::new(&scene_dir, &out).with_config(tiny_settings(tmp.path())),
+        training: TrainingArgs {
+            seed: Some(1),
+            ..TrainingArgs::default()
+        },
         ..TrainArgs::default()
     };
     let mut steps = 0;
@@ -266,9 +268,11 @@ fn without_a_novel_split_the_report_has_no_novel_section() {
     synth::write_rgb_synthetic_scene(&cfg, &scene_dir).unwrap();
     let out = tmp.path().join("out");
     let args = TrainArgs {
-        scene: scene_dir.clone(),
-        out: out.clone(),
-        iterations: Some(3),
+        stage: StageArgs::new(&scene_dir, &out),
+        training: TrainingArgs {
+            iterations: Some(3),
+            ..TrainingArgs::default()
+        },
         ..TrainArgs::default()
     };
     let o = stage::train(&args, &AtomicBool::new(false), |_| {}).unwrap();
@@ -294,9 +298,7 @@ fn interrupted_run_still_saves_a_usable_model() {
     tiny_scene(&scene_dir);
     let out = tmp.path().join("out");
     let args = TrainArgs {
-        scene: scene_dir,
-        out: out.clone(),
-        config: Some(tiny_settings(tmp.path())),
+        stage: StageArgs::new(scene_dir, &out).with_config(tiny_settings(tmp.path())),
         ..TrainArgs::default()
     };
     let stop = AtomicBool::new(false);
@@ -321,9 +323,11 @@ fn missing_image_is_an_error_naming_it_and_leaves_no_output() {
     std::fs::remove_file(scene_dir.join("images/train_0002.png")).unwrap();
     let out = tmp.path().join("out");
     let args = TrainArgs {
-        scene: scene_dir,
-        out: out.clone(),
-        iterations: Some(5),
+        stage: StageArgs::new(scene_dir, &out),
+        training: TrainingArgs {
+            iterations: Some(5),
+            ..TrainingArgs::default()
+        },
         ..TrainArgs::default()
     };
     let e = stage::train(&args, &AtomicBool::new(false), |_| {})
@@ -345,13 +349,16 @@ fn bad_config_and_flags_are_errors_naming_the_file() {
     let cfg = tmp.path().join("bad.toml");
     std::fs::write(&cfg, "iteratons = 3\n").unwrap();
     let args = TrainArgs {
-        config: Some(cfg.clone()),
+        stage: StageArgs::default().with_config(cfg.clone()),
         ..TrainArgs::default()
     };
     let e = stage::resolve_settings(&args).unwrap_err().to_string();
     assert!(e.contains("bad.toml") && e.contains("iteratons"), "{e}");
     let args = TrainArgs {
-        iterations: Some(0),
+        training: TrainingArgs {
+            iterations: Some(0),
+            ..TrainingArgs::default()
+        },
         ..TrainArgs::default()
     };
     assert!(stage::resolve_settings(&args).is_err());

@@ -1,10 +1,12 @@
-//! The stage kit: what every degs binary does the same way: settings files ([`settings`]) and the
+//! The stage kit: what every degs binary does the same way: the flags they share
+//! ([`args`]), settings files ([`settings`]) and the
 //! defaults their flags show in `--help` ([`help`]), progress on stderr and Ctrl-C
 //! ([`progress`]), the `settings` verb through which the runner learns a stage's
 //! settings ([`verb`]), the one-line error exit ([`exit_on_error`]), the phase timings and
 //! peak memory of each stage's `report.json` ([`report`]), and Adam with its learning-rate
 //! schedule, shared by every trainer ([`optim`]).
 
+pub mod args;
 pub mod help;
 pub mod optim;
 pub mod progress;
@@ -12,6 +14,7 @@ pub mod report;
 pub mod settings;
 pub mod verb;
 
+pub use args::{OutputArgs, StageArgs, TrainingArgs};
 pub use help::{parse_with, show_defaults, with_default};
 pub use progress::{Progress, sigint_flag};
 pub use settings::Settings;

@@ -70,16 +70,8 @@ impl InputArgs {
 
 #[derive(Args, Debug)]
 pub struct CommonArgs {
-    /// Output directory (appears complete or not at all).
-    #[arg(long)]
-    pub out: PathBuf,
-    /// Replace an earlier output of the same command at OUT (never a folder that holds
-    /// an input, nor one some other program wrote).
-    #[arg(long)]
-    pub force: bool,
-    /// Settings file (TOML, keys of FlowSettings); flags override it.
-    #[arg(long)]
-    pub config: Option<PathBuf>,
+    #[command(flatten)]
+    pub output: stagekit::OutputArgs,
     /// Base network weights: safetensors with a .json sidecar, or bare (tensor names in
     /// `evflow --help`). Default: $EVFLOW_WEIGHTS, else the weights shipped in
     /// evflow/weights/.
@@ -101,7 +93,7 @@ impl CommonArgs {
     /// The settings of `--config` (or the defaults) with these flags and then `more`
     /// (the command's own flags) applied, validated; errors name the file.
     pub fn settings(&self, more: impl FnOnce(&mut FlowSettings)) -> scene::Result<FlowSettings> {
-        stagekit::settings::resolve(self.config.as_deref(), |s: &mut FlowSettings| {
+        stagekit::settings::resolve(self.output.config.as_deref(), |s: &mut FlowSettings| {
             if let Some(w) = &self.weights {
                 s.weights = Some(w.clone());
             }

@@ -68,11 +68,11 @@ impl FinetuneArgs {
         })?;
         run_stage(
             &self.input.input()?,
-            &self.common.out,
+            &self.common.output.out,
             &s,
             true,
             None,
-            self.common.force,
+            self.common.output.force,
         )
     }
 }
@@ -95,11 +95,11 @@ impl PredictArgs {
         let s = self.common.settings(|s| s.mode = Mode::None)?;
         run_stage(
             &self.input.input()?,
-            &self.common.out,
+            &self.common.output.out,
             &s,
             false,
             self.adapter.as_deref(),
-            self.common.force,
+            self.common.output.force,
         )
     }
 }

@@ -5,19 +5,11 @@ use crate::pretrain::PretrainSettings;
 use clap::Args;
 use stagekit::Progress;
 use stagekit::settings::{resolve, write_resolved};
-use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub struct PretrainArgs {
-    /// Output directory.
-    #[arg(long)]
-    pub out: PathBuf,
-    /// Replace an earlier output of `evflow pretrain` at OUT.
-    #[arg(long)]
-    pub force: bool,
-    /// Settings (TOML, keys of evflow::pretrain::PretrainSettings).
-    #[arg(long)]
-    pub config: Option<PathBuf>,
+    #[command(flatten)]
+    pub output: stagekit::OutputArgs,
     /// Base width C of the network (overrides the config).
     #[arg(long)]
     pub base: Option<usize>,
@@ -34,13 +26,13 @@ pub const PRETRAIN_SETTING_FLAGS: &[(&str, &str)] =
 impl PretrainArgs {
     /// Pretrain into `--out` and write the resolved settings beside the weights.
     pub fn run(&self) -> anyhow::Result<()> {
-        let out = &self.out;
-        let s = resolve(self.config.as_deref(), |s: &mut PretrainSettings| {
+        let out = &self.output.out;
+        let s = resolve(self.output.config.as_deref(), |s: &mut PretrainSettings| {
             s.base = self.base.unwrap_or(s.base);
             s.iterations = self.iterations.unwrap_or(s.iterations);
         })?;
         let progress = Progress::new("pretrain", s.iterations as u64);
-        let r = crate::pretrain::run(&s, out, self.force, &mut |k, _, loss| {
+        let r = crate::pretrain::run(&s, out, self.output.force, &mut |k, _, loss| {
             progress.set(k as u64, || format!("loss {loss:.4}"));
         })?;
         progress.finish();
