@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 
 /// One step of a curve.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct CurveStep {
+pub(crate) struct CurveStep {
     pub step: u32,
     /// LoCM fine-tuning seconds up to and including this step (scoring not counted).
     pub locm_s: f64,
@@ -38,7 +38,7 @@ pub struct CurveStep {
 
 /// One curve file.
 #[derive(Clone, Debug, Serialize)]
-pub struct Curve {
+pub(crate) struct Curve {
     /// The file's stem: the curve's name on the chart.
     pub name: String,
     pub path: PathBuf,
@@ -60,7 +60,7 @@ pub fn is_curve_file(arg: &str) -> bool {
 }
 
 /// Read and check a curve file; errors name the file and the line.
-pub fn read_curve(path: &Path) -> Result<Curve> {
+pub(crate) fn read_curve(path: &Path) -> Result<Curve> {
     let bytes = std::fs::read(path).map_err(|e| anyhow!("{}: cannot read: {e}", path.display()))?;
     let text = std::str::from_utf8(&bytes)
         .map_err(|e| anyhow!("{}: not UTF-8 text: {e}", path.display()))?;
@@ -77,7 +77,7 @@ pub fn read_curve(path: &Path) -> Result<Curve> {
 }
 
 /// The steps of a curve file's text; errors say which line and what is wrong with it.
-pub fn parse_steps(text: &str) -> Result<Vec<CurveStep>> {
+pub(crate) fn parse_steps(text: &str) -> Result<Vec<CurveStep>> {
     let mut steps: Vec<CurveStep> = Vec::new();
     let ends_cut = !text.is_empty() && !text.ends_with('\n');
     let lines: Vec<&str> = text.lines().collect();
@@ -153,7 +153,7 @@ fn check_step(s: &CurveStep) -> Result<()> {
 }
 
 /// Every curve's steps as CSV, one row per step.
-pub fn to_csv(curves: &[Curve]) -> String {
+pub(crate) fn to_csv(curves: &[Curve]) -> String {
     let mut s = String::from("curve,step,locm_s,loss,epe_px,zero_px,ratio,stopped,stop_reason\n");
     for c in curves {
         for p in &c.steps {

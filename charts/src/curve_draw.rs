@@ -11,7 +11,7 @@ use plotters::prelude::*;
 use std::path::{Path, PathBuf};
 
 /// One colour per curve, in file order (repeating past six).
-pub const CURVE_COLOURS: [RGBColor; 6] = [
+pub(crate) const CURVE_COLOURS: [RGBColor; 6] = [
     RGBColor(214, 39, 40),
     RGBColor(31, 119, 180),
     RGBColor(44, 160, 44),
@@ -21,7 +21,7 @@ pub const CURVE_COLOURS: [RGBColor; 6] = [
 ];
 
 /// What the label of a curve's stopping point says.
-pub fn stop_label(c: &Curve) -> Option<String> {
+pub(crate) fn stop_label(c: &Curve) -> Option<String> {
     let s = c.stop()?;
     let why = s.stop_reason.as_deref().unwrap_or("stopped");
     Some(format!(
@@ -35,7 +35,7 @@ struct CurveChart<'a> {
 }
 
 /// Draw `curves` to `<stem>.png` and `<stem>.svg`.
-pub fn draw_curves(curves: &[Curve], stem: &Path) -> Result<Vec<PathBuf>> {
+pub(crate) fn draw_curves(curves: &[Curve], stem: &Path) -> Result<Vec<PathBuf>> {
     write_png_and_svg(&CurveChart { curves }, stem)
 }
 

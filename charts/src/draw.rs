@@ -18,7 +18,7 @@ pub const SIZE: (u32, u32) = (960, 640);
 /// The same with the channel count, as the PNG reads back.
 pub const SIZE_RGB: (u32, u32, u32) = (SIZE.0, SIZE.1, 3);
 
-pub fn register_font() -> Result<()> {
+pub(crate) fn register_font() -> Result<()> {
     static DONE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
     let ok = *DONE.get_or_init(|| {
         plotters::style::register_font("sans-serif", FontStyle::Normal, FONT).is_ok()
@@ -156,7 +156,7 @@ fn model_series(points: &[&ModelPoint], x_of: &XOf) -> Vec<Series> {
 type XOf = dyn Fn(&ModelPoint) -> Option<f64>;
 
 /// Write every chart of `data` into `out`; the files written.
-pub fn draw_all(data: &ChartData, out: &Path) -> Result<Vec<PathBuf>> {
+pub(crate) fn draw_all(data: &ChartData, out: &Path) -> Result<Vec<PathBuf>> {
     let mut scenes: Vec<&str> = data.models.iter().map(|p| p.scene.as_str()).collect();
     scenes.extend(data.flows.iter().map(|p| p.scene.as_str()));
     scenes.sort();

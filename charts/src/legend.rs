@@ -32,7 +32,7 @@ pub fn draw_legend<'a, DB: DrawingBackend + 'a, CT: plotters::coord::CoordTransl
 
 /// The named places a legend may take, in order of preference on ties: the corners, then
 /// the middles of the edges.
-pub const LEGEND_PLACES: [&str; 8] = [
+pub(crate) const LEGEND_PLACES: [&str; 8] = [
     "lower right",
     "upper right",
     "lower left",
@@ -46,14 +46,14 @@ pub const LEGEND_PLACES: [&str; 8] = [
 /// Where a legend goes: the name of its place ("inside" when no named place was the
 /// emptiest) and its box's upper-left corner in pixels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct LegendPlace {
+pub(crate) struct LegendPlace {
     pub name: &'static str,
     pub origin: (i32, i32),
 }
 
 /// Size in pixels of the legend box of `labels`, laid out as plotters lays it out (the
 /// labels' text block, a 30-pixel sample of the series and a 10-pixel margin around).
-pub fn legend_size(labels: &[String]) -> (i32, i32) {
+pub(crate) fn legend_size(labels: &[String]) -> (i32, i32) {
     // Measured with the bundled font (`draw::register_font`, before any chart is drawn).
     let font: TextStyle = LEGEND_FONT.into_font().into();
     let mut text = MultiLineText::<(i32, i32), &str>::new((0, 0), &font);
@@ -86,7 +86,7 @@ fn named_origin(k: usize, area: (i32, i32, i32, i32), size: (i32, i32)) -> (i32,
 /// The legend box of `size` pixels that covers the fewest of `points` in the plotting
 /// area `(x0, y0, x1, y1)` (pixels, y down): the named places first (the earlier on
 /// ties), then any position on a 10-pixel grid inside the area when one covers fewer.
-pub fn legend_place(
+pub(crate) fn legend_place(
     points: &[(i32, i32)],
     area: (i32, i32, i32, i32),
     size: (i32, i32),

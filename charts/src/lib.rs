@@ -105,7 +105,7 @@ pub struct ChartData {
 /// Indices of the Pareto front of `(cost, value)` points where lower cost and higher
 /// value are better, ordered by cost: a point is on it when no other point costs at
 /// most as much and scores at least as well with one of the two strictly better.
-pub fn pareto_front(points: &[(f64, f64)]) -> Vec<usize> {
+pub(crate) fn pareto_front(points: &[(f64, f64)]) -> Vec<usize> {
     let mut idx: Vec<usize> = (0..points.len())
         .filter(|&i| points[i].0.is_finite() && points[i].1.is_finite())
         .collect();
@@ -139,7 +139,7 @@ fn num(v: &Value, path: &str) -> Option<f64> {
 }
 
 /// Bytes of the model files of a stage's output directory.
-pub fn model_bytes(entry: &Path) -> u64 {
+pub(crate) fn model_bytes(entry: &Path) -> u64 {
     const NOT_MODEL: [&str; 4] = [
         "report.json",
         "settings.toml",
@@ -315,7 +315,7 @@ fn locm_seconds(report: &Value) -> Option<f64> {
 }
 
 /// The charted numbers as CSV, one row per point (models, then flows, then baselines).
-pub fn to_csv(d: &ChartData) -> String {
+pub(crate) fn to_csv(d: &ChartData) -> String {
     let opt = |v: Option<f64>| v.map_or(String::new(), |x| format!("{x}"));
     let mut s = String::from(
         "kind,scene,stage,key,method,experiments,psnr_db,ssim,lpips,novel_psnr_db,total_s,\

@@ -17,7 +17,7 @@ use serde_json::Value;
 
 /// The `baselines` section of a deform stage's report; None when it has none or a
 /// figure is missing.
-pub fn from_report(report: &Value) -> Option<BaselineFigures> {
+pub(crate) fn from_report(report: &Value) -> Option<BaselineFigures> {
     let b = report.get("baselines")?;
     let score = |k: &str| {
         let s = b.get(k)?;

@@ -5,7 +5,7 @@ use anyhow::{Context, Result, bail};
 use std::path::{Path, PathBuf};
 
 /// Look for a number under a key containing "epe" in a stage report.
-pub fn find_epe(v: &serde_json::Value) -> Option<f64> {
+pub(crate) fn find_epe(v: &serde_json::Value) -> Option<f64> {
     match v {
         serde_json::Value::Object(m) => m
             .iter()
@@ -22,7 +22,7 @@ pub fn find_epe(v: &serde_json::Value) -> Option<f64> {
 
 /// Per-event flow error of a directory of `.evflow` files against ground truth.
 #[derive(Clone, Debug, Default, PartialEq)]
-pub struct FlowError {
+pub(crate) struct FlowError {
     /// Mean end-point error, px/s.
     pub epe_px_s: f64,
     /// Mean error in pixels over each event's window.
@@ -35,7 +35,7 @@ pub struct FlowError {
 /// Compare every `flow_dir/*.evflow` with `gt_path` (`gt/event_flow.bin`), matching
 /// events by their index into the scene's stream; noise events (ground-truth object
 /// [`NOISE_ID`](synth::gt::NOISE_ID)) are left out. None when no event matches.
-pub fn flow_error(flow_dir: &Path, gt_path: &Path) -> Result<Option<FlowError>> {
+pub(crate) fn flow_error(flow_dir: &Path, gt_path: &Path) -> Result<Option<FlowError>> {
     let gt = synth::gt::read_event_flow_gt(gt_path)?;
     let mut files: Vec<PathBuf> = std::fs::read_dir(flow_dir)
         .with_context(|| format!("{}: cannot list", flow_dir.display()))?

@@ -35,7 +35,7 @@ pub fn ssim_u8(a: &[f32], b: &[f32], width: usize, height: usize, channels: usiz
 }
 
 /// Compare two images (3 channels after reading) on 8-bit levels: (PSNR, SSIM).
-pub fn compare_images(test: &Path, render: &Path) -> Result<(f64, f64)> {
+pub(crate) fn compare_images(test: &Path, render: &Path) -> Result<(f64, f64)> {
     let a = read_image(test)?;
     let b = read_image(render)?;
     if (a.width, a.height, a.channels) != (b.width, b.height, b.channels) {
@@ -65,7 +65,7 @@ pub fn compare_images(test: &Path, render: &Path) -> Result<(f64, f64)> {
 }
 
 /// Image files of `dir`, sorted by name.
-pub fn images_in(dir: &Path) -> Vec<PathBuf> {
+pub(crate) fn images_in(dir: &Path) -> Vec<PathBuf> {
     let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
         .into_iter()
         .flatten()
@@ -87,7 +87,10 @@ pub fn images_in(dir: &Path) -> Vec<PathBuf> {
 
 /// Pair each test frame with a render: same file stem when the stage kept the names,
 /// else in order when the counts agree.
-pub fn pair_renders(tests: &[PathBuf], renders: &[PathBuf]) -> Result<Vec<(PathBuf, PathBuf)>> {
+pub(crate) fn pair_renders(
+    tests: &[PathBuf],
+    renders: &[PathBuf],
+) -> Result<Vec<(PathBuf, PathBuf)>> {
     let stem = |p: &Path| p.file_stem().map(|s| s.to_string_lossy().to_string());
     let by_stem: Vec<_> = tests
         .iter()
@@ -112,7 +115,7 @@ pub fn pair_renders(tests: &[PathBuf], renders: &[PathBuf]) -> Result<Vec<(PathB
 }
 
 /// PSNR/SSIM of each (held-out image, render) pair.
-pub fn score_pairs(pairs: &[(PathBuf, PathBuf)]) -> Result<Vec<FrameMetrics>> {
+pub(crate) fn score_pairs(pairs: &[(PathBuf, PathBuf)]) -> Result<Vec<FrameMetrics>> {
     pairs
         .par_iter()
         .map(|(t, r)| {

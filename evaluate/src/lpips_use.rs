@@ -9,7 +9,7 @@ use scene::image_io::{Image, read_image};
 use std::path::Path;
 
 /// The network the evaluation reports.
-pub const EVAL_VARIANT: Variant = Variant::Vgg;
+pub(crate) const EVAL_VARIANT: Variant = Variant::Vgg;
 
 /// How the evaluation gets the LPIPS weights.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -43,7 +43,7 @@ fn rgb(img: &Image) -> Vec<f32> {
 }
 
 /// LPIPS of two image files (the first three channels; grey images repeated).
-pub fn lpips_of_files(m: &Lpips, test: &Path, render: &Path) -> Result<f64> {
+pub(crate) fn lpips_of_files(m: &Lpips, test: &Path, render: &Path) -> Result<f64> {
     let (a, b) = (read_image(test)?, read_image(render)?);
     let (ra, rb) = (rgb(&a), rgb(&b));
     let d = m.distance(
@@ -63,7 +63,7 @@ pub fn lpips_of_files(m: &Lpips, test: &Path, render: &Path) -> Result<f64> {
 
 /// LPIPS of every (held-out image, render) pair of each set, and the network's name;
 /// `Err` says why there are none (no weights, or a pair that cannot be scored).
-pub fn score_sets(
+pub(crate) fn score_sets(
     sets: &[Vec<(&Path, &Path)>],
     how: LpipsUse,
 ) -> std::result::Result<(String, Vec<Vec<f64>>), String> {
@@ -77,7 +77,7 @@ pub fn score_sets(
 }
 
 /// The mean of values that are all present (None when any is missing, or none).
-pub fn mean_all(values: impl Iterator<Item = Option<f64>>) -> Option<f64> {
+pub(crate) fn mean_all(values: impl Iterator<Item = Option<f64>>) -> Option<f64> {
     let v: Option<Vec<f64>> = values.collect();
     v.filter(|v| !v.is_empty())
         .map(|v| v.iter().sum::<f64>() / v.len() as f64)

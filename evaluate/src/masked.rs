@@ -15,7 +15,7 @@ use std::path::Path;
 
 /// Object ids (`k + 1` for `objects[k]`) of the objects that move; None when the scene
 /// does not say (no `synth.json`: a recording).
-pub fn moving_ids(scene_dir: &Path) -> Option<Vec<u16>> {
+pub(crate) fn moving_ids(scene_dir: &Path) -> Option<Vec<u16>> {
     let text = std::fs::read_to_string(scene_dir.join("synth.json")).ok()?;
     let cfg: synth::SynthConfig = serde_json::from_str(&text).ok()?;
     Some(
@@ -96,7 +96,7 @@ impl Pair {
 }
 
 /// Mean relative depth error over `mask` (see [`MaskFigures::moving_depth_error`]).
-pub fn depth_error(render: &Path, gt: &Path, mask: &[bool]) -> Result<Option<f64>> {
+pub(crate) fn depth_error(render: &Path, gt: &Path, mask: &[bool]) -> Result<Option<f64>> {
     let (w, h, d) = scene::image_io::read_exr_depth(render)?;
     let (gw, gh, g) = scene::image_io::read_exr_depth(gt)?;
     if (w, h) != (gw, gh) || g.len() != mask.len() {
@@ -125,7 +125,7 @@ pub fn depth_error(render: &Path, gt: &Path, mask: &[bool]) -> Result<Option<f64
 /// k has `gt/novel/*_kkkk.png`); a mask the scene lacks leaves its figures None.
 /// `depth_dir`: where the render stage wrote the novel views' depth (`NAME.exr` for
 /// render `NAME.png`).
-pub fn novel_masks(
+pub(crate) fn novel_masks(
     scene_dir: &Path,
     pairs: &[(&Path, &Path)],
     depth_dir: Option<&Path>,

@@ -14,7 +14,7 @@ const GAP: u32 = 2;
 
 /// Write the sheet of `pairs` (ground truth, render) to `out`; None when there are no
 /// pairs.
-pub fn write_sheet(pairs: &[(&Path, &Path)], out: &Path) -> Result<Option<PathBuf>> {
+pub(crate) fn write_sheet(pairs: &[(&Path, &Path)], out: &Path) -> Result<Option<PathBuf>> {
     let Some(&(first, _)) = pairs.first() else {
         return Ok(None);
     };

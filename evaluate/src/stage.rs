@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 pub const BINARY: &str = "evaluate";
 
 /// The novel views' contact sheet in the output directory.
-pub const SHEET: &str = "novel_sheet.png";
+pub(crate) const SHEET: &str = "novel_sheet.png";
 
 /// What is evaluated.
 #[derive(Clone, Copy, Debug)]

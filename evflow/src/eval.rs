@@ -21,7 +21,7 @@ use std::path::Path;
 use std::time::Instant;
 
 /// Outlier threshold of [`flow_metrics`], px.
-pub const OUTLIER_PX: f64 = 3.0;
+pub(crate) const OUTLIER_PX: f64 = 3.0;
 
 /// End-point error statistics of a flow against ground truth.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -91,7 +91,7 @@ pub fn scale(values: &[f64], factor: f64) -> Vec<f64> {
 }
 
 /// A dense flow `(u, v)` (row-major `w·h`) sampled at the nearest pixel of each event.
-pub fn sample_at_events(
+pub(crate) fn sample_at_events(
     u: &[f64],
     v: &[f64],
     (w, h): (usize, usize),
@@ -106,7 +106,7 @@ pub fn sample_at_events(
 }
 
 /// Pixels that received at least one event (nearest pixel, inside the sensor).
-pub fn event_mask(ev: &CmEvents, (w, h): (usize, usize)) -> Vec<bool> {
+pub(crate) fn event_mask(ev: &CmEvents, (w, h): (usize, usize)) -> Vec<bool> {
     let mut m = vec![false; w * h];
     for k in 0..ev.len() {
         let (x, y) = (ev.x[k].round(), ev.y[k].round());

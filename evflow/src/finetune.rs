@@ -191,7 +191,7 @@ impl FlowSettings {
         self.mode != Mode::None && self.epochs != Some(0)
     }
 
-    pub fn cm_config(&self) -> crate::cm::CmConfig {
+    pub(crate) fn cm_config(&self) -> crate::cm::CmConfig {
         crate::cm::CmConfig {
             scales: self.cm_scales,
             lambda_tv: self.lambda_tv,
@@ -280,7 +280,7 @@ pub fn first_fine_pass(s: &FlowSettings, plan: &crate::budget::Schedule) -> usiz
 
 /// Finest CM pyramid level used at `epoch` when coarse-to-fine runs over `passes`
 /// epochs (0 unless `cm_coarse_to_fine`; 0 after them).
-pub fn coarse_level(s: &FlowSettings, epoch: usize, passes: usize) -> usize {
+pub(crate) fn coarse_level(s: &FlowSettings, epoch: usize, passes: usize) -> usize {
     if !s.cm_coarse_to_fine || passes < 2 {
         return 0;
     }
@@ -289,7 +289,7 @@ pub fn coarse_level(s: &FlowSettings, epoch: usize, passes: usize) -> usize {
 }
 
 /// Windows with more events than the CM loss takes (`max_cm_events`).
-pub fn subsampled_windows<'a>(
+pub(crate) fn subsampled_windows<'a>(
     src: &'a Source,
     s: &FlowSettings,
 ) -> impl Iterator<Item = &'a crate::source::Window> {
@@ -298,7 +298,7 @@ pub fn subsampled_windows<'a>(
 }
 
 /// Mean CM loss of `net` over the windows with events (no gradient).
-pub fn mean_cm_loss(net: &FlowNet, src: &Source, s: &FlowSettings) -> f64 {
+pub(crate) fn mean_cm_loss(net: &FlowNet, src: &Source, s: &FlowSettings) -> f64 {
     let (wd, ht) = (src.width() as usize, src.height() as usize);
     let n = wd * ht;
     let cfg = s.cm_config();

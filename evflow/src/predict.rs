@@ -89,7 +89,7 @@ pub fn window_file(index: usize, ext: &str) -> String {
 }
 
 /// Write the previews of one window into `dir`.
-pub fn write_previews(dir: &Path, w: &Window, dense: &DenseFlow) -> Result<()> {
+pub(crate) fn write_previews(dir: &Path, w: &Window, dense: &DenseFlow) -> Result<()> {
     let (wd, ht) = (dense.width, dense.height);
     write_flo(
         &dir.join(window_file(w.index, "flo")),
@@ -198,7 +198,7 @@ pub fn scene_gt(scene_dir: &Path) -> Result<Option<synth::gt::EventFlowGt>> {
 
 /// Evaluate one window's per-event flow: flow-warp gain always, errors against `gt`
 /// (noise events, whose ground truth is 0 by convention, are left out).
-pub fn eval_window(
+pub(crate) fn eval_window(
     src: &Source,
     w: &Window,
     dense: &DenseFlow,
@@ -227,7 +227,7 @@ pub fn eval_window(
 
 /// Per-event means of the windows' ground-truth errors (px/s, px, outlier fraction), all
 /// windows pooled: each window's mean weighted by its scored events.
-pub fn pooled_means(eval: &[WindowEval]) -> (Option<f64>, Option<f64>, Option<f64>) {
+pub(crate) fn pooled_means(eval: &[WindowEval]) -> (Option<f64>, Option<f64>, Option<f64>) {
     let n: usize = eval.iter().map(|e| e.gt_events).sum();
     let pooled = |f: &dyn Fn(&WindowEval) -> Option<f64>| {
         (n > 0).then(|| {
@@ -265,7 +265,7 @@ pub struct PredictReport {
 /// Predict every window of `src` into `out_dir/flow/NNNN.evflow` (+ previews in
 /// `out_dir/previews/` when `previews`), evaluating against `gt` where given.
 /// `progress(done, total)` after each window; `warn` for empty windows.
-pub fn predict_all(
+pub(crate) fn predict_all(
     net: &FlowNet,
     src: &Source,
     out_dir: &Path,

@@ -188,7 +188,7 @@ fn undistort_all(ev: &EventStream, k: Option<&Intrinsics>) -> (Vec<f32>, Vec<f32
 /// Windows of `len` seconds centred on each frame time, clamped to `[first, last]` frame
 /// time and to the midpoints between neighbouring frames (no event in two windows); the
 /// last one includes its end time.
-pub fn windows_around(ev: &EventStream, times: &[f64], len: f64) -> Vec<Window> {
+pub(crate) fn windows_around(ev: &EventStream, times: &[f64], len: f64) -> Vec<Window> {
     let n = times.len();
     (0..n)
         .map(|i| {
@@ -221,7 +221,7 @@ fn window(ev: &EventStream, index: usize, t_a: f64, t_b: f64, last: bool) -> Win
 }
 
 /// Windows between consecutive frame times; the last one includes its end time.
-pub fn windows_between(ev: &EventStream, times: &[f64]) -> Vec<Window> {
+pub(crate) fn windows_between(ev: &EventStream, times: &[f64]) -> Vec<Window> {
     let n = times.len().saturating_sub(1);
     (0..n)
         .map(|i| window(ev, i, times[i], times[i + 1], i + 1 == n))

@@ -108,7 +108,7 @@ pub fn hex(h: &[u8; 32]) -> String {
 }
 
 /// BLAKE3 of a file's bytes, hex.
-pub fn file_hash(path: &Path) -> Result<String> {
+pub(crate) fn file_hash(path: &Path) -> Result<String> {
     let bytes = std::fs::read(path).at(path)?;
     Ok(blake3::hash(&bytes).to_hex().to_string())
 }

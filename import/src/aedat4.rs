@@ -20,7 +20,7 @@ use scene::manifest::FrameEncoding;
 use std::path::Path;
 
 /// Read `file` (events and frames); `calib` and `static_camera` as in the module doc.
-pub fn read_aedat4_recording(
+pub(crate) fn read_aedat4_recording(
     file: &Path,
     calib: Option<&Path>,
     static_camera: bool,

@@ -17,7 +17,7 @@ pub struct EventsAlignment {
 }
 
 /// Event file names looked for beside a layout's files, in this order.
-pub const EVENT_NAMES: [&str; 6] = [
+pub(crate) const EVENT_NAMES: [&str; 6] = [
     "events.evs",
     "events.txt",
     "events.npz",
@@ -54,7 +54,7 @@ pub fn event_file(
 }
 
 /// Read the events of a `width × height` sensor.
-pub fn read_for_sensor(path: &Path, width: u32, height: u32) -> Result<EventStream> {
+pub(crate) fn read_for_sensor(path: &Path, width: u32, height: u32) -> Result<EventStream> {
     read_events(
         path,
         &ReadOptions {
@@ -66,7 +66,7 @@ pub fn read_for_sensor(path: &Path, width: u32, height: u32) -> Result<EventStre
 
 /// Maps normalised frame times in [0, 1] to seconds on the events' clock.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct TimeMap {
+pub(crate) struct TimeMap {
     pub offset: f64,
     pub duration: f64,
     /// Whether offset and duration were both given (else taken from the events' span).

@@ -24,7 +24,7 @@ use scene::manifest::{FrameEncoding, Manifest, TEST_FILE, TRAIN_FILE};
 use std::path::Path;
 
 /// Read a D-NeRF / Blender folder plus its events.
-pub fn read_blender(src: &Path, o: &EventsAlignment) -> Result<Recording> {
+pub(crate) fn read_blender(src: &Path, o: &EventsAlignment) -> Result<Recording> {
     let train_path = src.join(TRAIN_FILE);
     let train = Manifest::read(&train_path)?;
     let test_path = src.join(TEST_FILE);

@@ -22,12 +22,12 @@ use scene::Pose;
 const FLIP: DQuat = DQuat::from_xyzw(1.0, 0.0, 0.0, 0.0);
 
 /// A camera-to-world pose in OpenCV camera axes → the manifest's OpenGL axes.
-pub fn opencv_to_opengl(cam_to_world_cv: Pose) -> Pose {
+pub(crate) fn opencv_to_opengl(cam_to_world_cv: Pose) -> Pose {
     Pose::new(cam_to_world_cv.rotation * FLIP, cam_to_world_cv.translation)
 }
 
 /// The inverse of [`opencv_to_opengl`] (the same map: `F` is its own inverse).
-pub fn opengl_to_opencv(cam_to_world_gl: Pose) -> Pose {
+pub(crate) fn opengl_to_opencv(cam_to_world_gl: Pose) -> Pose {
     Pose::new(cam_to_world_gl.rotation * FLIP, cam_to_world_gl.translation)
 }
 

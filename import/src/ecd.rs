@@ -31,10 +31,10 @@ use scene::{Distortion, Intrinsics, Pose, Scene, Trajectory};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-pub const CALIB: &str = "calib.txt";
-pub const IMAGES: &str = "images.txt";
+pub(crate) const CALIB: &str = "calib.txt";
+pub(crate) const IMAGES: &str = "images.txt";
 pub const EVENTS: &str = "events.txt";
-pub const GROUNDTRUTH: &str = "groundtruth.txt";
+pub(crate) const GROUNDTRUTH: &str = "groundtruth.txt";
 
 /// Read an ECD recording (layout in the module doc).
 pub fn read_ecd(src: &Path) -> Result<Recording> {
@@ -152,7 +152,7 @@ fn read_images_txt(src: &Path) -> Result<Vec<(f64, PathBuf)>> {
 
 /// The camera of `calib` (ECD `calib.txt`), or without one a guess (fx = fy = width,
 /// centre at the image centre) with a warning saying so.
-pub fn calib_or_guess(
+pub(crate) fn calib_or_guess(
     calib: Option<&Path>,
     w: u32,
     h: u32,
@@ -215,7 +215,7 @@ pub fn read_calib(path: &Path, width: u32, height: u32) -> Result<Intrinsics> {
 }
 
 /// `groundtruth.txt` as a trajectory in the manifest's axes.
-pub fn read_groundtruth(path: &Path) -> Result<Trajectory> {
+pub(crate) fn read_groundtruth(path: &Path) -> Result<Trajectory> {
     let text = read_text(path)?;
     let rows = rows(path, &text, 8, 8)?;
     if rows.is_empty() {

@@ -26,7 +26,7 @@ use scene::{Pose, Scene};
 use std::path::{Path, PathBuf};
 
 /// HS-ERGB stores event coordinates multiplied by this.
-pub const COORD_SCALE: f64 = 32.0;
+pub(crate) const COORD_SCALE: f64 = 32.0;
 
 /// Events whose coordinates were read raw (as stored, 16 bits), in pixels of the
 /// `(w, h)` frames: divided by [`COORD_SCALE`] as HS-ERGB stores them, unless their
@@ -137,7 +137,7 @@ fn timestamp_unit(times: &[f64], events: &EventStream) -> f64 {
 }
 
 /// Read an HS-ERGB sequence folder.
-pub fn read_hsergb(src: &Path, calib: Option<&Path>) -> Result<Recording> {
+pub(crate) fn read_hsergb(src: &Path, calib: Option<&Path>) -> Result<Recording> {
     let img_dir = find_dir(src, &["images_corrected", "images"])?;
     let ev_dir = find_dir(src, &["events_aligned", "events"])?;
     let images = files(&img_dir, "png")?;

@@ -167,7 +167,11 @@ fn pose(c: &CameraJson, norm: Option<&SceneJson>, path: &Path) -> Result<Pose> {
 }
 
 /// Read a nerfies-style capture plus its events.
-pub fn read_nerfies(src: &Path, o: &EventsAlignment, downscale: Option<u32>) -> Result<Recording> {
+pub(crate) fn read_nerfies(
+    src: &Path,
+    o: &EventsAlignment,
+    downscale: Option<u32>,
+) -> Result<Recording> {
     let dataset_path = src.join("dataset.json");
     let dataset: Dataset = read_json(&dataset_path)?;
     let meta_path = src.join("metadata.json");

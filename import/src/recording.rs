@@ -247,7 +247,7 @@ impl std::fmt::Display for ImportSummary {
 }
 
 /// A scene's train and test frames together, by time (for the exporters).
-pub fn frames_by_time(scene: &scene::Scene) -> Vec<&scene::manifest::Frame> {
+pub(crate) fn frames_by_time(scene: &scene::Scene) -> Vec<&scene::manifest::Frame> {
     let mut frames: Vec<_> = scene
         .train
         .frames
@@ -259,7 +259,7 @@ pub fn frames_by_time(scene: &scene::Scene) -> Vec<&scene::manifest::Frame> {
 }
 
 /// The command whose outputs [`write_scene`] marks.
-pub const IMPORT_COMMAND: &str = "degs import";
+pub(crate) const IMPORT_COMMAND: &str = "degs import";
 
 /// Write `rec` as a scene directory at `out` (atomically; an earlier import there is
 /// replaced only under `opts.force`, anything else there is refused):
@@ -276,7 +276,7 @@ pub fn write_scene(rec: &Recording, opts: &ImportOptions, out: &Path) -> Result<
 }
 
 /// [`write_scene`] under `rule` (which names the source files the output must not hold).
-pub fn write_scene_with(
+pub(crate) fn write_scene_with(
     rec: &Recording,
     opts: &ImportOptions,
     out: &Path,
@@ -501,7 +501,7 @@ fn write_image(root: &Path, stem: &str, image: &FrameImage) -> Result<String> {
 }
 
 /// Min / mean / max events per interval between consecutive frame times.
-pub fn interval_counts(ev: &EventStream, times: &[f64]) -> Option<IntervalCounts> {
+pub(crate) fn interval_counts(ev: &EventStream, times: &[f64]) -> Option<IntervalCounts> {
     let counts: Vec<usize> = times
         .windows(2)
         .map(|w| ev.window_range(w[0], w[1]).len())

@@ -57,7 +57,7 @@ pub fn number(path: &Path, row: &Row, k: usize, name: &str) -> Result<f64> {
 }
 
 /// Check that `times` strictly increase; the error names the row's line.
-pub fn check_increasing(path: &Path, rows: &[Row], times: &[f64]) -> Result<()> {
+pub(crate) fn check_increasing(path: &Path, rows: &[Row], times: &[f64]) -> Result<()> {
     if let Some(i) = times.windows(2).position(|w| w[1] <= w[0]) {
         return Err(Error::invalid(
             path,

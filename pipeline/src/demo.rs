@@ -20,13 +20,13 @@ use synth::SynthConfig;
 
 /// Side of the demo's square scene when the user sets no size (small enough that the
 /// whole demo runs in minutes on two cores).
-pub const DEMO_SIZE: u32 = 96;
+pub(crate) const DEMO_SIZE: u32 = 96;
 /// Warm-up iterations of the demo (the stage default is the paper's 3500).
-pub const DEMO_GAUSSIANS_ITERATIONS: u32 = 1500;
+pub(crate) const DEMO_GAUSSIANS_ITERATIONS: u32 = 1500;
 /// LoCM epochs of the demo (the stage default trains until the CM loss stops improving).
-pub const DEMO_EVFLOW_EPOCHS: usize = 1;
+pub(crate) const DEMO_EVFLOW_EPOCHS: usize = 1;
 /// Joint iterations of the demo (the stage default is 2000).
-pub const DEMO_DEFORM_ITERATIONS: u32 = 600;
+pub(crate) const DEMO_DEFORM_ITERATIONS: u32 = 600;
 
 /// What the demo runs.
 #[derive(Clone, Debug)]
@@ -82,7 +82,7 @@ pub struct DemoStage {
 }
 
 /// The demo's experiment: the scene and the reduced stage settings.
-pub fn demo_experiment(opts: &DemoOptions) -> Experiment {
+pub(crate) fn demo_experiment(opts: &DemoOptions) -> Experiment {
     let mut exp = Experiment::synthetic("demo", opts.scene.clone());
     if let Some(n) = opts.gaussians_iterations {
         let t = exp.stages.entry("gaussians".into()).or_default();
@@ -237,7 +237,7 @@ fn at(v: &Value, path: &str) -> Option<f64> {
 }
 
 /// The key figures of a stage's `report.json` (label, value, unit).
-pub fn report_figures(stage: &str, dir: &Path) -> Vec<(String, f64, String)> {
+pub(crate) fn report_figures(stage: &str, dir: &Path) -> Vec<(String, f64, String)> {
     let Some(v) = std::fs::read(dir.join("report.json"))
         .ok()
         .and_then(|b| serde_json::from_slice::<Value>(&b).ok())
@@ -254,7 +254,7 @@ pub fn report_figures(stage: &str, dir: &Path) -> Vec<(String, f64, String)> {
 
 /// Events of one window around the middle of the recording, coloured by polarity
 /// (red positive, blue negative; the later event wins) on white.
-pub fn event_preview(ev: &EventStream) -> Image {
+pub(crate) fn event_preview(ev: &EventStream) -> Image {
     let (w, h) = (ev.width.max(1), ev.height.max(1));
     let mut img = Image::new(w, h, 3);
     img.data.iter_mut().for_each(|v| *v = 1.0);

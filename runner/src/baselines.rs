@@ -13,7 +13,7 @@ pub type Figures = Option<(f64, f64)>;
 /// The block `degs eval` prints under its table: the model's test-frame figures beside
 /// the baselines', then its novel-view figures (with no baselines). `model` names the
 /// stage whose renders were scored; `baselines` is the figures or why there are none.
-pub fn format_block(
+pub(crate) fn format_block(
     model: &str,
     test: Figures,
     novel: Figures,

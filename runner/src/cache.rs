@@ -202,7 +202,7 @@ pub fn list_files(dir: &Path) -> Result<Vec<PathBuf>> {
 /// A key for a scene directory that is not a cache entry: blake3 over the relative
 /// path, size and mtime of every file (reading gigabytes of events on every run would
 /// defeat the cache; editing or replacing any file changes the key).
-pub fn dir_fingerprint(dir: &Path) -> Result<String> {
+pub(crate) fn dir_fingerprint(dir: &Path) -> Result<String> {
     if !dir.is_dir() {
         anyhow::bail!("{}: scene directory not found", dir.display());
     }
@@ -346,7 +346,7 @@ pub fn verify(dir: &Path, full: bool) -> Verdict {
 
 /// The wall time a stage's `report.json` gives for itself (`wall_s` or
 /// `wall_seconds`), seconds; None when it has none.
-pub fn report_wall_s(dir: &Path) -> Option<f64> {
+pub(crate) fn report_wall_s(dir: &Path) -> Option<f64> {
     let v: serde_json::Value =
         serde_json::from_slice(&fs::read(dir.join("report.json")).ok()?).ok()?;
     ["wall_s", "wall_seconds", "total_s"]
@@ -356,7 +356,7 @@ pub fn report_wall_s(dir: &Path) -> Option<f64> {
 }
 
 /// Total size in bytes of the files under `dir`.
-pub fn dir_size(dir: &Path) -> u64 {
+pub(crate) fn dir_size(dir: &Path) -> u64 {
     list_files(dir)
         .unwrap_or_default()
         .iter()

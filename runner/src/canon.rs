@@ -110,12 +110,12 @@ fn flatten_into(out: &mut BTreeMap<String, String>, prefix: &str, t: &Table) {
 }
 
 /// A TOML table as JSON (for run records).
-pub fn to_json(table: &Table) -> serde_json::Value {
+pub(crate) fn to_json(table: &Table) -> serde_json::Value {
     serde_json::to_value(canonical_table(table)).unwrap_or(serde_json::Value::Null)
 }
 
 /// Back from the JSON stored in a run record.
-pub fn from_json(v: &serde_json::Value) -> Table {
+pub(crate) fn from_json(v: &serde_json::Value) -> Table {
     serde_json::from_value::<Table>(v.clone()).unwrap_or_default()
 }
 

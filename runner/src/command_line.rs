@@ -5,7 +5,7 @@ use crate::graph::{Node, output_dir};
 use std::path::{Path, PathBuf};
 
 /// Path of the settings file a node is run with.
-pub fn settings_path(cache: &Cache, exp: &str, stage: &str) -> PathBuf {
+pub(crate) fn settings_path(cache: &Cache, exp: &str, stage: &str) -> PathBuf {
     cache.run_dir(exp).join(format!("{stage}.settings.toml"))
 }
 
@@ -34,7 +34,7 @@ pub fn command(nodes: &[Node], i: usize, cache: &Cache, out: &Path, config: &Pat
 }
 
 /// Quote a word for a POSIX shell.
-pub fn shell_quote(s: &str) -> String {
+pub(crate) fn shell_quote(s: &str) -> String {
     if !s.is_empty()
         && s.chars()
             .all(|c| c.is_ascii_alphanumeric() || "-_./=:+,@%".contains(c))

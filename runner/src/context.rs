@@ -32,7 +32,11 @@ impl Context {
 
 /// The executable `binary`: in `stage_dir` when given (only there), else next to the
 /// running `degs`, else on `PATH`.
-pub fn find_stage_binary(binary: &str, stage_dir: Option<&Path>, degs: &Path) -> Option<PathBuf> {
+pub(crate) fn find_stage_binary(
+    binary: &str,
+    stage_dir: Option<&Path>,
+    degs: &Path,
+) -> Option<PathBuf> {
     let is_exe = |p: &Path| {
         use std::os::unix::fs::PermissionsExt;
         p.metadata()

@@ -22,11 +22,11 @@ use toml::{Table, Value};
 pub const STAGE: &str = "eval";
 /// Its binary and the cargo package that builds it.
 pub const BINARY: &str = "evaluate";
-pub const PACKAGE: &str = "degs-evaluate";
+pub(crate) const PACKAGE: &str = "degs-evaluate";
 
 /// How the evaluation gets the LPIPS weights, from `DEGS_LPIPS`: `fetch` (unset: download
 /// at first use), `cached` (only weights already in the cache) or `off`.
-pub fn lpips_from_env() -> Result<&'static str> {
+pub(crate) fn lpips_from_env() -> Result<&'static str> {
     match std::env::var("DEGS_LPIPS").as_deref() {
         Err(_) | Ok("") | Ok("fetch") => Ok("fetch"),
         Ok("cached") => Ok("cached"),

@@ -274,7 +274,7 @@ impl Experiment {
 
     /// Check the table of `stage` with its binary: Ok(the files outside the graph the
     /// settings make it read), or an error naming the file, the stage and the key.
-    pub fn check_stage(&self, stage: &str, binary: &Path) -> Result<Vec<InputFile>> {
+    pub(crate) fn check_stage(&self, stage: &str, binary: &Path) -> Result<Vec<InputFile>> {
         match crate::settings::check(binary, &self.settings(stage))? {
             Ok(files) => Ok(files),
             Err(e) => {
@@ -308,7 +308,7 @@ impl Experiment {
     }
 
     /// `name` and the `[scene]` part of [`Experiment::to_toml`].
-    pub fn scene_toml(&self) -> String {
+    pub(crate) fn scene_toml(&self) -> String {
         let mut out = format!("name = {}\n\n[scene]\n", Value::String(self.name.clone()));
         match &self.scene {
             SceneSource::Dir(d) => {

@@ -190,7 +190,7 @@ pub fn ancestors(nodes: &[Node], i: usize) -> Vec<bool> {
 }
 
 /// `i` and every node that (transitively) needs it.
-pub fn descendants(nodes: &[Node], i: usize) -> Vec<bool> {
+pub(crate) fn descendants(nodes: &[Node], i: usize) -> Vec<bool> {
     let mut mark = vec![false; nodes.len()];
     mark[i] = true;
     for n in 0..nodes.len() {
@@ -202,7 +202,7 @@ pub fn descendants(nodes: &[Node], i: usize) -> Vec<bool> {
 }
 
 /// Output directory of a node: the scene dir, or its cache entry.
-pub fn output_dir(nodes: &[Node], i: usize, cache: &Cache) -> Option<PathBuf> {
+pub(crate) fn output_dir(nodes: &[Node], i: usize, cache: &Cache) -> Option<PathBuf> {
     match &nodes[i].kind {
         NodeKind::SceneDir(d) | NodeKind::Given(d) => Some(d.clone()),
         _ => nodes[i]

@@ -148,7 +148,7 @@ impl Plan {
 
     /// A Snakefile: one rule per job to run (inputs named by the stage's flags, the
     /// entry as a `directory()` output), and `all` asking for every entry.
-    pub fn snakefile(&self, all: bool) -> String {
+    pub(crate) fn snakefile(&self, all: bool) -> String {
         let mut s = self.header("Snakemake rules");
         s += "# Run: snakemake -s Snakefile --cores N (or with a cluster profile).\n\n";
         s += "rule all:\n    input:\n";
@@ -222,7 +222,7 @@ impl Plan {
 }
 
 /// `stage_<first 12 of the key>`: unique (keys are) and a Python identifier.
-pub fn rule_name(j: &Job) -> String {
+pub(crate) fn rule_name(j: &Job) -> String {
     format!("{}_{}", j.stage, &j.key[..j.key.len().min(12)])
 }
 

@@ -9,7 +9,7 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 /// Lines of output kept for the log and the error message.
-pub const TAIL_LINES: usize = 200;
+pub(crate) const TAIL_LINES: usize = 200;
 const MAX_LINE: usize = 2000;
 
 /// How a stage process ended.

@@ -18,7 +18,7 @@ use toml::{Table, Value};
 
 /// A file outside the stage graph that a stage's settings make it read (its base
 /// weights), by the name it enters the key under.
-pub type InputFile = (String, PathBuf);
+pub(crate) type InputFile = (String, PathBuf);
 
 type Memo = HashMap<(PathBuf, String), std::result::Result<String, String>>;
 
@@ -126,7 +126,7 @@ pub fn check(binary: &Path, table: &Table) -> Result<std::result::Result<Vec<Inp
 }
 
 /// `[name]` with `table` under it (nested tables as `[name.sub]`).
-pub fn toml_section(name: &str, table: &Table) -> String {
+pub(crate) fn toml_section(name: &str, table: &Table) -> String {
     let scalars: Table = table
         .iter()
         .filter(|(_, v)| !v.is_table())

@@ -15,7 +15,7 @@ pub const SCENE: &str = "scene";
 /// Node name (and `degs` sub-command) of the scene when it is synthesised.
 pub const SYNTH: &str = "synth";
 /// The key figures of the synthesised scene's `report.json`.
-pub const SYNTH_FIGURES: &[Figure] = &[
+pub(crate) const SYNTH_FIGURES: &[Figure] = &[
     Figure::plain("train_frames", "train frames"),
     Figure::plain("test_frames", "test frames"),
     Figure::plain("novel_frames", "novel views"),
@@ -180,7 +180,7 @@ impl Stage {
     }
 
     /// Why it cannot run when its binary is missing, and how to build it.
-    pub fn not_built_message(&self, stage_dir: Option<&Path>) -> String {
+    pub(crate) fn not_built_message(&self, stage_dir: Option<&Path>) -> String {
         not_built(self.binary, self.package, stage_dir)
     }
 }
@@ -219,14 +219,14 @@ pub fn figures(name: &str) -> &'static [Figure] {
 }
 
 /// Every node name, in run order (`synth` for the scene).
-pub fn node_names() -> Vec<&'static str> {
+pub(crate) fn node_names() -> Vec<&'static str> {
     std::iter::once(SYNTH)
         .chain(STAGES.iter().map(|s| s.name))
         .collect()
 }
 
 /// Index of a node by name (`scene` and `synth` are node 0; stage `i` is node `i + 1`).
-pub fn node_index(name: &str) -> Option<usize> {
+pub(crate) fn node_index(name: &str) -> Option<usize> {
     if name == SCENE || name == SYNTH {
         return Some(0);
     }

@@ -147,7 +147,7 @@ impl Drop for AtomicDir {
 pub const OUTPUT_MARKER: &str = ".degs-output";
 
 /// Whether `dir` is an output of `command` (its marker names it).
-pub fn is_output_of(dir: &Path, command: &str) -> bool {
+pub(crate) fn is_output_of(dir: &Path, command: &str) -> bool {
     fs::read_to_string(dir.join(OUTPUT_MARKER)).is_ok_and(|s| s.trim() == command)
 }
 

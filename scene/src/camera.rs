@@ -32,7 +32,7 @@ impl Distortion {
     }
 
     /// Undistorted normalised coordinates → distorted normalised coordinates.
-    pub fn distort(&self, n: DVec2) -> DVec2 {
+    pub(crate) fn distort(&self, n: DVec2) -> DVec2 {
         let (x, y) = (n.x, n.y);
         let r2 = x * x + y * y;
         let radial = 1.0 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3));
@@ -44,7 +44,7 @@ impl Distortion {
 
     /// Inverse of [`Distortion::distort`] by Newton's method (converges to ~1e-12 for
     /// the distortions of real lenses inside the image).
-    pub fn undistort(&self, d: DVec2) -> DVec2 {
+    pub(crate) fn undistort(&self, d: DVec2) -> DVec2 {
         let mut n = d;
         for _ in 0..30 {
             let (x, y) = (n.x, n.y);
@@ -176,7 +176,7 @@ impl Default for Pose {
 }
 
 /// Tolerance on `RᵀR = I` and `det R = 1` when a pose is read from a matrix.
-pub const RIGID_TOLERANCE: f64 = 1e-4;
+pub(crate) const RIGID_TOLERANCE: f64 = 1e-4;
 
 impl Pose {
     pub fn new(rotation: DQuat, translation: DVec3) -> Self {

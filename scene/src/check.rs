@@ -36,9 +36,9 @@ impl fmt::Display for Finding {
 
 /// Two frames are one when their times agree to this (seconds) and their poses'
 /// matrices to [`SAME_POSE`].
-pub const SAME_TIME_S: f64 = 1e-9;
+pub(crate) const SAME_TIME_S: f64 = 1e-9;
 /// See [`SAME_TIME_S`].
-pub const SAME_POSE: f64 = 1e-9;
+pub(crate) const SAME_POSE: f64 = 1e-9;
 
 /// The findings on a scene's splits and on its event times (`events_t`, sorted; None
 /// when the scene has no events).

@@ -7,13 +7,13 @@
 use crate::real::Real;
 use rayon::prelude::*;
 
-pub const SSIM_WINDOW: usize = 11;
-pub const SSIM_SIGMA: f64 = 1.5;
+pub(crate) const SSIM_WINDOW: usize = 11;
+pub(crate) const SSIM_SIGMA: f64 = 1.5;
 const C1: f64 = 0.01 * 0.01;
 const C2: f64 = 0.03 * 0.03;
 
 /// Round to the 8-bit value a PNG would store, back in [0, 1].
-pub fn quantize_u8(v: f32) -> f32 {
+pub(crate) fn quantize_u8(v: f32) -> f32 {
     (v.clamp(0.0, 1.0) * 255.0).round() / 255.0
 }
 

@@ -39,7 +39,7 @@ pub fn toml_error(text: &str, e: &toml::de::Error) -> String {
 
 /// The dotted key (`table.key`) of the `key = value` line holding byte `at` of `text`,
 /// with the `[table]` header above it.
-pub fn key_at(text: &str, at: usize) -> Option<String> {
+pub(crate) fn key_at(text: &str, at: usize) -> Option<String> {
     let at = at.min(text.len());
     let start = text[..at].rfind('\n').map_or(0, |i| i + 1);
     let end = text[at..].find('\n').map_or(text.len(), |i| at + i);
@@ -79,7 +79,7 @@ pub fn from_table<S: Settings>(table: toml::Table, origin: &Path) -> Result<S> {
 
 /// `table` read as `T` through TOML text, so that an error names the key it is about
 /// (`key \`densify.interval\`: invalid type …`).
-pub fn from_table_naming_key<T: DeserializeOwned>(
+pub(crate) fn from_table_naming_key<T: DeserializeOwned>(
     table: toml::Table,
 ) -> std::result::Result<T, String> {
     let text = toml::to_string(&table).map_err(|e| e.to_string())?;
@@ -121,7 +121,7 @@ pub fn write_resolved<S: Serialize>(dir: &Path, s: &S) -> Result<()> {
 /// Replace every float that is exactly an `f32` by the shortest decimal of that `f32`.
 /// A float read from TOML into an `f32` field and back gives the same `f32`; an `f64`
 /// field's value changes only if it was exactly an `f32` with a long expansion.
-pub fn tidy_floats(value: &mut toml::Value) {
+pub(crate) fn tidy_floats(value: &mut toml::Value) {
     match value {
         toml::Value::Float(x) => {
             let f = *x as f32;

@@ -30,7 +30,7 @@ pub struct SettingsArgs {
 }
 
 /// Files outside the stage graph that settings `S` make the stage read, by name.
-pub type InputFiles<S> = fn(&S) -> Vec<(&'static str, PathBuf)>;
+pub(crate) type InputFiles<S> = fn(&S) -> Vec<(&'static str, PathBuf)>;
 
 /// No files outside the graph.
 pub fn no_files<S>(_: &S) -> Vec<(&'static str, PathBuf)> {
@@ -51,7 +51,7 @@ pub fn merge(base: &mut toml::Table, over: &toml::Table) {
 
 /// The check of `table`: merged over the defaults of `S`, read as `S` (an error names
 /// the key), then [`Settings::validate`].
-pub fn check_table<S: Settings>(table: &toml::Table) -> std::result::Result<S, String> {
+pub(crate) fn check_table<S: Settings>(table: &toml::Table) -> std::result::Result<S, String> {
     let mut full: toml::Table = to_toml(&S::default())
         .map_err(|e| e.to_string())?
         .parse()

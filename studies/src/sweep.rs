@@ -54,7 +54,7 @@ const SWEEP_KEYS: [&str; 3] = ["name", "base", "axes"];
 
 /// A sweep-like file's top-level table and its `name` (default: the file's stem), after
 /// checking it has only `keys` (`what` names the file's kind in the error).
-pub fn parse_named_table(
+pub(crate) fn parse_named_table(
     text: &str,
     path: &Path,
     keys: &[&str],
@@ -119,7 +119,7 @@ impl Sweep {
 
     /// A sweep of no axes over `base` (read from `base_file`): the experiments of a
     /// file that expands its own way (`degs stress`) made with [`Sweep::experiment`].
-    pub fn over_base(name: &str, file: &Path, base: Table, base_file: PathBuf) -> Sweep {
+    pub(crate) fn over_base(name: &str, file: &Path, base: Table, base_file: PathBuf) -> Sweep {
         Sweep {
             name: name.into(),
             file: file.to_path_buf(),
@@ -242,7 +242,7 @@ impl Sweep {
 /// Remove `base` from a sweep-like file's top table and read it: an experiment file
 /// relative to `path`, or an inline table. The base's TOML and the file that anchors
 /// its relative scene `dir`.
-pub fn take_base(top: &mut Table, path: &Path) -> Result<(Table, PathBuf)> {
+pub(crate) fn take_base(top: &mut Table, path: &Path) -> Result<(Table, PathBuf)> {
     let at = |e: String| anyhow!("{}: {e}", path.display());
     match top.remove("base") {
         Some(Value::String(file)) => {
@@ -297,7 +297,7 @@ fn set_dotted(t: &mut Table, key: &str, v: Value) -> Result<()> {
 /// For each key the fewest trailing segments that no other key ends with
 /// (`deform.iterations`, `gaussians.field.width`, `scene.settings.width` →
 /// `iterations`, `field.width`, `settings.width`).
-pub fn short_keys(keys: &[String]) -> Vec<String> {
+pub(crate) fn short_keys(keys: &[String]) -> Vec<String> {
     let suffix = |k: &str, n: usize| {
         let parts: Vec<&str> = k.split('.').collect();
         parts[parts.len().saturating_sub(n)..].join(".")
@@ -319,7 +319,7 @@ pub fn short_keys(keys: &[String]) -> Vec<String> {
 }
 
 /// `<sweep>_<key>-<value>_…`; characters a run name cannot hold become `-`.
-pub fn point_name(sweep: &str, values: &[(&str, &Value)]) -> String {
+pub(crate) fn point_name(sweep: &str, values: &[(&str, &Value)]) -> String {
     let clean = |s: &str| -> String {
         s.chars()
             .map(|c| {

@@ -70,7 +70,7 @@ pub fn write_experiments(
 
 /// Write each point's experiment to `runs/<name>/<experiment>.toml`; return them with
 /// their axis values.
-pub fn write_points(
+pub(crate) fn write_points(
     name: &str,
     points: Vec<crate::sweep::Point>,
     ctx: &Context,
@@ -119,7 +119,7 @@ pub fn run(
 /// Run `exps` (written under `runs/<sweep>/`, each with its axis values) one after the
 /// other and keep `runs/<sweep>/sweep.json` current: [`run`]'s loop, also used by
 /// `degs stress` for its variants.
-pub fn run_experiments(
+pub(crate) fn run_experiments(
     sweep: &Sweep,
     axes: Vec<(String, Vec<serde_json::Value>)>,
     exps: &[(Experiment, BTreeMap<String, serde_json::Value>)],

@@ -80,7 +80,7 @@ impl Default for SimConfig {
 impl SimConfig {
     /// The single contrast threshold C of a scene manifest: the mean of the nominal
     /// C⁺ and C⁻ (exactly C when they are equal).
-    pub fn nominal_threshold(&self) -> f64 {
+    pub(crate) fn nominal_threshold(&self) -> f64 {
         0.5 * (self.threshold_pos + self.threshold_neg)
     }
 }

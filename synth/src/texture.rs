@@ -25,7 +25,7 @@ fn hash3(x: i64, y: i64, z: i64, seed: u32) -> f64 {
 }
 
 /// Smooth 3-D value noise in [0, 1] (trilinear with a quintic fade).
-pub fn value_noise(p: DVec3, seed: u32) -> f64 {
+pub(crate) fn value_noise(p: DVec3, seed: u32) -> f64 {
     let f = p.floor();
     let (ix, iy, iz) = (f.x as i64, f.y as i64, f.z as i64);
     let r = p - f;
@@ -41,7 +41,7 @@ pub fn value_noise(p: DVec3, seed: u32) -> f64 {
 }
 
 /// Linear RGB of `tex` at material point `q`.
-pub fn shade(tex: &Texture, q: DVec3) -> [f64; 3] {
+pub(crate) fn shade(tex: &Texture, q: DVec3) -> [f64; 3] {
     let s = q / tex.cell;
     let first = match tex.pattern {
         Pattern::Checker => {

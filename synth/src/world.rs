@@ -305,7 +305,7 @@ impl SynthWorld {
     }
 
     /// The ray through pixel `px` of the novel-view camera at time `t`.
-    pub fn cast_novel(&self, t: f64, px: DVec2) -> Option<Hit> {
+    pub(crate) fn cast_novel(&self, t: f64, px: DVec2) -> Option<Hit> {
         self.frame_from(t, self.novel_camera_state(t)).cast(px)
     }
 

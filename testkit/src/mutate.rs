@@ -107,7 +107,7 @@ impl Mutation {
 }
 
 /// Recomputes a format's checksum in a damaged copy.
-pub type Fixup = dyn Fn(&mut [u8]);
+pub(crate) type Fixup = dyn Fn(&mut [u8]);
 
 /// How to fuzz one file.
 pub struct Plan<'a> {

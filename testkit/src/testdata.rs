@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 
 /// Environment variable that points at another copy of the test recordings.
-pub const SHARED_DATA_ENV: &str = "DEGS_SHARED_DATA";
+pub(crate) const SHARED_DATA_ENV: &str = "DEGS_SHARED_DATA";
 
 /// Path of `rel` inside the test recordings: `$DEGS_SHARED_DATA/rel` when that is set,
 /// else `testdata/rel` in the workspace. Panics with the path it expected when the file

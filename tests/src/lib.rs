@@ -10,7 +10,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 /// The binaries an end-to-end run needs.
-pub const BINARIES: [&str; 6] = ["degs", "evflow", "gaussians", "assoc", "deform", "evaluate"];
+pub(crate) const BINARIES: [&str; 6] =
+    ["degs", "evflow", "gaussians", "assoc", "deform", "evaluate"];
 
 /// The directory holding this build's binaries: `target/<profile>/`.
 pub fn bin_dir() -> PathBuf {

@@ -43,7 +43,7 @@ pub struct FinetuneArgs {
 
 /// The flags of [`FinetuneArgs`] that override a setting, each with its key in
 /// [`FlowSettings`] (their `--help` shows its default: [`stagekit::show_defaults`]).
-pub const FINETUNE_SETTING_FLAGS: &[(&str, &str)] = &[
+pub(crate) const FINETUNE_SETTING_FLAGS: &[(&str, &str)] = &[
     ("mode", "mode"),
     ("min_steps", "stop.min_steps"),
     ("max_steps", "stop.max_steps"),

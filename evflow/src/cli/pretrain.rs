@@ -20,7 +20,7 @@ pub struct PretrainArgs {
 
 /// The flags of [`PretrainArgs`] that override a setting, each with its key in
 /// [`PretrainSettings`] (their `--help` shows its default).
-pub const PRETRAIN_SETTING_FLAGS: &[(&str, &str)] =
+pub(crate) const PRETRAIN_SETTING_FLAGS: &[(&str, &str)] =
     &[("base", "base"), ("iterations", "iterations")];
 
 impl PretrainArgs {

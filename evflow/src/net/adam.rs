@@ -7,7 +7,7 @@ use burn::tensor::{Gradients, Tensor, TensorData};
 use stagekit::optim::Adam;
 
 /// Adam's ε (PyTorch's default).
-pub const ADAM_EPS: f64 = 1e-8;
+pub(crate) const ADAM_EPS: f64 = 1e-8;
 
 /// One Adam step at learning rate `lr` on the trainable tensor `t` from its gradient in
 /// `grads`, with the moments of `adam`'s group `name` (created on first use). A tensor

@@ -87,7 +87,7 @@ pub struct PretrainReport {
 }
 
 /// A copy of `net` on the inference (non-autodiff) device.
-pub fn inference_copy(net: &FlowNet) -> FlowNet {
+pub(crate) fn inference_copy(net: &FlowNet) -> FlowNet {
     let mut n = net.clone();
     for c in &mut n.convs {
         c.weight = c.weight.clone().detach().inner();

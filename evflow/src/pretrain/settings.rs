@@ -182,7 +182,7 @@ impl stagekit::Settings for PretrainSettings {
 }
 
 impl PretrainSettings {
-    pub fn net_config(&self) -> NetConfig {
+    pub(crate) fn net_config(&self) -> NetConfig {
         NetConfig {
             base: self.base,
             bins: self.bins,

@@ -12,7 +12,7 @@ use anyhow::Result;
 
 /// What the run is asked for: `until` runs only that node and what it needs; `force`
 /// re-runs those nodes and what needs them even when cached.
-pub struct Request<'a> {
+pub(crate) struct Request<'a> {
     pub until: Option<usize>,
     pub force: &'a [usize],
     /// Re-hash every cached file instead of trusting unchanged size + mtime.

@@ -39,7 +39,7 @@ pub struct RunOptions {
 }
 
 /// Write the settings file of every runnable node; return the resolved nodes.
-pub fn prepare(exp: &Experiment, ctx: &Context) -> Result<Vec<Node>> {
+pub(crate) fn prepare(exp: &Experiment, ctx: &Context) -> Result<Vec<Node>> {
     ctx.cache.remove_stale_temps()?;
     let mut hashes = BinaryHashes::load(&ctx.cache);
     let nodes = graph::resolve(exp, ctx, &mut hashes)?;
@@ -106,7 +106,7 @@ pub fn run(
 /// Run resolved `nodes` (their settings files written) for the experiment `name`
 /// (read from `file`); the record is saved to `record_path` after every change when
 /// given.
-pub fn run_nodes(
+pub(crate) fn run_nodes(
     nodes: &[Node],
     (name, file): (&str, Option<&std::path::Path>),
     ctx: &Context,

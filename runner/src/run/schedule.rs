@@ -25,7 +25,7 @@ pub struct Schedule<'a> {
 
 /// Run every waiting node (or skip it), calling `save` on the record whenever
 /// something changed; returns when nothing runs any more.
-pub fn run_waiting(
+pub(crate) fn run_waiting(
     s: &Schedule,
     states: &mut [NodeState],
     record: &mut RunRecord,

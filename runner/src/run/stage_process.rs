@@ -114,7 +114,7 @@ fn log_summary(out: &Outcome) -> String {
 }
 
 /// The progress line of a finished stage.
-pub fn finish_message(action: Action, rec: &StageRecord) -> String {
+pub(crate) fn finish_message(action: Action, rec: &StageRecord) -> String {
     match action {
         Action::Failed => format!(
             "FAILED: {} (log: {})",

@@ -13,7 +13,7 @@ pub enum State {
 
 /// A node's state and why it runs.
 #[derive(Clone, Debug)]
-pub struct NodeState {
+pub(crate) struct NodeState {
     pub state: State,
     /// Run even when cached (`--force` names it or a node it needs).
     pub forced: bool,

@@ -37,9 +37,9 @@ pub const MAGIC: &[u8; 8] = b"DEGSEVFL";
 pub const VERSION: u32 = 1;
 pub const HEADER_LEN: usize = 88;
 /// Bytes per event over all columns.
-pub const BYTES_PER_EVENT: usize = 16;
+pub(crate) const BYTES_PER_EVENT: usize = 16;
 /// Magic number of Middlebury `.flo` files.
-pub const FLO_MAGIC: f32 = 202021.25;
+pub(crate) const FLO_MAGIC: f32 = 202021.25;
 
 /// The per-event flow of one window.
 #[derive(Clone, Debug, Default, PartialEq)]

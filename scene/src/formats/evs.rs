@@ -32,7 +32,7 @@ pub const MAGIC: &[u8; 8] = b"DEGSEVS\0";
 pub const VERSION: u32 = 1;
 pub const HEADER_LEN: usize = 64;
 /// Bytes per event over all columns.
-pub const BYTES_PER_EVENT: usize = 13;
+pub(crate) const BYTES_PER_EVENT: usize = 13;
 
 /// Elements serialised per write call.
 const BLOCK: usize = 1 << 16;
@@ -210,7 +210,7 @@ impl EvsMap {
     }
 
     /// Copy into an owned stream and validate it.
-    pub fn to_stream(&self) -> Result<EventStream> {
+    pub(crate) fn to_stream(&self) -> Result<EventStream> {
         let ev = self.copy_columns();
         check(&self.path, &ev)?;
         Ok(ev)

@@ -61,7 +61,7 @@ pub enum Format {
 
 impl Format {
     /// From a path's extension (case-insensitive).
-    pub fn from_path(path: &Path) -> Result<Format> {
+    pub(crate) fn from_path(path: &Path) -> Result<Format> {
         let ext = path
             .extension()
             .map(|e| e.to_string_lossy().to_ascii_lowercase())

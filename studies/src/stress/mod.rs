@@ -32,7 +32,7 @@ pub const STAGE: &str = "stress-scene";
 /// The cache entry of `t` applied to the scene `base` (keyed `base_key`), made when
 /// missing by `synth stress` (its key from the `synth` binary's hash, the transform's
 /// settings and the clean scene's key).
-pub fn transformed_scene(
+pub(crate) fn transformed_scene(
     ctx: &Context,
     base: &Path,
     base_key: &str,

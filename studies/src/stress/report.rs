@@ -110,7 +110,7 @@ fn num(v: Option<f64>, digits: usize) -> String {
 }
 
 /// `report.md`.
-pub fn markdown(r: &StressRecord) -> String {
+pub(crate) fn markdown(r: &StressRecord) -> String {
     let mut s = format!(
         "# Stress run `{}`\n\nBase: {} ({}×{}). Every variant is run with DEGS (the base's \
          settings) and RGB-only (`deform` with `schedule.gamma1 = gamma2_max = 0`). Test \

@@ -75,7 +75,7 @@ impl StressKind {
         }
     }
     /// The x axis of its chart.
-    pub fn axis_label(self) -> &'static str {
+    pub(crate) fn axis_label(self) -> &'static str {
         match self {
             StressKind::Fps => "train frame rate (Hz)",
             StressKind::NoiseHz => "background activity (events / pixel / s)",
@@ -155,7 +155,7 @@ pub struct Variant {
 }
 
 /// The two methods every variant runs with, and the `deform` settings that make them.
-pub const METHODS: [(&str, &[(&str, f64)]); 2] = [
+pub(crate) const METHODS: [(&str, &[(&str, f64)]); 2] = [
     ("degs", &[]),
     (
         "rgb",
@@ -239,7 +239,7 @@ impl StressFile {
     }
 
     /// The level a stress has on the clean scene (its chart's reference point).
-    pub fn neutral_level(&self, kind: StressKind) -> Option<f64> {
+    pub(crate) fn neutral_level(&self, kind: StressKind) -> Option<f64> {
         match kind {
             StressKind::Fps => Some(self.base_fps),
             StressKind::NoiseHz => Some(self.synthetic().map_or(0.0, |c| c.events.shot_noise_hz)),
@@ -364,14 +364,14 @@ impl StressFile {
     }
 
     /// A burst of `n` events on the reference sensor, as many per pixel on ours.
-    pub fn scaled_burst(&self, n: f64) -> u64 {
+    pub(crate) fn scaled_burst(&self, n: f64) -> u64 {
         let [rw, rh] = self.settings.burst_reference_sensor;
         let ours = self.sensor.0 as f64 * self.sensor.1 as f64;
         (n * ours / (rw as f64 * rh as f64).max(1.0)).round() as u64
     }
 
     /// The experiment name of a variant run with a method.
-    pub fn experiment_name(&self, variant: &Variant, method: &str) -> String {
+    pub(crate) fn experiment_name(&self, variant: &Variant, method: &str) -> String {
         format!("{}_{}_{method}", self.name, variant.name)
     }
 

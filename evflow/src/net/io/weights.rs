@@ -108,7 +108,7 @@ impl FlowNet {
 
     /// A network with `config` whose parameters are taken from `tensors` (read from
     /// `path`, named in errors): every tensor of [`layout`] must be there with its shape.
-    pub fn from_tensors(
+    pub(crate) fn from_tensors(
         path: &Path,
         config: NetConfig,
         tensors: &TensorMap,
