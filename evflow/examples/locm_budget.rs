@@ -18,8 +18,9 @@
 //! `stopped` (true on the step where the rule stops) and there `stop_reason`.
 
 use burn::tensor::{DType, Device};
-use evflow::finetune::{FlowSettings, finetune_observed, for_inference};
+use evflow::finetune::{finetune_observed, for_inference};
 use evflow::predict::{dense_flow, event_flow};
+use evflow::settings::FlowSettings;
 use evflow::source::{Source, WindowSpec};
 use evflow::stage::{Input, score_window};
 use std::path::{Path, PathBuf};

@@ -10,6 +10,7 @@ pub mod finetune;
 pub mod net;
 pub mod predict;
 pub mod pretrain;
+pub mod settings;
 pub mod source;
 pub mod stage;
 pub mod voxel;

@@ -54,9 +54,9 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Cmd::Eval(a) => a.run(),
         Cmd::Pretrain(a) => a.run(),
         Cmd::Settings(a) => {
-            return Ok(stagekit::verb::run::<evflow::finetune::FlowSettings>(
+            return Ok(stagekit::verb::run::<evflow::settings::FlowSettings>(
                 &a,
-                evflow::finetune::FlowSettings::input_files,
+                evflow::settings::FlowSettings::input_files,
             )?);
         }
     }?;

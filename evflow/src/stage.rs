@@ -11,8 +11,9 @@
 //!                                  curve, time per epoch, flow figures
 //! ```
 
-use crate::finetune::{FinetuneReport, FlowSettings, Mode, Step, for_inference};
+use crate::finetune::{FinetuneReport, Step, for_inference};
 use crate::predict::PredictReport;
+use crate::settings::{FlowSettings, Mode};
 use crate::source::{Source, WindowSpec};
 use burn::tensor::{DType, Device};
 use scene::error::{Error, IoContext, Result};

@@ -95,7 +95,7 @@ fn millions_of_events_in_one_window_give_finite_flow_for_every_event() {
 
 #[test]
 fn several_subsampled_windows_give_one_warning() {
-    use evflow::finetune::FlowSettings;
+    use evflow::settings::FlowSettings;
     use evflow::source::WindowSpec;
     use evflow::stage::{Event, Input};
     let tmp = tempfile::tempdir().unwrap();

@@ -54,7 +54,7 @@ fn help_shows_the_settings_defaults() {
         assert!(out.status.success());
         String::from_utf8_lossy(&out.stdout).into_owned()
     };
-    let f = evflow::finetune::FlowSettings::default();
+    let f = evflow::settings::FlowSettings::default();
     let finetune = help("finetune");
     for (flag, default) in [
         ("--min-steps", f.stop.min_steps.to_string()),

@@ -4,9 +4,10 @@
 //! train frame and corrupt weights give clear errors.
 
 use burn::tensor::{DType, Device};
-use evflow::finetune::{FlowSettings, Mode, for_inference};
+use evflow::finetune::for_inference;
 use evflow::net::io::sidecar;
 use evflow::net::{FlowNet, NetConfig, tensor4, to_f64};
+use evflow::settings::{FlowSettings, Mode};
 use evflow::source::{Source, WindowSpec};
 use evflow::stage::{Event, Input};
 use std::path::{Path, PathBuf};

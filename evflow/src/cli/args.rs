@@ -1,6 +1,6 @@
 //! Arguments shared by `finetune`, `predict` and `eval`, and what they resolve to.
 
-use crate::finetune::FlowSettings;
+use crate::settings::FlowSettings;
 use crate::source::{WindowSpec, parse_sensor, parse_window};
 use crate::stage::Input;
 use clap::Args;

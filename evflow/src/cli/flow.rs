@@ -2,7 +2,7 @@
 //! ([`crate::stage`]) from the command line, with a progress bar on a terminal.
 
 use super::args::{CommonArgs, InputArgs};
-use crate::finetune::{FlowSettings, Mode};
+use crate::settings::{FlowSettings, Mode};
 use crate::stage::{Event, Input};
 use clap::Args;
 use stagekit::Progress;
@@ -128,10 +128,10 @@ impl EvalArgs {
         let settings = self.flows.join("settings.toml");
         let frame_window = if settings.is_file() {
             let text = std::fs::read_to_string(&settings)?;
-            stagekit::settings::parse::<crate::finetune::FlowSettings>(&text, &settings)?
+            stagekit::settings::parse::<crate::settings::FlowSettings>(&text, &settings)?
                 .frame_window
         } else {
-            crate::finetune::FlowSettings::default().frame_window
+            crate::settings::FlowSettings::default().frame_window
         };
         let e = crate::stage::eval_flows(
             &self.input.input()?,
@@ -198,7 +198,7 @@ fn run_stage(
         b.finish();
     }
     let ft = &report.finetune;
-    let cm = if ft.mode == crate::finetune::Mode::None {
+    let cm = if ft.mode == crate::settings::Mode::None {
         "no fine-tuning".to_string()
     } else {
         format!(

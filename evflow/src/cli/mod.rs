@@ -23,7 +23,7 @@ pub fn show_defaults(cmd: clap::Command) -> clap::Command {
         })
     };
     cmd.mut_subcommand("finetune", |c| {
-        max_flow(show_defaults::<crate::finetune::FlowSettings>(
+        max_flow(show_defaults::<crate::settings::FlowSettings>(
             c,
             flow::FINETUNE_SETTING_FLAGS,
         ))
