@@ -1,5 +1,5 @@
 //! The settings of the `evflow` stage (`evflow settings --defaults`): fine-tuning
-//! ([`crate::finetune`]) and prediction; every key optional in `settings.toml`.
+//! (LoCM) and prediction; every key optional in `settings.toml`.
 
 use crate::budget::{Budget, StopRule};
 use crate::net::io::BareWeights;
