@@ -40,6 +40,12 @@ pub struct RunFlags {
     /// independent)
     #[arg(short = 'j', long, default_value_t = 1)]
     pub jobs: usize,
+    /// Experiments of a sweep or stress run to run at the same time, each with its -j
+    /// stages; a stage they share is built once (the others wait on its cache entry's
+    /// lock, as a second `degs` on the same cache does); stage processes share the cores
+    /// evenly (RAYON_NUM_THREADS, unless set)
+    #[arg(short = 'J', long = "experiments", default_value_t = 1)]
+    pub experiments: usize,
     /// Re-hash every cached file (default: only files whose size or mtime changed)
     #[arg(long)]
     pub verify: bool,
@@ -53,6 +59,7 @@ impl RunFlags {
     pub fn options(&self) -> RunOptions {
         RunOptions {
             jobs: self.jobs,
+            experiments: self.experiments,
             verify_full: self.verify,
             ..RunOptions::default()
         }
@@ -157,8 +164,8 @@ pub enum Command {
         verify: bool,
     },
     /// Run every experiment of a sweep (a base experiment and axes: their cartesian
-    /// product), one after the other through the cache, so every stage they share is
-    /// computed once. Writes each experiment to runs/<sweep>/<experiment>.toml and
+    /// product) through the cache, -J at a time, so every stage they share is computed
+    /// once. Writes each experiment to runs/<sweep>/<experiment>.toml and
     /// runs/<sweep>/sweep.json (the experiments, their run records, which experiment
     /// built each shared entry). Re-running resumes an interrupted sweep.
     Sweep {

@@ -13,6 +13,7 @@ pub mod context;
 pub mod eval;
 pub mod experiment;
 pub mod graph;
+pub mod lock;
 pub mod overrides;
 pub mod plan;
 pub mod process;

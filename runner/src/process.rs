@@ -45,9 +45,19 @@ impl Outcome {
 
 /// Run `args[0]` with `args[1..]`, calling `on_line` for each output line. The child
 /// is killed (SIGKILL) if this thread's process dies, so an interrupted runner leaves
-/// no orphan writing into the cache.
-pub fn run(args: &[String], on_line: &(dyn Fn(&str) + Sync)) -> Result<Outcome> {
+/// no orphan writing into the cache. `threads`: the child's share of the cores
+/// (`RAYON_NUM_THREADS`, unless the user set it), when several stages run at once.
+pub fn run(
+    args: &[String],
+    threads: Option<usize>,
+    on_line: &(dyn Fn(&str) + Sync),
+) -> Result<Outcome> {
     let mut cmd = Command::new(&args[0]);
+    if let Some(n) = threads
+        && std::env::var_os("RAYON_NUM_THREADS").is_none()
+    {
+        cmd.env("RAYON_NUM_THREADS", n.max(1).to_string());
+    }
     cmd.args(&args[1..])
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
@@ -133,12 +143,43 @@ pub fn fmt_kib(kib: Option<u64>) -> String {
     }
 }
 
+/// Each stage's share of the cores when `at_once` stages run at the same time: None
+/// for one (it has them all), else the cores divided evenly, at least one each.
+pub fn thread_share(at_once: usize) -> Option<usize> {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    (at_once > 1).then(|| (cores / at_once).max(1))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     fn sh(script: &str) -> Outcome {
-        run(&["/bin/sh".into(), "-c".into(), script.into()], &|_| {}).unwrap()
+        run(
+            &["/bin/sh".into(), "-c".into(), script.into()],
+            None,
+            &|_| {},
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn a_stage_gets_its_share_of_the_threads() {
+        let args = [
+            "/bin/sh".into(),
+            "-c".into(),
+            "echo t=$RAYON_NUM_THREADS".into(),
+        ];
+        let out = run(&args, Some(3), &|_| {}).unwrap();
+        let expected = match std::env::var("RAYON_NUM_THREADS") {
+            Ok(user) => format!("t={user}"),
+            Err(_) => "t=3".to_string(),
+        };
+        assert_eq!(out.tail, vec![expected]);
+        let cores = std::thread::available_parallelism().unwrap().get();
+        assert_eq!(thread_share(1), None);
+        assert_eq!(thread_share(2), Some((cores / 2).max(1)));
+        assert_eq!(thread_share(10 * cores), Some(1));
     }
 
     #[test]
@@ -167,7 +208,7 @@ mod tests {
 
     #[test]
     fn missing_binary_is_an_error() {
-        let e = run(&["/nonexistent/stage".into()], &|_| {}).unwrap_err();
+        let e = run(&["/nonexistent/stage".into()], None, &|_| {}).unwrap_err();
         assert!(e.to_string().contains("/nonexistent/stage"));
     }
 }

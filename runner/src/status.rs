@@ -153,10 +153,12 @@ pub struct GcReport {
     pub bytes: u64,
 }
 
-/// Remove cache entries that no `runs/*/run.json` refers to (and stale temp dirs).
+/// Remove cache entries that no `runs/*/run.json` refers to (and stale temp dirs, and
+/// the lock files no runner holds).
 pub fn gc(cache: &cache::Cache, dry_run: bool) -> Result<GcReport> {
     if !dry_run {
         cache.remove_stale_temps()?;
+        crate::lock::remove_free_locks(cache)?;
     }
     let mut used = BTreeSet::new();
     let mut used_dirs = BTreeSet::new();

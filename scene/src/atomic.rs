@@ -1,6 +1,6 @@
 //! Atomic outputs (DESIGN §3): a file or directory appears complete or not at all.
 //!
-//! Files are written to `name.degs-tmp-<pid>` next to the target, fsynced, then renamed.
+//! Files are written to `name.degs-tmp-<pid>.<n>` (a count per process) next to the target, fsynced, then renamed.
 //! Output directories are built under `name.degs-tmp-<pid>` and renamed at the end; an
 //! [`OutputRule`] says what an existing one may be (never an input, nor a user's folder).
 //! A writer that fails (or a process that is killed) leaves only the temp name, which
@@ -25,6 +25,17 @@ pub fn temp_path(path: &Path) -> PathBuf {
     path.with_file_name(name)
 }
 
+/// `path` with `.degs-tmp-<pid>.<n>` appended to its file name: `n` counts the temp
+/// files this process made, so that two threads writing the same file (experiments of
+/// a sweep run at once saving one record) never share a temp file.
+fn unique_temp_path(path: &Path) -> PathBuf {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let mut name = path.file_name().unwrap_or_default().to_os_string();
+    name.push(format!("{TEMP_SUFFIX}{}.{n}", std::process::id()));
+    path.with_file_name(name)
+}
+
 /// Write `path` atomically with the bytes `write` produces. On error the temp file is
 /// removed and `path` is left as it was.
 pub fn write_atomic<F>(path: &Path, write: F) -> Result<()>
@@ -34,7 +45,7 @@ where
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         fs::create_dir_all(dir).at(dir)?;
     }
-    let tmp = temp_path(path);
+    let tmp = unique_temp_path(path);
     let result = (|| -> std::io::Result<()> {
         let file = File::create(&tmp)?;
         let mut w = BufWriter::with_capacity(1 << 20, file);
@@ -267,8 +278,8 @@ fn resolved(path: &Path) -> PathBuf {
     }
 }
 
-/// Remove `*.degs-tmp-<pid>` entries in `dir` whose process no longer runs (nothing
-/// else: a user's `notes.tmp-12` is not ours).
+/// Remove `*.degs-tmp-<pid>` and `*.degs-tmp-<pid>.<n>` entries in `dir` whose process
+/// no longer runs (nothing else: a user's `notes.tmp-12` is not ours).
 pub fn remove_stale_temps(dir: &Path) -> Result<()> {
     let Ok(entries) = fs::read_dir(dir) else {
         return Ok(());
@@ -279,7 +290,13 @@ pub fn remove_stale_temps(dir: &Path) -> Result<()> {
         let Some(pos) = name.rfind(TEMP_SUFFIX) else {
             continue;
         };
-        let Ok(pid) = name[pos + TEMP_SUFFIX.len()..].parse::<u32>() else {
+        let tail = &name[pos + TEMP_SUFFIX.len()..];
+        let pid = match tail.split_once('.') {
+            Some((pid, n)) if n.bytes().all(|b| b.is_ascii_digit()) && !n.is_empty() => pid,
+            Some(_) => continue,
+            None => tail,
+        };
+        let Ok(pid) = pid.parse::<u32>() else {
             continue;
         };
         if pid != std::process::id() && !process_alive(pid) {

@@ -41,3 +41,34 @@ fn temps_of_zombies_and_dead_processes_are_removed_and_live_ones_kept() {
     assert!(live_temp.exists());
     zombie.wait().unwrap();
 }
+
+#[test]
+fn threads_writing_one_file_at_once_never_share_a_temp_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let target = dir.path().join("record.json");
+    std::thread::scope(|s| {
+        for t in 0..4u8 {
+            let target = &target;
+            s.spawn(move || {
+                for _ in 0..200 {
+                    scene::atomic::write_bytes_atomic(target, &[t; 64]).unwrap();
+                }
+            });
+        }
+    });
+    // One writer's whole content, and no temp file left.
+    let bytes = fs::read(&target).unwrap();
+    assert!(bytes.len() == 64 && bytes.iter().all(|&b| b == bytes[0]));
+    assert_eq!(fs::read_dir(dir.path()).unwrap().count(), 1);
+    // A temp file of a dead process with a count is stale too; a live one's is kept.
+    let dead = dir.path().join("x.degs-tmp-4194304.7");
+    let live = dir
+        .path()
+        .join(format!("x.degs-tmp-{}.7", std::process::id()));
+    let odd = dir.path().join("x.degs-tmp-4194304.notes");
+    for p in [&dead, &live, &odd] {
+        fs::write(p, "t").unwrap();
+    }
+    remove_stale_temps(dir.path()).unwrap();
+    assert!(!dead.exists() && live.exists() && odd.exists());
+}

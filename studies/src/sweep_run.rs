@@ -116,8 +116,9 @@ pub fn run(
     run_experiments(sweep, axes, &exps, ctx, opts, progress)
 }
 
-/// Run `exps` (written under `runs/<sweep>/`, each with its axis values) one after the
-/// other and keep `runs/<sweep>/sweep.json` current: [`run`]'s loop, also used by
+/// Run `exps` (written under `runs/<sweep>/`, each with its axis values), `-J` of them
+/// at a time (`opts.experiments`; a stage two experiments share is built once: the
+/// second waits on its cache entry's lock), and keep `runs/<sweep>/sweep.json` current: [`run`]'s loop, also used by
 /// `degs stress` for its variants.
 pub(crate) fn run_experiments(
     sweep: &Sweep,
@@ -149,17 +150,45 @@ pub(crate) fn run_experiments(
     };
     let path = dir.join("sweep.json");
     scene::atomic::write_json_atomic(&path, &record)?;
-    for (i, (exp, _)) in exps.iter().enumerate() {
-        progress.note(&format!(
-            "sweep {}: experiment {}/{}: {}",
-            sweep.name,
-            i + 1,
-            exps.len(),
-            exp.name
-        ));
-        let run = run::run(exp, ctx, opts, progress)?;
-        note_run(&mut record, i, &run);
-        scene::atomic::write_json_atomic(&path, &record)?;
+    let at_once = opts.experiments.clamp(1, exps.len().max(1));
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let mut first_error = None;
+    std::thread::scope(|scope| -> Result<()> {
+        let (tx, rx) = std::sync::mpsc::channel();
+        for _ in 0..at_once {
+            let (tx, next) = (tx.clone(), &next);
+            scope.spawn(move || {
+                loop {
+                    let i = next.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+                    let Some((exp, _)) = exps.get(i) else { break };
+                    progress.note(&format!(
+                        "sweep {}: experiment {}/{}: {}",
+                        sweep.name,
+                        i + 1,
+                        exps.len(),
+                        exp.name
+                    ));
+                    if tx.send((i, run::run(exp, ctx, opts, progress))).is_err() {
+                        break;
+                    }
+                }
+            });
+        }
+        drop(tx);
+        for (i, run) in rx {
+            match run {
+                Ok(run) => note_run(&mut record, i, &run),
+                Err(e) => {
+                    let e = e.context(format!("experiment {}", exps[i].0.name));
+                    first_error.get_or_insert(e);
+                }
+            }
+            scene::atomic::write_json_atomic(&path, &record)?;
+        }
+        Ok(())
+    })?;
+    if let Some(e) = first_error {
+        return Err(e);
     }
     let failed = record
         .experiments

@@ -25,7 +25,7 @@ pub fn check(
     nodes: &[Node],
     request: &Request,
     records: &mut [StageRecord],
-    progress: &Progress,
+    (progress, label): (&Progress, &dyn Fn(usize) -> String),
 ) -> Result<Vec<NodeState>> {
     let n = nodes.len();
     let included = match request.until {
@@ -46,7 +46,13 @@ pub fn check(
             rebuild_reason: None,
         };
         if included[i] {
-            check_node(nd, &mut st, request.verify_full, &mut records[i], progress)?;
+            check_node(
+                nd,
+                &mut st,
+                request.verify_full,
+                &mut records[i],
+                (progress, &label(i)),
+            )?;
         } else {
             st.state = State::Done(Action::NotRequested);
         }
@@ -60,7 +66,7 @@ fn check_node(
     st: &mut NodeState,
     verify_full: bool,
     rec: &mut StageRecord,
-    progress: &Progress,
+    (progress, label): (&Progress, &str),
 ) -> Result<()> {
     if let Some(why) = &nd.unavailable {
         let action = if nd.binary.is_none() {
@@ -70,7 +76,7 @@ fn check_node(
         };
         rec.error = Some(why.clone());
         st.state = State::Done(action);
-        progress.finish(&nd.stage, why);
+        progress.finish(label, why);
         return Ok(());
     }
     if let NodeKind::Given(_) = &nd.kind {
@@ -79,7 +85,7 @@ fn check_node(
     }
     if let NodeKind::SceneDir(d) = &nd.kind {
         st.state = State::Done(Action::Cached);
-        progress.finish(&nd.stage, &format!("scene directory {}", d.display()));
+        progress.finish(label, &format!("scene directory {}", d.display()));
         return Ok(());
     }
     let entry = rec.entry.clone().unwrap_or_default();
@@ -107,7 +113,7 @@ fn check_node(
         let m = cache::read_manifest(&entry);
         rec.built_wall_s = m.as_ref().map(|m| m.wall_s);
         rec.peak_rss_kib = m.and_then(|m| m.peak_rss_kib);
-        progress.finish(&nd.stage, &format!("cached  {}", entry.display()));
+        progress.finish(label, &format!("cached  {}", entry.display()));
     }
     Ok(())
 }

@@ -36,6 +36,8 @@ pub struct RunOptions {
     pub jobs: usize,
     /// Re-hash every cached file instead of trusting unchanged size + mtime.
     pub verify_full: bool,
+    /// Experiments run at the same time by sweeps and stress runs (`-J`; at least 1).
+    pub experiments: usize,
 }
 
 /// Write the settings file of every runnable node; return the resolved nodes.
@@ -142,14 +144,16 @@ pub(crate) fn run_nodes(
         force: &opts.force,
         verify_full: opts.verify_full,
     };
-    let mut states = cache_check::check(nodes, &request, &mut record.stages, progress)?;
     let schedule = Schedule {
         nodes,
         ctx,
         experiment: name,
         jobs: opts.jobs,
         progress,
+        experiments_at_once: opts.experiments.max(1),
     };
+    let label = |i: usize| schedule.label(i);
+    let mut states = cache_check::check(nodes, &request, &mut record.stages, (progress, &label))?;
     schedule::run_waiting(&schedule, &mut states, &mut record, &mut save)?;
 
     for (rec, st) in record.stages.iter_mut().zip(&states) {

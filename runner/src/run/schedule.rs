@@ -2,11 +2,11 @@
 //! input has its output, at most `jobs` at a time; one whose input ended without
 //! output is skipped. The run record is saved after every change.
 
-use super::stage_process;
+use super::stage_process::{self, Started};
 use super::state::{NodeState, State};
 use crate::context::Context;
 use crate::graph::Node;
-use crate::process::{self, Outcome};
+use crate::lock::EntryLock;
 use crate::progress::Progress;
 use crate::record::{Action, RunRecord, StageRecord};
 use anyhow::Result;
@@ -21,6 +21,20 @@ pub struct Schedule<'a> {
     /// Stages run at the same time (at least 1).
     pub jobs: usize,
     pub progress: &'a Progress,
+    /// Experiments of a sweep running at the same time as this one (`-J`; at least 1):
+    /// progress lines name the experiment when several run, and the cores are shared.
+    pub experiments_at_once: usize,
+}
+
+impl Schedule<'_> {
+    /// How progress lines name node `i`: its stage, after the experiment when several
+    /// experiments run at once.
+    pub(crate) fn label(&self, i: usize) -> String {
+        match self.experiments_at_once > 1 {
+            true => format!("{}: {}", self.experiment, self.nodes[i].stage),
+            false => self.nodes[i].stage.clone(),
+        }
+    }
 }
 
 /// Run every waiting node (or skip it), calling `save` on the record whenever
@@ -33,18 +47,26 @@ pub(crate) fn run_waiting(
 ) -> Result<()> {
     let jobs = s.jobs.max(1);
     std::thread::scope(|scope| -> Result<()> {
-        let (tx, rx) = mpsc::channel::<(usize, Result<Outcome>)>();
+        let (tx, rx) = mpsc::channel::<(usize, Result<(Started, EntryLock)>)>();
         let mut running = 0usize;
         loop {
             skip_blocked(s, states, &mut record.stages);
             for i in ready(s.nodes, states).into_iter().take(jobs - running) {
                 let args = stage_process::start(s.nodes, i, s.ctx, s.experiment)?;
-                s.progress
-                    .start(&s.nodes[i].stage, &start_message(&states[i]));
-                let (tx, progress) = (tx.clone(), s.progress);
-                let stage = s.nodes[i].stage.clone();
+                let label = s.label(i);
+                s.progress.start(&label, &start_message(&states[i]));
+                let reuse = !states[i].forced && states[i].rebuild_reason.is_none();
+                let threads = crate::process::thread_share(jobs * s.experiments_at_once);
+                let (tx, progress, nodes, ctx) = (tx.clone(), s.progress, s.nodes, s.ctx);
                 scope.spawn(move || {
-                    let out = process::run(&args, &|line| progress.output(&stage, line));
+                    let on_line = |line: &str| progress.output(&label, line);
+                    let out = stage_process::lock_and_run(
+                        nodes,
+                        i,
+                        ctx,
+                        (&args, reuse, threads),
+                        &on_line,
+                    );
                     let _ = tx.send((i, out));
                 });
                 states[i].state = State::Running;
@@ -54,16 +76,42 @@ pub(crate) fn run_waiting(
             if running == 0 {
                 break;
             }
-            let Ok((i, outcome)) = rx.recv() else { break };
+            let Ok((i, started)) = rx.recv() else { break };
             running -= 1;
+            let (started, lock) = started?;
             let rec = &mut record.stages[i];
-            let rebuilding = states[i].rebuild_reason.is_some();
-            let action =
-                stage_process::finish(s.nodes, i, s.ctx, s.experiment, outcome, rec, rebuilding)?;
-            s.progress.finish(
-                &s.nodes[i].stage,
-                &stage_process::finish_message(action, rec),
-            );
+            let action = match started {
+                Started::BuiltElsewhere => {
+                    let entry = rec.entry.clone().unwrap_or_default();
+                    let m = crate::cache::read_manifest(&entry);
+                    rec.built_wall_s = m.as_ref().map(|m| m.wall_s);
+                    rec.peak_rss_kib = m.and_then(|m| m.peak_rss_kib);
+                    s.progress.finish(
+                        &s.label(i),
+                        &format!(
+                            "cached (built meanwhile by another runner)  {}",
+                            entry.display()
+                        ),
+                    );
+                    Action::Cached
+                }
+                Started::Ran(outcome) => {
+                    let rebuilding = states[i].rebuild_reason.is_some();
+                    let action = stage_process::finish(
+                        s.nodes,
+                        i,
+                        s.ctx,
+                        s.experiment,
+                        outcome,
+                        rec,
+                        rebuilding,
+                    )?;
+                    s.progress
+                        .finish(&s.label(i), &stage_process::finish_message(action, rec));
+                    action
+                }
+            };
+            drop(lock);
             states[i].state = State::Done(action);
         }
         Ok(())
@@ -86,7 +134,7 @@ fn skip_blocked(s: &Schedule, states: &mut [NodeState], records: &mut [StageReco
                 .find(|x| matches!(states[x.node].state, State::Done(a) if !a.has_output()));
             if let Some(bad) = blocked {
                 let why = format!("input {} did not finish", s.nodes[bad.node].stage);
-                s.progress.finish(&node.stage, &format!("skipped: {why}"));
+                s.progress.finish(&s.label(i), &format!("skipped: {why}"));
                 records[i].error = Some(why);
                 states[i].state = State::Done(Action::Skipped);
                 changed = true;

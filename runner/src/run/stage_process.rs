@@ -6,23 +6,64 @@ use crate::cache;
 use crate::command_line::{command, settings_path, shell_quote};
 use crate::context::Context;
 use crate::graph::Node;
+use crate::lock::EntryLock;
 use crate::process::{Outcome, fmt_kib};
 use crate::record::{Action, StageRecord};
 use anyhow::{Result, bail};
 use std::fs;
 use std::path::{Path, PathBuf};
 
-/// Clear the temp dir of node `i` and return its command line.
+/// The command line of node `i` (its output goes to its temp dir).
 pub fn start(nodes: &[Node], i: usize, ctx: &Context, exp: &str) -> Result<Vec<String>> {
     let nd = &nodes[i];
     let key = nd.key.as_deref().unwrap_or_default();
     let tmp = ctx.cache.temp_entry(&nd.stage, key);
-    if tmp.exists() {
-        fs::remove_dir_all(&tmp)?;
-    }
     fs::create_dir_all(ctx.cache.stage_dir(&nd.stage))?;
     let config = settings_path(&ctx.cache, exp, &nd.stage);
     Ok(command(nodes, i, &ctx.cache, &tmp, &config))
+}
+
+/// What a node's thread found once it held the entry's lock.
+pub enum Started {
+    /// Another runner built the entry while this one waited: use it.
+    BuiltElsewhere,
+    /// The stage ran (or could not start).
+    Ran(Result<Outcome>),
+}
+
+/// On node `i`'s own thread: take the entry's lock (waiting for a runner that builds
+/// it), use the entry if that runner sealed it meanwhile, else clear the temp dir and
+/// run `args`. `reuse`: an entry found then may be used (not when the node is forced or
+/// rebuilds a tampered entry). The lock is returned, to be held until the output is in
+/// place.
+pub fn lock_and_run(
+    nodes: &[Node],
+    i: usize,
+    ctx: &Context,
+    (args, reuse, threads): (&[String], bool, Option<usize>),
+    on_line: &(dyn Fn(&str) + Sync),
+) -> Result<(Started, EntryLock)> {
+    let nd = &nodes[i];
+    let key = nd.key.as_deref().unwrap_or_default();
+    let lock = match EntryLock::try_take(&ctx.cache, &nd.stage, key)? {
+        Some(l) => l,
+        None => {
+            on_line("waiting: another runner is building this cache entry");
+            EntryLock::take(&ctx.cache, &nd.stage, key)?
+        }
+    };
+    let entry = ctx.cache.entry(&nd.stage, key);
+    if reuse && cache::read_manifest(&entry).is_some() {
+        return Ok((Started::BuiltElsewhere, lock));
+    }
+    let tmp = ctx.cache.temp_entry(&nd.stage, key);
+    if tmp.exists() {
+        fs::remove_dir_all(&tmp)?;
+    }
+    Ok((
+        Started::Ran(crate::process::run(args, threads, on_line)),
+        lock,
+    ))
 }
 
 /// Seal and move a finished stage into place (or record its failure); write its log.

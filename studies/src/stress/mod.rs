@@ -63,6 +63,8 @@ pub(crate) fn transformed_scene(
         serde_json::from_slice(&bytes)
             .with_context(|| format!("{}: not a transform summary", p.display()))
     };
+    // Held until the entry is in place: another runner making the same variant waits.
+    let _lock = runner::lock::EntryLock::take(&ctx.cache, STAGE, &key)?;
     if runner::cache::read_manifest(&entry).is_some() {
         return Ok((entry.clone(), summary_of(&entry)?));
     }
@@ -90,7 +92,7 @@ pub(crate) fn transformed_scene(
     .iter()
     .map(|a| a.to_string_lossy().to_string())
     .collect();
-    let outcome = runner::process::run(&args, &|_| {});
+    let outcome = runner::process::run(&args, None, &|_| {});
     let _ = std::fs::remove_file(&config);
     let out = outcome?;
     if !out.success() {
