@@ -459,7 +459,7 @@ pub fn train(
     let summary = trainer.run(&TileRasterizer, &views, stop, on_step);
 
     phases.start("save");
-    let model = Model::from_trainer(&trainer);
+    let model = Model::from(&trainer);
     // The settings as trained (the automatic Gaussian cap resolved).
     let settings = trainer.settings.clone();
     let split = trainer.split;

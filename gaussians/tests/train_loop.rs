@@ -399,7 +399,7 @@ fn static_split_flags_and_freezes_the_gaussians_the_field_barely_moves() {
     let sp = t.split.unwrap();
     assert_eq!((sp.dynamic, sp.static_), (0, 10));
     assert!(!t.field_on() && !t.settings.dynamic_only && t.splats.dynamic.is_empty());
-    assert!(gaussians::model::Model::from_trainer(&t).field.is_none());
+    assert!(gaussians::model::Model::from(&t).field.is_none());
     let (d, _) = t.deformed(0.7);
     assert_eq!(d.means, t.splats.means);
     assert_eq!(d.rotations, t.splats.rotations);

@@ -15,6 +15,7 @@ pub mod sh_refit;
 pub mod sizing;
 pub mod static_split;
 pub mod stereo;
+mod to_model;
 
 use crate::densify::{self, Geometry, GradStats};
 use crate::field::{self, Mlp};

@@ -30,10 +30,11 @@
 //! field); `field_probe.rs` can choose it at the field's switch from views held out of
 //! training (opt-in, `field_probe`).
 
-use super::judge::{Candidate, Judge, at_time, gather_deltas, middle_time, posed_deltas};
+use super::judge::{Candidate, Judge, gather_deltas, middle_time, posed_deltas};
 use super::sh_refit::refit_sh;
 use super::{Trainer, View, static_split};
 use crate::Rasterizer;
+use crate::motion::at_time;
 use crate::raster::sh::num_coeffs;
 use crate::splats::Splats;
 use serde::{Deserialize, Serialize};
