@@ -205,6 +205,6 @@ impl Trainer {
         self.stats = p.stats;
         self.iteration = p.iteration;
         // Buffers sized for the old field.
-        self.clear_spare();
+        self.spare.clear();
     }
 }

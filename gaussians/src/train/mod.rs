@@ -13,9 +13,11 @@ mod run;
 pub mod settings;
 pub mod sh_refit;
 pub mod sizing;
+mod spare;
 pub mod static_split;
 pub mod stereo;
 mod to_model;
+mod view;
 
 use crate::densify::{self, Geometry, GradStats};
 use crate::field::{self, Mlp};
@@ -26,48 +28,8 @@ pub use run::RunSummary;
 use scene::Camera;
 use scene::metrics;
 pub use settings::TrainSettings;
-use std::any::Any;
-use std::sync::{Mutex, MutexGuard};
-
-/// A training view: camera, normalised time, planar RGB target.
-#[derive(Clone, Debug)]
-pub struct View {
-    pub camera: Camera,
-    pub time: f32,
-    pub rgb: Vec<f32>,
-}
-
-/// A view rendered by the current model, with what its backward needs.
-pub struct ViewRender<S> {
-    pub image: RenderedImage,
-    pub camera: Camera,
-    /// Normalised time of the view.
-    pub time: f32,
-    /// The Gaussians as rendered (deformed to the view's time).
-    pub deformed: Splats,
-    deltas: Option<(field::Deltas, field::MlpCache<f32>)>,
-    state: S,
-}
-
-/// Gradients of a loss on the model: canonical Gaussians (with the densification
-/// statistics of the render they came from), the field's parameters (empty when the
-/// field is off) and the camera (camera-frame right twist, `raster::apply_twist`).
-#[derive(Clone, Debug, Default)]
-pub struct ModelGrads {
-    pub splats: SplatGrads,
-    pub field: Vec<f32>,
-    pub camera: [f64; 6],
-}
-
-/// Per-step figures.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct StepInfo {
-    pub iteration: u32,
-    pub loss: f64,
-    pub psnr: f64,
-    pub gaussians: usize,
-    pub field_on: bool,
-}
+use spare::Spare;
+pub use view::{ModelGrads, StepInfo, View, ViewRender};
 
 /// The training state.
 pub struct Trainer {
@@ -90,26 +52,8 @@ pub struct Trainer {
     order: Vec<usize>,
     rng: rand_chacha::ChaCha8Rng,
     /// Buffers given back by [`Self::recycle_view`] / [`Self::recycle_grads`].
-    spare: Mutex<Spare>,
+    spare: spare::Pool,
 }
-
-/// What a training loop reuses from one iteration to the next: the last rendered view
-/// (deformed Gaussians, image, rasterizer state, field activations), the last gradients
-/// and the field's scratch. Once warm, an iteration allocates no per-Gaussian or
-/// per-pixel buffer of these (the figures: BENCHMARKS.md, "A cheaper iteration").
-#[derive(Default)]
-struct Spare {
-    /// `ViewRender<R::State>`s of the rasterizer in use (at most [`SPARE_MAX`]).
-    views: Vec<Box<dyn Any + Send>>,
-    grads: Vec<ModelGrads>,
-    field: field::FieldWork,
-    delta_grads: field::Deltas,
-    /// The isometry term of the last [`Trainer::view_backward`].
-    rigidity_loss: f64,
-}
-
-/// Views and gradients kept for reuse (the joint training renders two views a step).
-const SPARE_MAX: usize = 2;
 
 const GROUPS: [&str; 7] = [
     "means",
@@ -161,36 +105,21 @@ impl Trainer {
             field_probe: None,
             neighbours: None,
             order: Vec::new(),
-            spare: Mutex::default(),
+            spare: spare::Pool::default(),
         }
-    }
-
-    fn spare(&self) -> MutexGuard<'_, Spare> {
-        self.spare.lock().unwrap_or_else(|e| e.into_inner())
-    }
-
-    /// Drop the reused buffers (after the model's shape changed).
-    fn clear_spare(&mut self) {
-        *self.spare.get_mut().unwrap_or_else(|e| e.into_inner()) = Spare::default();
     }
 
     /// Give back a view when done with it (after [`Self::view_backward`]): a later
     /// [`Self::render_view`] with the same rasterizer reuses its buffers. Optional; a
     /// view not given back is simply dropped.
     pub fn recycle_view<S: Send + 'static>(&self, v: ViewRender<S>) {
-        let mut spare = self.spare();
-        if spare.views.len() < SPARE_MAX {
-            spare.views.push(Box::new(v));
-        }
+        self.spare.lock().put_view(v);
     }
 
     /// Give back gradients when done with them (after [`Self::apply_gradients`]): a
     /// later [`Self::view_backward`] reuses their buffers. Optional.
     pub fn recycle_grads(&self, g: ModelGrads) {
-        let mut spare = self.spare();
-        if spare.grads.len() < SPARE_MAX {
-            spare.grads.push(g);
-        }
+        self.spare.lock().put_grads(g);
     }
 
     /// SH degree in use at the current iteration.
@@ -233,8 +162,7 @@ impl Trainer {
     where
         R::State: Send + 'static,
     {
-        let old = self.spare().views.pop();
-        let old = old.and_then(|v| v.downcast::<ViewRender<R::State>>().ok());
+        let old = self.spare.lock().take_view::<R::State>();
         let (mut deformed, old_deltas, reuse) = match old {
             Some(v) => (v.deformed, v.deltas, Some((v.image, v.state))),
             None => (Splats::default(), None, None),
@@ -246,7 +174,7 @@ impl Trainer {
                 &self.splats,
                 t,
                 self.settings.dynamic_only,
-                &mut self.spare().field,
+                &mut self.spare.lock().field,
                 &mut d,
                 &mut cache,
             );
@@ -287,7 +215,7 @@ impl Trainer {
         d_depth: Option<&[f32]>,
         d_means: Option<&[[f32; 3]]>,
     ) -> ModelGrads {
-        let mut out = self.spare().grads.pop().unwrap_or_default();
+        let mut out = self.spare.lock().take_grads();
         let g = &mut out.splats;
         out.camera = r.backward_view_into(&v.deformed, &v.camera, &v.state, d_rgb, d_depth, g);
         if let Some(dm) = d_means {
@@ -299,7 +227,7 @@ impl Trainer {
         crate::motion::backward(&self.splats, v.time, &g.means, &mut g.motion);
         out.field.clear();
         if let Some((d, cache)) = &v.deltas {
-            let mut spare = self.spare();
+            let mut spare = self.spare.lock();
             let Spare {
                 field: work,
                 delta_grads,
@@ -361,7 +289,7 @@ impl Trainer {
 
     /// The isometry term of the last [`Self::view_backward`] (0 when it is off).
     pub fn rigidity_loss(&self) -> f64 {
-        self.spare().rigidity_loss
+        self.spare.lock().rigidity_loss
     }
 
     /// The RGB loss of the warm-up (`(1−λ)·L1 + λ·D-SSIM`) of a render against a planar
