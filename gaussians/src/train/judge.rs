@@ -56,6 +56,18 @@ pub struct Judge<'a, R> {
     pub evaluations: usize,
 }
 
+impl<'a, R> Judge<'a, R> {
+    /// A judge of renders by `r` on `background` at `views`, no pass made yet.
+    pub fn new(r: &'a R, views: &'a [View], background: [f32; 3]) -> Self {
+        Judge {
+            r,
+            views,
+            background,
+            evaluations: 0,
+        }
+    }
+}
+
 /// The middle of the views' time span (0 without views).
 pub fn middle_time(views: &[View]) -> f32 {
     let lo = views.iter().map(|v| v.time).fold(f32::INFINITY, f32::min);

@@ -3,7 +3,8 @@
 //! after a static phase a deformation field `F(γ(x), γ(t))` (Deform-GS).
 //!
 //! The rasterizer is reached through the [`Rasterizer`] trait so the loop can be tested
-//! on its own; [`Splats`] holds the trainable parameters.
+//! on its own; [`Splats`] holds the trainable parameters. The loop calls [`static_split`],
+//! [`sizing`] and [`field_probe`] when due and takes on what they decide.
 
 pub mod field_probe;
 pub mod init;
@@ -24,11 +25,15 @@ use crate::field::{self, Mlp};
 use crate::optim::{Adam, ExpSchedule};
 use crate::raster::{Rasterizer, RenderedImage};
 use crate::splats::{SplatGrads, Splats};
-pub use run::RunSummary;
+use field_probe::FieldProbeSummary;
+use judge::{Candidate, Judge};
+pub use run::{RunSummary, run};
 use scene::Camera;
 use scene::metrics;
 pub use settings::TrainSettings;
+use sizing::SizingSummary;
 use spare::Spare;
+use static_split::SplitSummary;
 pub use view::{ModelGrads, StepInfo, View, ViewRender};
 
 /// The training state.
@@ -42,11 +47,11 @@ pub struct Trainer {
     pub extent: f32,
     pub iteration: u32,
     /// The static/dynamic split, once made.
-    pub split: Option<static_split::SplitSummary>,
+    pub split: Option<SplitSummary>,
     /// What the sizing decided, once done ([`sizing`]).
-    pub sizing: Option<sizing::SizingSummary>,
+    pub sizing: Option<SizingSummary>,
     /// What the field's width probe measured and chose, once done ([`field_probe`]).
-    pub field_probe: Option<field_probe::FieldProbeSummary>,
+    pub field_probe: Option<FieldProbeSummary>,
     /// Canonical neighbours of the isometry term ([`rigidity`]), while it is on.
     pub neighbours: Option<rigidity::Neighbours>,
     order: Vec<usize>,
@@ -363,34 +368,146 @@ impl Trainer {
         Some(s.static_iterations + (s.static_split_at.clamp(0.0, 1.0) * field_its) as u32)
     }
 
+    /// The iteration of the sizing (`None`: no sizing in this run).
+    pub fn sizing_iteration(&self) -> Option<u32> {
+        let s = &self.settings;
+        sizing::iteration(&s.size, s.densify.until_iter, s.iterations)
+    }
+
+    /// The length of the field's width probe (`None`: no probe in this run).
+    pub fn field_probe_iterations(&self) -> Option<u32> {
+        let (split, sizing) = (self.static_split_iteration(), self.sizing_iteration());
+        field_probe::iterations(&self.settings, split, sizing)
+    }
+
+    /// The model as it renders now: its field while on, at the SH degree in use.
+    fn candidate(&self) -> Candidate<'_> {
+        Candidate {
+            splats: &self.splats,
+            field: self.field_on().then_some(&self.field),
+            dynamic_only: self.settings.dynamic_only,
+            sh_degree: self.sh_degree(),
+            deltas: None,
+        }
+    }
+
     /// Make the static/dynamic split when its iteration has come ([`static_split`]).
     pub fn split_static_if_due(&mut self, views: &[View]) {
         if self.split.is_some() || self.static_split_iteration() != Some(self.iteration) {
             return;
         }
-        let cams: Vec<Camera> = views.iter().map(|v| v.camera).collect();
-        let times: Vec<f32> = views.iter().map(|v| v.time).collect();
-        let times = static_split::sample_times(&times);
-        let motion = static_split::field_motion_px(&self.field, &self.splats, &cams, &times);
         let tol = self.settings.static_tolerance_px;
-        self.splats.dynamic = static_split::dynamic_flags(&motion, tol);
+        let (flags, summary) =
+            static_split::decide(&self.field, &self.splats, views, tol, self.iteration);
+        self.splats.dynamic = flags;
         self.settings.dynamic_only = true;
         // The isometry term's lists hold the Gaussians the field moved until now.
         self.neighbours = None;
-        let dynamic = self.splats.dynamic.iter().filter(|&&d| d).count();
-        if dynamic == 0 {
+        if summary.dynamic == 0 {
             // Nothing moves: the model needs no field at all.
             self.settings.deform = false;
             self.settings.dynamic_only = false;
             self.splats.dynamic.clear();
         }
-        self.split = Some(static_split::SplitSummary {
+        self.split = Some(summary);
+    }
+
+    /// Size the model when its iteration has come ([`sizing`]): the sizing decides, the
+    /// trainer goes on with the sized model and the settings that go with it.
+    pub fn size_if_due<R: Rasterizer>(&mut self, r: &R, views: &[View]) {
+        if self.sizing.is_some() || self.sizing_iteration() != Some(self.iteration) {
+            return;
+        }
+        let start = std::time::Instant::now();
+        let mut judge = Judge::new(r, views, self.settings.background);
+        let field_trained = self.iteration > self.settings.static_iterations;
+        let size = self.settings.size;
+        let d = sizing::decide(&mut judge, self.candidate(), &size, field_trained);
+        // The settings the sized model trains with.
+        let s = &mut self.settings;
+        let cap_before = s.densify.max_gaussians;
+        if d.summary.field_dropped {
+            (s.deform, s.dynamic_only) = (false, false);
+        } else if d.summary.split.is_some() {
+            s.dynamic_only = true;
+        }
+        s.sh_degree = d.sh_degree.unwrap_or(s.sh_degree);
+        s.densify.max_gaussians = d.kept().unwrap_or(cap_before);
+        let sum = d.apply(&mut self.splats, &mut self.adam, &mut self.stats);
+        // The sized model as it renders now.
+        let train_psnr_after = judge.psnr(&self.candidate());
+        self.sizing = Some(SizingSummary {
             iteration: self.iteration,
-            tolerance_px: tol,
-            dynamic,
-            static_: self.splats.len() - dynamic,
-            motion_px_quantiles: static_split::quantiles(&motion, [0.5, 0.9, 0.99]),
+            gaussian_cap_before: cap_before,
+            train_psnr_after,
+            gaussians: self.splats.len(),
+            evaluations: judge.evaluations,
+            seconds: start.elapsed().as_secs_f64(),
+            ..sum
         });
+    }
+
+    /// Run the field's width probe when the field is switched on ([`field_probe`]): the
+    /// model goes on from the chosen candidate, `iteration` advanced by the probe's length.
+    pub fn probe_field_if_due<R: Rasterizer>(&mut self, r: &R, views: &[View])
+    where
+        R::State: Send + 'static,
+    {
+        if self.field_probe.is_some() || self.iteration != self.settings.static_iterations {
+            return;
+        }
+        let Some(k) = self.field_probe_iterations() else {
+            return;
+        };
+        let s = &self.settings;
+        let widths = field_probe::candidate_widths(s.field.width, s.size.field_halvings);
+        let train = |width, train_views: &[View]| {
+            let mut p = self.fork_with_field_width(width);
+            for _ in 0..k {
+                p.step(r, train_views);
+            }
+            p
+        };
+        let score = |p: &Trainer, held: &[View]| {
+            Judge::new(r, held, p.settings.background).psnr(&p.candidate())
+        };
+        let tolerance_db = s.size.tolerance_db;
+        let Some((chosen, sum)) = field_probe::run(views, widths, tolerance_db, train, score)
+        else {
+            return;
+        };
+        self.adopt_probe(chosen);
+        self.field_probe = Some(FieldProbeSummary {
+            iteration: self.settings.static_iterations,
+            probe_iterations: k,
+            ..sum
+        });
+    }
+
+    /// A copy of the training state with a fresh field of `width` (no probe of its own).
+    fn fork_with_field_width(&self, width: usize) -> Trainer {
+        let mut settings = self.settings.clone();
+        settings.field.width = width;
+        settings.size.field_probe = 0;
+        let mut t = Trainer::new(settings, self.splats.clone(), self.extent);
+        t.adam = self.adam.clone();
+        t.stats = self.stats.clone();
+        t.iteration = self.iteration;
+        t.split = self.split;
+        t
+    }
+
+    /// Go on from a probe's state (its Gaussians, field, optimiser and iteration).
+    fn adopt_probe(&mut self, p: Trainer) {
+        self.settings.field = p.settings.field;
+        self.splats = p.splats;
+        self.field = p.field;
+        self.adam = p.adam;
+        self.field_adam = p.field_adam;
+        self.stats = p.stats;
+        self.iteration = p.iteration;
+        // Buffers sized for the old field.
+        self.spare.clear();
     }
 
     fn apply_grads(&mut self, g: &SplatGrads, it: u32) {
