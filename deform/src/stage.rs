@@ -204,7 +204,7 @@ pub fn train(
     let train_seconds = train_clock.elapsed().as_secs_f64();
     let camera = tr.camera_check(&d);
     phases.start("save");
-    let model = Model::from_trainer(&tr.inner);
+    let model = Model::from(&tr.inner);
     model.save(out.path())?;
     let model_size = gaussians::model::size::ModelSize::of(&model, out.path())?;
     if let Some(p) = &tr.posenet {

@@ -333,7 +333,7 @@ fn duplicate_frame_times_are_refused_by_the_cli_and_survived_by_the_trainer() {
     assert_splats_finite(&tr.inner.splats);
     assert!(finite(&tr.inner.field.params));
     assert!(finite(tr.posenet.as_ref().unwrap().params()));
-    let model = Model::from_trainer(&tr.inner);
+    let model = Model::from(&tr.inner);
     let test = gaussians::stage::evaluate(&model, &d.test, "test", None).unwrap();
     assert!(
         test.psnr_mean.is_finite() && test.psnr_mean > 10.0,

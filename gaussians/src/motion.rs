@@ -15,8 +15,10 @@
 //! Empty [`Splats::motion`] = no trajectories (every centre still, the field alone moves
 //! it). The gradient: `∂μ(t)/∂v = τ·I`, `∂μ(t)/∂a = τ²·I`.
 
+use crate::field::{self, Mlp};
 use crate::splats::Splats;
 use rayon::prelude::*;
+use std::borrow::Cow;
 
 /// Normalised time at which a Gaussian's centre is `μ` (the middle of the recording).
 pub const T0: f32 = 0.5;
@@ -66,4 +68,36 @@ pub fn backward(s: &Splats, t: f32, g_means: &[[f32; 3]], out: &mut Vec<[f32; WI
         .into_par_iter()
         .with_min_len(4096)
         .for_each(|(o, g)| *o = std::array::from_fn(|k| g[k % 3] * if k < 3 { p1 } else { p2 }));
+}
+
+/// `s` deformed to time `t` by `field` and its trajectories (`s` itself without
+/// either).
+pub fn at_time<'s>(
+    s: &'s Splats,
+    field: Option<&Mlp<f32>>,
+    dynamic_only: bool,
+    t: f32,
+) -> Cow<'s, Splats> {
+    let deformed = match field {
+        None => Cow::Borrowed(s),
+        Some(f) => {
+            let (d, _) = field::splat_deltas(f, s, t, dynamic_only);
+            Cow::Owned(field::deform_splats(s, &d))
+        }
+    };
+    with_trajectories(s, t, deformed)
+}
+
+/// `deformed` (the Gaussians of `s` deformed by a field) moved along their trajectories.
+pub(crate) fn with_trajectories<'s>(
+    s: &Splats,
+    t: f32,
+    deformed: Cow<'s, Splats>,
+) -> Cow<'s, Splats> {
+    if s.motion.is_empty() {
+        return deformed;
+    }
+    let mut out = deformed.into_owned();
+    advance(s, t, &mut out.means);
+    Cow::Owned(out)
 }

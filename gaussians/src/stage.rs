@@ -443,10 +443,10 @@ pub fn train(
 
     phases.start("train");
     let mut trainer = Trainer::new(settings, splats, extent);
-    let summary = trainer.run(&TileRasterizer, &views, stop, on_step);
+    let summary = crate::train::run(&mut trainer, &TileRasterizer, &views, stop, on_step);
 
     phases.start("save");
-    let model = Model::from_trainer(&trainer);
+    let model = Model::from(&trainer);
     // The settings as trained (the automatic Gaussian cap resolved).
     let settings = trainer.settings.clone();
     let split = trainer.split;

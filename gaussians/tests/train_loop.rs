@@ -306,7 +306,7 @@ fn run_stops_on_the_flag_and_counts_phases() {
     let mut t = Trainer::new(s, random_splats(10, DVec3::ZERO, 0.5, 1), 1.0);
     let stop = AtomicBool::new(false);
     let mut seen = 0;
-    let sum = t.run(&Additive, &views, &stop, |info| {
+    let sum = gaussians::train::run(&mut t, &Additive, &views, &stop, |info| {
         seen += 1;
         if info.iteration == 25 {
             stop.store(true, Ordering::Relaxed);
@@ -317,7 +317,7 @@ fn run_stops_on_the_flag_and_counts_phases() {
     // 10 static iterations, then the field is on.
     assert_eq!((sum.static_steps, sum.deform_steps), (10, 15));
     stop.store(false, Ordering::Relaxed);
-    let sum = t.run(&Additive, &views, &stop, |_| {});
+    let sum = gaussians::train::run(&mut t, &Additive, &views, &stop, |_| {});
     assert!(!sum.interrupted);
     assert_eq!(sum.iterations, 40);
     assert_eq!((sum.static_steps, sum.deform_steps), (0, 15));
@@ -399,7 +399,7 @@ fn static_split_flags_and_freezes_the_gaussians_the_field_barely_moves() {
     let sp = t.split.unwrap();
     assert_eq!((sp.dynamic, sp.static_), (0, 10));
     assert!(!t.field_on() && !t.settings.dynamic_only && t.splats.dynamic.is_empty());
-    assert!(gaussians::model::Model::from_trainer(&t).field.is_none());
+    assert!(gaussians::model::Model::from(&t).field.is_none());
     let (d, _) = t.deformed(0.7);
     assert_eq!(d.means, t.splats.means);
     assert_eq!(d.rotations, t.splats.rotations);

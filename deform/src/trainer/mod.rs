@@ -27,7 +27,7 @@ use stagekit::optim::Adam;
 use std::time::Instant;
 
 mod motion;
-use motion::MotionGrads;
+use motion::{MotionGrads, MotionTerm};
 
 /// Near plane (scene units) below which a centre or depth is not used by the motion loss.
 const NEAR: f64 = 1e-3;
@@ -224,6 +224,33 @@ impl JointTrainer {
             interpolated: pose_error(&interp, &recorded),
             corrected: pose_error(&corrected, &recorded),
         }
+    }
+
+    /// Eq. 12 at train frame `i` ([`motion`]; rendered as `rv`): writes `γ2·∂L/∂θ` into
+    /// `out`; returns `(L_motion, bound Gaussians, bound events left out and why)`.
+    fn motion_term(
+        &self,
+        d: &Inputs,
+        i: usize,
+        rv: &ViewRender<<TileRasterizer as Rasterizer>::State>,
+        g2: f32,
+        out: &mut MotionGrads,
+    ) -> (f64, usize, DroppedBindings) {
+        let inner = &self.inner;
+        let term = MotionTerm {
+            d,
+            bindings: &self.bindings[i],
+            splats: &inner.splats,
+            field: inner.field_on().then_some(&inner.field),
+            dynamic_only: inner.settings.dynamic_only,
+            span: self.span,
+            flow_form: self.settings.flow_form,
+            motion: &self.settings.motion,
+            neighbours: &self.settings.motion_neighbours,
+            camera_at: &|t| self.camera_at(d, t),
+            posenet: self.posenet.is_some(),
+        };
+        term.eval(i, rv, g2, out)
     }
 
     /// `L_motion` at train frame `i` (γ2 = 1) and its gradient on the model and on the

@@ -1,17 +1,22 @@
 //! The motion term of the joint step (Eq. 12 at the drawn train frame): flows of the
-//! bound Gaussians against their events' flow, and where its gradient goes.
+//! bound Gaussians against their events' flow, and where its gradient goes. It reads the
+//! training through [`MotionTerm`]: the Gaussians, the field, the bindings, the camera.
 
-use super::{JointTrainer, NEAR, field_time};
+use super::{NEAR, field_time};
 use crate::camera_path::{CameraVelocity, velocity_between, velocity_between_backward};
 use crate::fallbacks::DroppedBindings;
 use crate::flow::{EgoGrad, ego_flow, ego_flow_backward, gaussian_flow, gaussian_flow_backward};
 use crate::flow::{EgoPoints, Flow2, GsCameras, GsGrad, Pinhole, ProjCam};
 use crate::inputs::Inputs;
-use crate::motion_loss::{CsrBindings, MotionGrad, MotionInputs, PerGaussian, motion_loss};
+use crate::motion_loss::{
+    CsrBindings, MotionGrad, MotionInputs, MotionSettings, PerGaussian, motion_loss,
+};
+use crate::neighbours::NeighbourSettings;
 use crate::settings::FlowForm;
-use gaussians::field::{Deformation, Deltas};
+use gaussians::field::{Deformation, Deltas, Mlp};
 use gaussians::train::{ModelGrads, ViewRender};
-use gaussians::{Rasterizer, RenderedImage, TileRasterizer};
+use gaussians::{Rasterizer, RenderedImage, Splats, TileRasterizer};
+use scene::Camera;
 
 /// The motion term's gradients: on the centres as rendered at the view's time (`x(t0)`,
 /// taken back with the view's RGB gradient), on the canonical centres and on the field's
@@ -44,21 +49,41 @@ impl MotionGrads {
     }
 }
 
-impl JointTrainer {
+/// What the motion term reads of the joint training.
+pub(super) struct MotionTerm<'a> {
+    pub(super) d: &'a Inputs,
+    /// The bindings at the term's train frame.
+    pub(super) bindings: &'a assoc::Bindings,
+    /// The canonical Gaussians, and the field while it is on (moving only the dynamic
+    /// Gaussians when `dynamic_only`).
+    pub(super) splats: &'a Splats,
+    pub(super) field: Option<&'a Mlp<f32>>,
+    pub(super) dynamic_only: bool,
+    /// The span of the flows (seconds).
+    pub(super) span: f64,
+    pub(super) flow_form: FlowForm,
+    pub(super) motion: &'a MotionSettings,
+    pub(super) neighbours: &'a NeighbourSettings,
+    /// The joint training's camera (PoseNet-corrected) at `t` seconds, and the correction.
+    pub(super) camera_at: &'a dyn Fn(f64) -> (Camera, [f64; 6]),
+    /// Whether a PoseNet learns from the term (its camera gradients are wanted).
+    pub(super) posenet: bool,
+}
+
+impl MotionTerm<'_> {
     /// Eq. 12 over the Gaussians bound at train frame `i` (rendered as `rv`, whose
     /// deformed centres are `x(t0)`): writes `γ2·∂L/∂θ` into `out`; returns
     /// `(L_motion, bound Gaussians, bound events left out and why)`.
-    pub(super) fn motion_term(
+    pub(super) fn eval(
         &self,
-        d: &Inputs,
         i: usize,
         rv: &ViewRender<<TileRasterizer as Rasterizer>::State>,
         g2: f32,
         out: &mut MotionGrads,
     ) -> (f64, usize, DroppedBindings) {
-        let b = &self.bindings[i];
+        let (d, b) = (self.d, self.bindings);
         let mut dropped = DroppedBindings::default();
-        if b.gaussians() != self.inner.splats.len() {
+        if b.gaussians() != self.splats.len() {
             return (0.0, 0, dropped);
         }
         let idx: Vec<usize> = (0..b.gaussians())
@@ -92,12 +117,10 @@ impl JointTrainer {
             offsets.push(events.len() as u32);
         }
         // Deformed centres at t0 and t1 (the field sees canonical positions detached).
-        let xs: Vec<[f32; 3]> = idx.iter().map(|&g| self.inner.splats.means[g]).collect();
-        let field_on = self.inner.field_on();
-        let dynamic_only = self.inner.settings.dynamic_only;
-        let moves = |k: usize| !dynamic_only || self.inner.splats.is_dynamic(idx[k]);
-        let deform = |t: f32| {
-            let (dl, cache) = Deformation::forward(&self.inner.field, &xs, &[t]);
+        let xs: Vec<[f32; 3]> = idx.iter().map(|&g| self.splats.means[g]).collect();
+        let moves = |k: usize| !self.dynamic_only || self.splats.is_dynamic(idx[k]);
+        let deform = |field: &Mlp<f32>, t: f32| {
+            let (dl, cache) = Deformation::forward(field, &xs, &[t]);
             let x = (0..xs.len())
                 .map(|k| {
                     let dx = if moves(k) { dl.dx[k] } else { [0.0; 3] };
@@ -107,19 +130,20 @@ impl JointTrainer {
             (x, cache)
         };
         let x0: Vec<[f32; 3]> = idx.iter().map(|&g| rv.deformed.means[g]).collect();
-        let (x1, cache1) = if field_on {
-            let (x1, c1) = deform(tau1);
-            (x1, Some(c1))
-        } else {
-            (xs.clone(), None)
+        let (x1, cache1) = match self.field {
+            Some(f) => {
+                let (x1, c1) = deform(f, tau1);
+                (x1, Some((f, c1)))
+            }
+            None => (xs.clone(), None),
         };
         let k = d.views[i].camera.intrinsics;
         // The joint training's camera (PoseNet-corrected) at both ends of the span.
-        let (ca, xa) = self.camera_at(d, t0);
-        let (cb, xb) = self.camera_at(d, t1);
+        let (ca, xa) = (self.camera_at)(t0);
+        let (cb, xb) = (self.camera_at)(t1);
         let cam0 = ProjCam::<f32>::new(&rv.camera.cam_to_world, &k, NEAR);
         let cam1 = ProjCam::<f32>::new(&cb.cam_to_world, &k, NEAR);
-        let cams = match self.settings.flow_form {
+        let cams = match self.flow_form {
             FlowForm::Paper => GsCameras::Same(&cam0),
             FlowForm::Exact => GsCameras::Exact(&cam0, &cam1),
         };
@@ -128,7 +152,7 @@ impl JointTrainer {
         // F_ego from the velocity of the joint training's camera (PoseNet-corrected) over
         // [t0, t1]: the PoseNet learns from L_motion too (Eq. 12 trains it jointly).
         let mut fego = Flow2::default();
-        let paper = self.settings.flow_form == FlowForm::Paper;
+        let paper = self.flow_form == FlowForm::Paper;
         let vel = velocity_between(&ca.cam_to_world, &cb.cam_to_world, t1 - t0);
         let vel = vel.to_array().map(|x| x as f32);
         let pinhole = Pinhole::from_intrinsics(&k);
@@ -146,7 +170,6 @@ impl JointTrainer {
             ego_flow(&pinhole, &vel, pts, (1.0 / NEAR) as f32, &mut fego);
         }
         dropped.disagreeing = self.drop_disagreeing(
-            d,
             &cam0,
             &x0,
             (t1 - t0) as f32,
@@ -162,7 +185,7 @@ impl JointTrainer {
             flow_u: &d.flow_u,
             flow_v: &d.flow_v,
             flow_base: 0,
-            ego: (self.settings.flow_form == FlowForm::Paper).then(|| PerGaussian {
+            ego: (self.flow_form == FlowForm::Paper).then(|| PerGaussian {
                 u: &fego.u,
                 v: &fego.v,
                 valid: Some(&fego.valid),
@@ -174,7 +197,7 @@ impl JointTrainer {
             },
         };
         let mut mg = MotionGrad::default();
-        let ml = motion_loss(&self.settings.motion, &inp, Some(&mut mg));
+        let ml = motion_loss(self.motion, &inp, Some(&mut mg));
         dropped.no_flow = ml.missing_events + ml.dropped_non_finite;
         dropped.outliers = ml.dropped_outliers;
         if ml.bound == 0 {
@@ -184,14 +207,14 @@ impl JointTrainer {
         let gv: Vec<f32> = mg.gs_v.iter().map(|g| g * g2).collect();
         let mut gg = GsGrad::default();
         gaussian_flow_backward(cams, &x0, &x1, &fgs, &gu, &gv, &mut gg);
-        let n = self.inner.splats.len();
+        let n = self.splats.len();
         out.at_view = vec![[0.0; 3]; n];
         out.canonical = vec![[0.0; 3]; n];
         for (kk, &g) in idx.iter().enumerate() {
             out.at_view[g] = gg.x0[kk];
             out.canonical[g] = gg.x1[kk];
         }
-        if paper && self.posenet.is_some() {
+        if paper && self.posenet {
             let scaled = |g: &[f32]| g.iter().map(|x| x * g2).collect::<Vec<f32>>();
             let mut eg = EgoGrad::default();
             let (gu, gv) = (scaled(&mg.ego_u), scaled(&mg.ego_v));
@@ -201,33 +224,30 @@ impl JointTrainer {
                 velocity_between_backward(&ca.cam_to_world, &cb.cam_to_world, t1 - t0, &g_vel);
             out.camera = vec![(t0, xa, ga), (t1, xb, gb)];
         }
-        if let Some(c1) = cache1 {
+        if let Some((f, c1)) = cache1 {
             let mut dl = Deltas::zeros(idx.len());
             for (kk, g) in gg.x1.iter().enumerate() {
                 if moves(kk) {
                     dl.dx[kk] = *g;
                 }
             }
-            out.field = Deformation::backward(&self.inner.field, &c1, &dl);
+            out.field = Deformation::backward(f, &c1, &dl);
         }
         (ml.loss as f64, idx.len(), dropped)
     }
-}
 
-impl JointTrainer {
     /// Empty the CSR ranges (`csr`: offsets, events, weights) of the bound Gaussians whose events'
     /// mean flow over the span `dt` disagrees with their neighbours' in the image
     /// ([`crate::neighbours`]; centres `x0` seen by `cam`); returns the events removed.
     fn drop_disagreeing(
         &self,
-        d: &Inputs,
         cam: &ProjCam<f32>,
         x0: &[[f32; 3]],
         dt: f32,
         csr: (&mut Vec<u32>, &mut Vec<u64>, &mut Vec<f32>),
     ) -> usize {
-        let (offsets, events, weights) = csr;
-        let s = &self.settings.motion_neighbours;
+        let (d, (offsets, events, weights)) = (self.d, csr);
+        let s = self.neighbours;
         if s.radius_px <= 0.0 {
             return 0;
         }

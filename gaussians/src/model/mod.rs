@@ -15,7 +15,6 @@ pub mod size;
 use crate::field::{self, Mlp};
 use crate::raster::{Rasterizer, RenderedImage, TileRasterizer};
 use crate::splats::Splats;
-use crate::train::Trainer;
 use scene::error::{Error, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -86,36 +85,6 @@ pub struct Model {
 }
 
 impl Model {
-    /// The model a trainer holds now (field included once it has been switched on, or
-    /// whenever deformation is enabled and the run got past the static phase), at the
-    /// SH degree it renders with now, with dynamic flags only when the field uses them.
-    pub fn from_trainer(tr: &Trainer) -> Model {
-        let s = &tr.settings;
-        let field = tr.field_on().then(|| tr.field.clone());
-        let mut splats = tr.splats.clone();
-        // Dynamic flags are written only where the field reads them.
-        if field.is_none() || !s.dynamic_only {
-            splats.dynamic.clear();
-        }
-        let n = splats.len();
-        Model {
-            splats,
-            info: ModelInfo {
-                // The degree in use: the coefficients above it are zero, and the PLY
-                // holds only the columns of this degree.
-                sh_degree: tr.sh_degree().min(3),
-                background: s.background,
-                dynamic_only: s.dynamic_only,
-                gaussians: n,
-                has_field: field.is_some(),
-                iterations: tr.iteration,
-                gaussian_cap_before_sizing: tr.sizing.as_ref().map(|s| s.gaussian_cap_before),
-                ..ModelInfo::default()
-            },
-            field,
-        }
-    }
-
     /// Write the model files into `dir` (created if missing); each file atomically.
     pub fn save(&self, dir: &Path) -> Result<()> {
         std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
@@ -215,7 +184,7 @@ impl Model {
     /// deltas and each centre's trajectory; the canonical ones when it has neither.
     pub fn at(&self, t: f32) -> Splats {
         let field = self.field.as_ref();
-        crate::train::judge::at_time(&self.splats, field, self.info.dynamic_only, t).into_owned()
+        crate::motion::at_time(&self.splats, field, self.info.dynamic_only, t).into_owned()
     }
 
     /// Render colour, depth and alpha at a camera and normalised time.

@@ -18,9 +18,8 @@
 //! It costs the losing candidates' iterations; a narrower field makes every later
 //! iteration cheaper (the field's `gemm` is a third of a warm-up).
 
-use super::judge::{Candidate, Judge};
-use super::{Trainer, View};
-use crate::Rasterizer;
+use super::View;
+use super::settings::TrainSettings;
 use serde::Serialize;
 
 /// Hold out every this-many-th view (in time order) for the probe.
@@ -95,116 +94,71 @@ pub fn choose(widths: &[usize], psnr: &[f64], tolerance_db: f64) -> usize {
         .unwrap_or(0)
 }
 
-impl Trainer {
-    /// The probe's length from the field's switch: `size.field_probe`, cut short of the
-    /// static/dynamic split, the sizing and the end of the run (`None`: no probe in this
-    /// run).
-    pub fn field_probe_iterations(&self) -> Option<u32> {
-        let s = &self.settings;
-        if !s.deform || s.size.tolerance_db <= 0.0 || s.size.field_probe == 0 {
-            return None;
-        }
-        if candidate_widths(s.field.width, s.size.field_halvings).len() < 2 {
-            return None;
-        }
-        let start = s.static_iterations;
-        let limit = [self.static_split_iteration(), self.sizing_iteration()]
-            .into_iter()
-            .flatten()
-            .fold(s.iterations, u32::min);
-        let k = s.size.field_probe.min(limit.saturating_sub(start + 1));
-        (k >= MIN_PROBE_ITERATIONS).then_some(k)
+/// The probe's length from the field's switch in a run with settings `s`:
+/// `size.field_probe`, cut short of the static/dynamic split (at `split`), the sizing (at
+/// `sizing`) and the end of the run (`None`: no probe in this run).
+pub fn iterations(s: &TrainSettings, split: Option<u32>, sizing: Option<u32>) -> Option<u32> {
+    if !s.deform || s.size.tolerance_db <= 0.0 || s.size.field_probe == 0 {
+        return None;
     }
+    if candidate_widths(s.field.width, s.size.field_halvings).len() < 2 {
+        return None;
+    }
+    let start = s.static_iterations;
+    let limit = [split, sizing]
+        .into_iter()
+        .flatten()
+        .fold(s.iterations, u32::min);
+    let k = s.size.field_probe.min(limit.saturating_sub(start + 1));
+    (k >= MIN_PROBE_ITERATIONS).then_some(k)
+}
 
-    /// Run the probe when the field is switched on (module docs): the model goes on
-    /// from the chosen candidate, `iteration` advanced by the probe's length.
-    pub fn probe_field_if_due<R: Rasterizer>(&mut self, r: &R, views: &[View])
-    where
-        R::State: Send + 'static,
-    {
-        if self.field_probe.is_some() || self.iteration != self.settings.static_iterations {
-            return;
-        }
-        let Some(k) = self.field_probe_iterations() else {
-            return;
-        };
-        let times: Vec<f32> = views.iter().map(|v| v.time).collect();
-        let held_out = held_out_views(&times, HOLD_OUT_EVERY);
-        if held_out.is_empty() {
-            return;
-        }
-        let start = std::time::Instant::now();
-        let (train, held): (Vec<View>, Vec<View>) = {
-            let (mut a, mut b) = (Vec::new(), Vec::new());
-            for (i, v) in views.iter().enumerate() {
-                if held_out.binary_search(&i).is_ok() {
-                    b.push(v.clone());
-                } else {
-                    a.push(v.clone());
-                }
+/// The probe (module docs) over `widths` (widest first, [`candidate_widths`]):
+/// `train(width, train_views)` trains a copy of the model with a fresh field of that width
+/// on the views less the held-out ones, `score(copy, held_out_views)` is its mean PSNR on
+/// the others; the copy whose width [`choose`] keeps, and what the probe measured (its
+/// `iteration` and `probe_iterations` left to the caller). `None`: too few views to hold
+/// any out.
+pub fn run<T>(
+    views: &[View],
+    widths: Vec<usize>,
+    tolerance_db: f64,
+    mut train: impl FnMut(usize, &[View]) -> T,
+    mut score: impl FnMut(&T, &[View]) -> f64,
+) -> Option<(T, FieldProbeSummary)> {
+    let times: Vec<f32> = views.iter().map(|v| v.time).collect();
+    let held_out = held_out_views(&times, HOLD_OUT_EVERY);
+    if held_out.is_empty() {
+        return None;
+    }
+    let start = std::time::Instant::now();
+    let (train_views, held): (Vec<View>, Vec<View>) = {
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        for (i, v) in views.iter().enumerate() {
+            if held_out.binary_search(&i).is_ok() {
+                b.push(v.clone());
+            } else {
+                a.push(v.clone());
             }
-            (a, b)
-        };
-        let widths = candidate_widths(self.settings.field.width, self.settings.size.field_halvings);
-        let mut scores = Vec::new();
-        let mut probes = Vec::new();
-        for &w in &widths {
-            let mut p = self.fork_with_field_width(w);
-            for _ in 0..k {
-                p.step(r, &train);
-            }
-            let mut judge = Judge {
-                r,
-                views: &held,
-                background: p.settings.background,
-                evaluations: 0,
-            };
-            scores.push(judge.psnr(&Candidate {
-                splats: &p.splats,
-                field: Some(&p.field),
-                dynamic_only: p.settings.dynamic_only,
-                sh_degree: p.sh_degree(),
-                deltas: None,
-            }));
-            probes.push(p);
         }
-        let pick = choose(&widths, &scores, self.settings.size.tolerance_db);
-        let chosen = probes.swap_remove(pick);
-        self.adopt_probe(chosen);
-        self.field_probe = Some(FieldProbeSummary {
-            iteration: self.settings.static_iterations,
-            probe_iterations: k,
-            held_out,
-            widths: widths.clone(),
-            held_out_psnr: scores,
-            width: widths[pick],
-            seconds: start.elapsed().as_secs_f64(),
-        });
+        (a, b)
+    };
+    let mut scores = Vec::new();
+    let mut probes = Vec::new();
+    for &w in &widths {
+        let p = train(w, &train_views);
+        scores.push(score(&p, &held));
+        probes.push(p);
     }
-
-    /// A copy of the training state with a fresh field of `width` (no probe of its own).
-    fn fork_with_field_width(&self, width: usize) -> Trainer {
-        let mut settings = self.settings.clone();
-        settings.field.width = width;
-        settings.size.field_probe = 0;
-        let mut t = Trainer::new(settings, self.splats.clone(), self.extent);
-        t.adam = self.adam.clone();
-        t.stats = self.stats.clone();
-        t.iteration = self.iteration;
-        t.split = self.split;
-        t
-    }
-
-    /// Go on from a probe's state (its Gaussians, field, optimiser and iteration).
-    fn adopt_probe(&mut self, p: Trainer) {
-        self.settings.field = p.settings.field;
-        self.splats = p.splats;
-        self.field = p.field;
-        self.adam = p.adam;
-        self.field_adam = p.field_adam;
-        self.stats = p.stats;
-        self.iteration = p.iteration;
-        // Buffers sized for the old field.
-        self.clear_spare();
-    }
+    let pick = choose(&widths, &scores, tolerance_db);
+    let chosen = probes.swap_remove(pick);
+    let summary = FieldProbeSummary {
+        held_out,
+        width: widths[pick],
+        widths,
+        held_out_psnr: scores,
+        seconds: start.elapsed().as_secs_f64(),
+        ..FieldProbeSummary::default()
+    };
+    Some((chosen, summary))
 }

@@ -4,6 +4,7 @@
 use super::View;
 use crate::Rasterizer;
 use crate::field::{self, Deltas, Mlp};
+use crate::motion::{at_time, with_trajectories};
 use crate::splats::Splats;
 use scene::metrics;
 use std::borrow::Cow;
@@ -55,6 +56,18 @@ pub struct Judge<'a, R> {
     pub evaluations: usize,
 }
 
+impl<'a, R> Judge<'a, R> {
+    /// A judge of renders by `r` on `background` at `views`, no pass made yet.
+    pub fn new(r: &'a R, views: &'a [View], background: [f32; 3]) -> Self {
+        Judge {
+            r,
+            views,
+            background,
+            evaluations: 0,
+        }
+    }
+}
+
 /// The middle of the views' time span (0 without views).
 pub fn middle_time(views: &[View]) -> f32 {
     let lo = views.iter().map(|v| v.time).fold(f32::INFINITY, f32::min);
@@ -67,34 +80,6 @@ pub fn middle_time(views: &[View]) -> f32 {
 
 /// PSNR above this (identical 8-bit images) counts as this, as the stage reports it.
 const PSNR_CAP: f64 = 100.0;
-
-/// `s` deformed to time `t` by `field` and its trajectories (`s` itself without
-/// either).
-pub fn at_time<'s>(
-    s: &'s Splats,
-    field: Option<&Mlp<f32>>,
-    dynamic_only: bool,
-    t: f32,
-) -> Cow<'s, Splats> {
-    let deformed = match field {
-        None => Cow::Borrowed(s),
-        Some(f) => {
-            let (d, _) = field::splat_deltas(f, s, t, dynamic_only);
-            Cow::Owned(field::deform_splats(s, &d))
-        }
-    };
-    with_trajectories(s, t, deformed)
-}
-
-/// `deformed` (the Gaussians of `s` deformed by a field) moved along their trajectories.
-fn with_trajectories<'s>(s: &Splats, t: f32, deformed: Cow<'s, Splats>) -> Cow<'s, Splats> {
-    if s.motion.is_empty() {
-        return deformed;
-    }
-    let mut out = deformed.into_owned();
-    crate::motion::advance(s, t, &mut out.means);
-    Cow::Owned(out)
-}
 
 /// The candidate's Gaussians at view `k` (at time `t`).
 fn posed<'s>(c: &Candidate<'s>, k: usize, t: f32) -> Cow<'s, Splats> {

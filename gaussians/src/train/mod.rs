@@ -3,7 +3,8 @@
 //! after a static phase a deformation field `F(γ(x), γ(t))` (Deform-GS).
 //!
 //! The rasterizer is reached through the [`Rasterizer`] trait so the loop can be tested
-//! on its own; [`Splats`] holds the trainable parameters.
+//! on its own; [`Splats`] holds the trainable parameters. The loop calls [`static_split`],
+//! [`sizing`] and [`field_probe`] when due and takes on what they decide.
 
 pub mod field_probe;
 pub mod init;
@@ -13,60 +14,27 @@ mod run;
 pub mod settings;
 pub mod sh_refit;
 pub mod sizing;
+mod spare;
 pub mod static_split;
 pub mod stereo;
+mod to_model;
+mod view;
 
 use crate::densify::{self, Geometry, GradStats};
 use crate::field::{self, Mlp};
 use crate::optim::{Adam, ExpSchedule};
 use crate::raster::{Rasterizer, RenderedImage};
 use crate::splats::{SplatGrads, Splats};
-pub use run::RunSummary;
+use field_probe::FieldProbeSummary;
+use judge::{Candidate, Judge};
+pub use run::{RunSummary, run};
 use scene::Camera;
 use scene::metrics;
 pub use settings::TrainSettings;
-use std::any::Any;
-use std::sync::{Mutex, MutexGuard};
-
-/// A training view: camera, normalised time, planar RGB target.
-#[derive(Clone, Debug)]
-pub struct View {
-    pub camera: Camera,
-    pub time: f32,
-    pub rgb: Vec<f32>,
-}
-
-/// A view rendered by the current model, with what its backward needs.
-pub struct ViewRender<S> {
-    pub image: RenderedImage,
-    pub camera: Camera,
-    /// Normalised time of the view.
-    pub time: f32,
-    /// The Gaussians as rendered (deformed to the view's time).
-    pub deformed: Splats,
-    deltas: Option<(field::Deltas, field::MlpCache<f32>)>,
-    state: S,
-}
-
-/// Gradients of a loss on the model: canonical Gaussians (with the densification
-/// statistics of the render they came from), the field's parameters (empty when the
-/// field is off) and the camera (camera-frame right twist, `raster::apply_twist`).
-#[derive(Clone, Debug, Default)]
-pub struct ModelGrads {
-    pub splats: SplatGrads,
-    pub field: Vec<f32>,
-    pub camera: [f64; 6],
-}
-
-/// Per-step figures.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct StepInfo {
-    pub iteration: u32,
-    pub loss: f64,
-    pub psnr: f64,
-    pub gaussians: usize,
-    pub field_on: bool,
-}
+use sizing::SizingSummary;
+use spare::Spare;
+use static_split::SplitSummary;
+pub use view::{ModelGrads, StepInfo, View, ViewRender};
 
 /// The training state.
 pub struct Trainer {
@@ -79,36 +47,18 @@ pub struct Trainer {
     pub extent: f32,
     pub iteration: u32,
     /// The static/dynamic split, once made.
-    pub split: Option<static_split::SplitSummary>,
+    pub split: Option<SplitSummary>,
     /// What the sizing decided, once done ([`sizing`]).
-    pub sizing: Option<sizing::SizingSummary>,
+    pub sizing: Option<SizingSummary>,
     /// What the field's width probe measured and chose, once done ([`field_probe`]).
-    pub field_probe: Option<field_probe::FieldProbeSummary>,
+    pub field_probe: Option<FieldProbeSummary>,
     /// Canonical neighbours of the isometry term ([`rigidity`]), while it is on.
     pub neighbours: Option<rigidity::Neighbours>,
     order: Vec<usize>,
     rng: rand_chacha::ChaCha8Rng,
     /// Buffers given back by [`Self::recycle_view`] / [`Self::recycle_grads`].
-    spare: Mutex<Spare>,
+    spare: spare::Pool,
 }
-
-/// What a training loop reuses from one iteration to the next: the last rendered view
-/// (deformed Gaussians, image, rasterizer state, field activations), the last gradients
-/// and the field's scratch. Once warm, an iteration allocates no per-Gaussian or
-/// per-pixel buffer of these (the figures: BENCHMARKS.md, "A cheaper iteration").
-#[derive(Default)]
-struct Spare {
-    /// `ViewRender<R::State>`s of the rasterizer in use (at most [`SPARE_MAX`]).
-    views: Vec<Box<dyn Any + Send>>,
-    grads: Vec<ModelGrads>,
-    field: field::FieldWork,
-    delta_grads: field::Deltas,
-    /// The isometry term of the last [`Trainer::view_backward`].
-    rigidity_loss: f64,
-}
-
-/// Views and gradients kept for reuse (the joint training renders two views a step).
-const SPARE_MAX: usize = 2;
 
 const GROUPS: [&str; 7] = [
     "means",
@@ -160,36 +110,21 @@ impl Trainer {
             field_probe: None,
             neighbours: None,
             order: Vec::new(),
-            spare: Mutex::default(),
+            spare: spare::Pool::default(),
         }
-    }
-
-    fn spare(&self) -> MutexGuard<'_, Spare> {
-        self.spare.lock().unwrap_or_else(|e| e.into_inner())
-    }
-
-    /// Drop the reused buffers (after the model's shape changed).
-    fn clear_spare(&mut self) {
-        *self.spare.get_mut().unwrap_or_else(|e| e.into_inner()) = Spare::default();
     }
 
     /// Give back a view when done with it (after [`Self::view_backward`]): a later
     /// [`Self::render_view`] with the same rasterizer reuses its buffers. Optional; a
     /// view not given back is simply dropped.
     pub fn recycle_view<S: Send + 'static>(&self, v: ViewRender<S>) {
-        let mut spare = self.spare();
-        if spare.views.len() < SPARE_MAX {
-            spare.views.push(Box::new(v));
-        }
+        self.spare.lock().put_view(v);
     }
 
     /// Give back gradients when done with them (after [`Self::apply_gradients`]): a
     /// later [`Self::view_backward`] reuses their buffers. Optional.
     pub fn recycle_grads(&self, g: ModelGrads) {
-        let mut spare = self.spare();
-        if spare.grads.len() < SPARE_MAX {
-            spare.grads.push(g);
-        }
+        self.spare.lock().put_grads(g);
     }
 
     /// SH degree in use at the current iteration.
@@ -232,8 +167,7 @@ impl Trainer {
     where
         R::State: Send + 'static,
     {
-        let old = self.spare().views.pop();
-        let old = old.and_then(|v| v.downcast::<ViewRender<R::State>>().ok());
+        let old = self.spare.lock().take_view::<R::State>();
         let (mut deformed, old_deltas, reuse) = match old {
             Some(v) => (v.deformed, v.deltas, Some((v.image, v.state))),
             None => (Splats::default(), None, None),
@@ -245,7 +179,7 @@ impl Trainer {
                 &self.splats,
                 t,
                 self.settings.dynamic_only,
-                &mut self.spare().field,
+                &mut self.spare.lock().field,
                 &mut d,
                 &mut cache,
             );
@@ -286,7 +220,7 @@ impl Trainer {
         d_depth: Option<&[f32]>,
         d_means: Option<&[[f32; 3]]>,
     ) -> ModelGrads {
-        let mut out = self.spare().grads.pop().unwrap_or_default();
+        let mut out = self.spare.lock().take_grads();
         let g = &mut out.splats;
         out.camera = r.backward_view_into(&v.deformed, &v.camera, &v.state, d_rgb, d_depth, g);
         if let Some(dm) = d_means {
@@ -298,7 +232,7 @@ impl Trainer {
         crate::motion::backward(&self.splats, v.time, &g.means, &mut g.motion);
         out.field.clear();
         if let Some((d, cache)) = &v.deltas {
-            let mut spare = self.spare();
+            let mut spare = self.spare.lock();
             let Spare {
                 field: work,
                 delta_grads,
@@ -360,7 +294,7 @@ impl Trainer {
 
     /// The isometry term of the last [`Self::view_backward`] (0 when it is off).
     pub fn rigidity_loss(&self) -> f64 {
-        self.spare().rigidity_loss
+        self.spare.lock().rigidity_loss
     }
 
     /// The RGB loss of the warm-up (`(1−λ)·L1 + λ·D-SSIM`) of a render against a planar
@@ -434,34 +368,146 @@ impl Trainer {
         Some(s.static_iterations + (s.static_split_at.clamp(0.0, 1.0) * field_its) as u32)
     }
 
+    /// The iteration of the sizing (`None`: no sizing in this run).
+    pub fn sizing_iteration(&self) -> Option<u32> {
+        let s = &self.settings;
+        sizing::iteration(&s.size, s.densify.until_iter, s.iterations)
+    }
+
+    /// The length of the field's width probe (`None`: no probe in this run).
+    pub fn field_probe_iterations(&self) -> Option<u32> {
+        let (split, sizing) = (self.static_split_iteration(), self.sizing_iteration());
+        field_probe::iterations(&self.settings, split, sizing)
+    }
+
+    /// The model as it renders now: its field while on, at the SH degree in use.
+    fn candidate(&self) -> Candidate<'_> {
+        Candidate {
+            splats: &self.splats,
+            field: self.field_on().then_some(&self.field),
+            dynamic_only: self.settings.dynamic_only,
+            sh_degree: self.sh_degree(),
+            deltas: None,
+        }
+    }
+
     /// Make the static/dynamic split when its iteration has come ([`static_split`]).
     pub fn split_static_if_due(&mut self, views: &[View]) {
         if self.split.is_some() || self.static_split_iteration() != Some(self.iteration) {
             return;
         }
-        let cams: Vec<Camera> = views.iter().map(|v| v.camera).collect();
-        let times: Vec<f32> = views.iter().map(|v| v.time).collect();
-        let times = static_split::sample_times(&times);
-        let motion = static_split::field_motion_px(&self.field, &self.splats, &cams, &times);
         let tol = self.settings.static_tolerance_px;
-        self.splats.dynamic = static_split::dynamic_flags(&motion, tol);
+        let (flags, summary) =
+            static_split::decide(&self.field, &self.splats, views, tol, self.iteration);
+        self.splats.dynamic = flags;
         self.settings.dynamic_only = true;
         // The isometry term's lists hold the Gaussians the field moved until now.
         self.neighbours = None;
-        let dynamic = self.splats.dynamic.iter().filter(|&&d| d).count();
-        if dynamic == 0 {
+        if summary.dynamic == 0 {
             // Nothing moves: the model needs no field at all.
             self.settings.deform = false;
             self.settings.dynamic_only = false;
             self.splats.dynamic.clear();
         }
-        self.split = Some(static_split::SplitSummary {
+        self.split = Some(summary);
+    }
+
+    /// Size the model when its iteration has come ([`sizing`]): the sizing decides, the
+    /// trainer goes on with the sized model and the settings that go with it.
+    pub fn size_if_due<R: Rasterizer>(&mut self, r: &R, views: &[View]) {
+        if self.sizing.is_some() || self.sizing_iteration() != Some(self.iteration) {
+            return;
+        }
+        let start = std::time::Instant::now();
+        let mut judge = Judge::new(r, views, self.settings.background);
+        let field_trained = self.iteration > self.settings.static_iterations;
+        let size = self.settings.size;
+        let d = sizing::decide(&mut judge, self.candidate(), &size, field_trained);
+        // The settings the sized model trains with.
+        let s = &mut self.settings;
+        let cap_before = s.densify.max_gaussians;
+        if d.summary.field_dropped {
+            (s.deform, s.dynamic_only) = (false, false);
+        } else if d.summary.split.is_some() {
+            s.dynamic_only = true;
+        }
+        s.sh_degree = d.sh_degree.unwrap_or(s.sh_degree);
+        s.densify.max_gaussians = d.kept().unwrap_or(cap_before);
+        let sum = d.apply(&mut self.splats, &mut self.adam, &mut self.stats);
+        // The sized model as it renders now.
+        let train_psnr_after = judge.psnr(&self.candidate());
+        self.sizing = Some(SizingSummary {
             iteration: self.iteration,
-            tolerance_px: tol,
-            dynamic,
-            static_: self.splats.len() - dynamic,
-            motion_px_quantiles: static_split::quantiles(&motion, [0.5, 0.9, 0.99]),
+            gaussian_cap_before: cap_before,
+            train_psnr_after,
+            gaussians: self.splats.len(),
+            evaluations: judge.evaluations,
+            seconds: start.elapsed().as_secs_f64(),
+            ..sum
         });
+    }
+
+    /// Run the field's width probe when the field is switched on ([`field_probe`]): the
+    /// model goes on from the chosen candidate, `iteration` advanced by the probe's length.
+    pub fn probe_field_if_due<R: Rasterizer>(&mut self, r: &R, views: &[View])
+    where
+        R::State: Send + 'static,
+    {
+        if self.field_probe.is_some() || self.iteration != self.settings.static_iterations {
+            return;
+        }
+        let Some(k) = self.field_probe_iterations() else {
+            return;
+        };
+        let s = &self.settings;
+        let widths = field_probe::candidate_widths(s.field.width, s.size.field_halvings);
+        let train = |width, train_views: &[View]| {
+            let mut p = self.fork_with_field_width(width);
+            for _ in 0..k {
+                p.step(r, train_views);
+            }
+            p
+        };
+        let score = |p: &Trainer, held: &[View]| {
+            Judge::new(r, held, p.settings.background).psnr(&p.candidate())
+        };
+        let tolerance_db = s.size.tolerance_db;
+        let Some((chosen, sum)) = field_probe::run(views, widths, tolerance_db, train, score)
+        else {
+            return;
+        };
+        self.adopt_probe(chosen);
+        self.field_probe = Some(FieldProbeSummary {
+            iteration: self.settings.static_iterations,
+            probe_iterations: k,
+            ..sum
+        });
+    }
+
+    /// A copy of the training state with a fresh field of `width` (no probe of its own).
+    fn fork_with_field_width(&self, width: usize) -> Trainer {
+        let mut settings = self.settings.clone();
+        settings.field.width = width;
+        settings.size.field_probe = 0;
+        let mut t = Trainer::new(settings, self.splats.clone(), self.extent);
+        t.adam = self.adam.clone();
+        t.stats = self.stats.clone();
+        t.iteration = self.iteration;
+        t.split = self.split;
+        t
+    }
+
+    /// Go on from a probe's state (its Gaussians, field, optimiser and iteration).
+    fn adopt_probe(&mut self, p: Trainer) {
+        self.settings.field = p.settings.field;
+        self.splats = p.splats;
+        self.field = p.field;
+        self.adam = p.adam;
+        self.field_adam = p.field_adam;
+        self.stats = p.stats;
+        self.iteration = p.iteration;
+        // Buffers sized for the old field.
+        self.spare.clear();
     }
 
     fn apply_grads(&mut self, g: &SplatGrads, it: u32) {

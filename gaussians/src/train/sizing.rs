@@ -30,10 +30,13 @@
 //! field); `field_probe.rs` can choose it at the field's switch from views held out of
 //! training (opt-in, `field_probe`).
 
-use super::judge::{Candidate, Judge, at_time, gather_deltas, middle_time, posed_deltas};
+use super::judge::{Candidate, Judge, gather_deltas, middle_time, posed_deltas};
 use super::sh_refit::refit_sh;
-use super::{Trainer, View, static_split};
+use super::static_split;
 use crate::Rasterizer;
+use crate::densify::GradStats;
+use crate::motion::at_time;
+use crate::optim::Adam;
 use crate::raster::sh::num_coeffs;
 use crate::splats::Splats;
 use serde::{Deserialize, Serialize};
@@ -269,244 +272,245 @@ pub fn truncate_sh(sh_rest: &mut [[f32; 45]], degree: u32) {
     }
 }
 
-impl Trainer {
-    /// The iteration of the sizing (`None`: no sizing in this run).
-    pub fn sizing_iteration(&self) -> Option<u32> {
-        let s = &self.settings;
-        if s.size.tolerance_db <= 0.0 {
-            return None;
-        }
-        Some(match s.size.at {
-            0 => s.densify.until_iter.min(s.iterations),
-            at => at,
-        })
+/// The iteration of the sizing (`None`: no sizing in this run): `size.at`, or with 0 the
+/// end of densification (`densify_until`) or of the run (`iterations`), the earlier.
+pub fn iteration(size: &SizeSettings, densify_until: u32, iterations: u32) -> Option<u32> {
+    if size.tolerance_db <= 0.0 {
+        return None;
     }
+    Some(match size.at {
+        0 => densify_until.min(iterations),
+        at => at,
+    })
+}
 
-    /// Size the model when its iteration has come (module docs), recording what was
-    /// decided in `self.sizing`.
-    pub fn size_if_due<R: Rasterizer>(&mut self, r: &R, views: &[View]) {
-        if self.sizing.is_some() || self.sizing_iteration() != Some(self.iteration) {
-            return;
+/// What the sizing decided ([`decide`]), made on the trainer's state by
+/// [`Decision::apply`].
+pub struct Decision {
+    /// What was measured and decided; the trainer adds the iteration, the cap before and
+    /// the sized model's figures.
+    pub summary: SizingSummary,
+    /// The SH degree from now on (`None`: the degree was not sized).
+    pub sh_degree: Option<u32>,
+    /// Canonical Gaussians in place of the model's: frozen (without the field) or split
+    /// (the field on its dynamic ones).
+    model: Option<Splats>,
+    /// Whether the model keeps its field.
+    field: bool,
+    /// The colours refitted to `sh_degree` (indexed as the model before `keep`), when the
+    /// degree was lowered.
+    refit: Option<Splats>,
+    /// The Gaussians kept (ascending indices; `None`: all).
+    keep: Option<Vec<usize>>,
+}
+
+/// Size `model` (module docs): the trainer's model as it renders now (its field only
+/// while on, no deltas), scored by `judge` at the train views; `field_trained`: the field
+/// has trained since its switch (a field switched on this very iteration is still the
+/// identity: nothing to learn from it).
+pub fn decide<R: Rasterizer>(
+    judge: &mut Judge<R>,
+    model: Candidate,
+    size: &SizeSettings,
+    field_trained: bool,
+) -> Decision {
+    let views = judge.views;
+    let Candidate {
+        splats,
+        field,
+        dynamic_only,
+        sh_degree: sh_before,
+        ..
+    } = model;
+    let had_field = field.is_some();
+    // The model frozen at the middle of the recording: the field's deformation at
+    // that time baked into the Gaussians.
+    let wanted = size.drop_field || size.split_max_px > 0.0;
+    let frozen = (wanted && field.is_some() && field_trained)
+        .then(|| at_time(splats, field, dynamic_only, middle_time(views)).into_owned());
+    let mut c = Candidate {
+        deltas: None,
+        ..model
+    };
+    let before = judge.psnr(&c);
+    let mut target = before - size.tolerance_db;
+    let mut sum = SizingSummary {
+        tolerance_db: size.tolerance_db,
+        train_psnr_before: before,
+        sh_degree_before: sh_before,
+        sh_degree: sh_before,
+        gaussians_before: splats.len(),
+        ..SizingSummary::default()
+    };
+    let mut split_model = None;
+    if let (Some(f), Some(mlp)) = (&frozen, field) {
+        let frozen_c = Candidate {
+            splats: f,
+            field: None,
+            ..c
+        };
+        let p = judge.psnr(&frozen_c);
+        sum.train_psnr_without_field = Some(p);
+        let cams: Vec<_> = views.iter().map(|v| v.camera).collect();
+        let times: Vec<f32> = views.iter().map(|v| v.time).collect();
+        let times = static_split::sample_times(&times);
+        let mid = middle_time(views);
+        let motion = static_split::centre_motion_px(mlp, splats, dynamic_only, &cams, &times, mid);
+        sum.field_motion_px_quantiles =
+            Some(static_split::quantiles(&motion, [0.5, 0.99, 0.999, 1.0]));
+        if size.still_px > 0.0 {
+            let moving = motion.iter().filter(|&&m| m > size.still_px).count();
+            let worse = judge.worse_fraction(&c, &frozen_c, size.still_visible);
+            sum.visibly_worse_without_field = Some(worse);
+            sum.still = moving * 1000 <= motion.len() && worse <= STILL_WORSE_FRACTION;
         }
-        let start = std::time::Instant::now();
-        let size = self.settings.size;
-        let mut judge = Judge {
-            r,
-            views,
-            background: self.settings.background,
-            evaluations: 0,
-        };
-        let dynamic_only = self.settings.dynamic_only;
-        let sh_before = self.sh_degree();
-        let field = self.field_on().then_some(&self.field);
-        let had_field = field.is_some();
-        // The model frozen at the middle of the recording: the field's deformation at
-        // that time baked into the Gaussians (a field switched on this very iteration is
-        // still the identity: nothing to learn from it).
-        let field_trained = self.iteration > self.settings.static_iterations;
-        let wanted = size.drop_field || size.split_max_px > 0.0;
-        let frozen = (wanted && field.is_some() && field_trained)
-            .then(|| at_time(&self.splats, field, dynamic_only, middle_time(views)).into_owned());
-        let mut c = Candidate {
-            splats: &self.splats,
-            field,
-            dynamic_only,
-            sh_degree: sh_before,
-            deltas: None,
-        };
-        let before = judge.psnr(&c);
-        let target = before - size.tolerance_db;
-        let mut sum = SizingSummary {
-            iteration: self.iteration,
-            tolerance_db: size.tolerance_db,
-            train_psnr_before: before,
-            sh_degree_before: sh_before,
-            sh_degree: sh_before,
-            gaussians_before: self.splats.len(),
-            gaussian_cap_before: self.settings.densify.max_gaussians,
-            ..SizingSummary::default()
-        };
-        let mut target = target;
-        let mut split_model = None;
-        if let (Some(f), Some(mlp)) = (&frozen, field) {
-            let frozen_c = Candidate {
-                splats: f,
-                field: None,
-                ..c
-            };
-            let p = judge.psnr(&frozen_c);
-            sum.train_psnr_without_field = Some(p);
-            let cams: Vec<_> = views.iter().map(|v| v.camera).collect();
-            let times: Vec<f32> = views.iter().map(|v| v.time).collect();
-            let times = static_split::sample_times(&times);
-            let mid = middle_time(views);
-            let motion =
-                static_split::centre_motion_px(mlp, &self.splats, dynamic_only, &cams, &times, mid);
-            sum.field_motion_px_quantiles =
-                Some(static_split::quantiles(&motion, [0.5, 0.99, 0.999, 1.0]));
-            if size.still_px > 0.0 {
-                let moving = motion.iter().filter(|&&m| m > size.still_px).count();
-                let worse = judge.worse_fraction(&c, &frozen_c, size.still_visible);
-                sum.visibly_worse_without_field = Some(worse);
-                sum.still = moving * 1000 <= motion.len() && worse <= STILL_WORSE_FRACTION;
-            }
-            if size.drop_field && (sum.still || p >= target) {
-                c = frozen_c;
-                sum.field_dropped = true;
-                // The rest of the budget counts from the frozen model when a still
-                // scene's field went below it.
-                target = target.min(p - size.tolerance_db);
-            } else if size.split_max_px > 0.0 {
-                // The largest tolerance whose split stays within the budget.
-                for k in 0..SPLIT_STEPS {
-                    let tolerance_px = size.split_max_px / (1 << k) as f32;
-                    let model = split(&self.splats, f, &motion, tolerance_px);
-                    let p = judge.psnr(&Candidate {
-                        splats: &model,
-                        dynamic_only: true,
-                        ..c
+        if size.drop_field && (sum.still || p >= target) {
+            c = frozen_c;
+            sum.field_dropped = true;
+            // The rest of the budget counts from the frozen model when a still
+            // scene's field went below it.
+            target = target.min(p - size.tolerance_db);
+        } else if size.split_max_px > 0.0 {
+            // The largest tolerance whose split stays within the budget.
+            for k in 0..SPLIT_STEPS {
+                let tolerance_px = size.split_max_px / (1 << k) as f32;
+                let model = split(splats, f, &motion, tolerance_px);
+                let p = judge.psnr(&Candidate {
+                    splats: &model,
+                    dynamic_only: true,
+                    ..c
+                });
+                if p >= target {
+                    let dynamic = model.dynamic.iter().filter(|&&d| d).count();
+                    sum.split = Some(SplitChoice {
+                        tolerance_px,
+                        dynamic,
+                        static_: model.len() - dynamic,
+                        train_psnr: p,
                     });
-                    if p >= target {
-                        let dynamic = model.dynamic.iter().filter(|&&d| d).count();
-                        sum.split = Some(SplitChoice {
-                            tolerance_px,
-                            dynamic,
-                            static_: model.len() - dynamic,
-                            train_psnr: p,
-                        });
-                        split_model = Some(model);
-                        break;
-                    }
+                    split_model = Some(model);
+                    break;
                 }
             }
         }
-        if let Some(m) = &split_model {
-            c = Candidate {
-                splats: m,
-                dynamic_only: true,
-                ..c
-            };
-        }
-        // From here on the candidates keep the field's motion of each Gaussian they
-        // keep: evaluate the field once per view.
-        let posed = posed_deltas(&c, views);
-        let mut c = Candidate {
-            deltas: posed.as_deref(),
+    }
+    if let Some(m) = &split_model {
+        c = Candidate {
+            splats: m,
+            dynamic_only: true,
             ..c
         };
-        // A lower degree is scored (and kept) refitted to the colours the train cameras
-        // see, not truncated (`sh_refit.rs`).
-        let mut refit = None;
-        if size.sh_degree {
-            let eyes: Vec<[f64; 3]> = views
-                .iter()
-                .map(|v| v.camera.cam_to_world.translation.to_array())
-                .collect();
-            let (d, tried) = choose_sh_degree(
-                |d| {
-                    let r = refit_sh(c.splats, sh_before, d, &eyes);
-                    let p = judge.psnr(&Candidate {
-                        splats: &r,
-                        sh_degree: d,
-                        ..c
-                    });
-                    refit = Some(r);
-                    p
-                },
-                sh_before,
-                target,
-            );
-            if d == sh_before {
-                refit = None;
-            }
-            (sum.sh_degree, sum.train_psnr_by_sh_degree) = (d, tried);
-        }
-        if let Some(r) = &refit {
-            c = Candidate {
-                splats: r,
-                sh_degree: sum.sh_degree,
-                ..c
-            };
-        }
-        let mut keep = None;
-        let weights = if size.prune {
-            judge.contributions(&c)
-        } else {
-            None
-        };
-        if let Some(w) = weights {
-            let n = w.len();
-            let weighed = w.iter().filter(|&&v| v > 0.0).count();
-            sum.gaussians_without_weight = n - weighed;
-            let k = smallest_count(n, weighed, |k| {
-                let kept = top_k(&w, k);
-                let sub = gather(c.splats, &kept);
-                let deltas = c.deltas.map(|d| gather_deltas(d, &kept));
-                judge.psnr(&Candidate {
-                    splats: &sub,
-                    deltas: deltas.as_deref(),
+    }
+    // From here on the candidates keep the field's motion of each Gaussian they
+    // keep: evaluate the field once per view.
+    let posed = posed_deltas(&c, views);
+    let mut c = Candidate {
+        deltas: posed.as_deref(),
+        ..c
+    };
+    // A lower degree is scored (and kept) refitted to the colours the train cameras
+    // see, not truncated (`sh_refit.rs`).
+    let mut refit = None;
+    if size.sh_degree {
+        let eyes: Vec<[f64; 3]> = views
+            .iter()
+            .map(|v| v.camera.cam_to_world.translation.to_array())
+            .collect();
+        let (d, tried) = choose_sh_degree(
+            |d| {
+                let r = refit_sh(c.splats, sh_before, d, &eyes);
+                let p = judge.psnr(&Candidate {
+                    splats: &r,
+                    sh_degree: d,
                     ..c
-                }) >= target
-            });
-            keep = (k < n).then(|| top_k(&w, k));
-        }
-        let (sh, dynamic_only) = (c.sh_degree, c.dynamic_only);
-        let field_kept = had_field && !sum.field_dropped;
-        let model = match frozen.filter(|_| sum.field_dropped) {
-            Some(f) => Some(f),
-            None => split_model,
-        };
-        self.apply_sizing(
-            size.sh_degree.then_some(sh),
-            refit,
-            model,
-            field_kept,
-            keep.as_deref(),
+                });
+                refit = Some(r);
+                p
+            },
+            sh_before,
+            target,
         );
-        let c = Candidate {
-            splats: &self.splats,
-            field: field_kept.then_some(&self.field),
-            dynamic_only,
-            sh_degree: sh,
-            deltas: None,
+        if d == sh_before {
+            refit = None;
+        }
+        (sum.sh_degree, sum.train_psnr_by_sh_degree) = (d, tried);
+    }
+    if let Some(r) = &refit {
+        c = Candidate {
+            splats: r,
+            sh_degree: sum.sh_degree,
+            ..c
         };
-        sum.train_psnr_after = judge.psnr(&c);
-        sum.gaussians = self.splats.len();
-        sum.evaluations = judge.evaluations;
-        sum.seconds = start.elapsed().as_secs_f64();
-        self.sizing = Some(sum);
+    }
+    let mut keep = None;
+    let weights = if size.prune {
+        judge.contributions(&c)
+    } else {
+        None
+    };
+    if let Some(w) = weights {
+        let n = w.len();
+        let weighed = w.iter().filter(|&&v| v > 0.0).count();
+        sum.gaussians_without_weight = n - weighed;
+        let k = smallest_count(n, weighed, |k| {
+            let kept = top_k(&w, k);
+            let sub = gather(c.splats, &kept);
+            let deltas = c.deltas.map(|d| gather_deltas(d, &kept));
+            judge.psnr(&Candidate {
+                splats: &sub,
+                deltas: deltas.as_deref(),
+                ..c
+            }) >= target
+        });
+        keep = (k < n).then(|| top_k(&w, k));
+    }
+    let sh = size.sh_degree.then_some(c.sh_degree);
+    let field_kept = had_field && !sum.field_dropped;
+    let canonical = match frozen.filter(|_| sum.field_dropped) {
+        Some(f) => Some(f),
+        None => split_model,
+    };
+    Decision {
+        summary: sum,
+        sh_degree: sh,
+        model: canonical,
+        field: field_kept,
+        refit,
+        keep,
+    }
+}
+
+impl Decision {
+    /// The Gaussian count when the sizing dropped some (the cap from then on: densification
+    /// may still move Gaussians where they are needed, not add to them).
+    pub fn kept(&self) -> Option<usize> {
+        self.keep.as_ref().map(Vec::len)
     }
 
-    /// Make the sizing's decisions: the SH degree `sh` from now on (with the colours of
-    /// `refit`, indexed as the model before `keep`, when the degree was lowered),
-    /// `model` in place of the canonical Gaussians (frozen, without the field; or split,
-    /// the field on its dynamic ones), only `keep`.
-    fn apply_sizing(
-        &mut self,
-        sh: Option<u32>,
-        refit: Option<Splats>,
-        model: Option<Splats>,
-        field: bool,
-        keep: Option<&[usize]>,
-    ) {
-        if let Some(mut m) = model {
-            if field {
-                self.settings.dynamic_only = true;
-            } else {
+    /// Make the decisions on the trainer's Gaussians, their Adam moments (groups in the
+    /// trainer's order: 5 is `sh_rest`) and densification statistics: the model in place
+    /// of the canonical Gaussians, the SH degree (with the refitted colours), only the
+    /// Gaussians kept. The settings that go with them (`deform`, `dynamic_only`,
+    /// `sh_degree`, the cap) are the trainer's to change. Returns the summary.
+    pub fn apply(
+        self,
+        splats: &mut Splats,
+        adam: &mut Adam,
+        stats: &mut GradStats,
+    ) -> SizingSummary {
+        if let Some(mut m) = self.model {
+            if !self.field {
                 m.dynamic.clear();
-                self.settings.deform = false;
-                self.settings.dynamic_only = false;
             }
-            self.splats = m;
+            *splats = m;
         }
-        if let Some(r) = refit {
-            (self.splats.sh_dc, self.splats.sh_rest) = (r.sh_dc, r.sh_rest);
+        if let Some(r) = self.refit {
+            (splats.sh_dc, splats.sh_rest) = (r.sh_dc, r.sh_rest);
         }
-        if let Some(sh) = sh {
-            self.settings.sh_degree = sh;
-            truncate_sh(&mut self.splats.sh_rest, sh);
+        if let Some(sh) = self.sh_degree {
+            truncate_sh(&mut splats.sh_rest, sh);
             // Adam's moments of the zeroed coefficients too (group 5: sh_rest).
-            let g = &mut self.adam.groups[5];
+            let g = &mut adam.groups[5];
             let from = 3 * (num_coeffs(sh) - 1);
             for item in 0..g.m.len() / g.width {
                 let cols = item * g.width + from..(item + 1) * g.width;
@@ -514,17 +518,15 @@ impl Trainer {
                 g.v[cols].fill(0.0);
             }
         }
-        if let Some(keep) = keep {
-            // The sized count is the cap from now on (densification may still move
-            // Gaussians where they are needed, not add to them).
-            self.settings.densify.max_gaussians = keep.len();
-            self.splats = gather(&self.splats, keep);
+        if let Some(keep) = &self.keep {
+            *splats = gather(splats, keep);
             let src: Vec<Option<usize>> = keep.iter().map(|&i| Some(i)).collect();
-            for k in 0..self.adam.groups.len() {
-                self.adam.remap(k, &src);
+            for k in 0..adam.groups.len() {
+                adam.remap(k, &src);
             }
-            self.stats = crate::densify::GradStats::new(self.splats.len());
+            *stats = GradStats::new(splats.len());
         }
+        self.summary
     }
 }
 

@@ -4,7 +4,11 @@
 //! A static Gaussian cannot be moved by the field, so the background cannot deform to
 //! make up for an error of the camera (the joint training's PoseNet is pinned by it),
 //! and the field runs on the dynamic Gaussians only (cheaper iterations).
+//!
+//! At the split's iteration [`decide`] makes it (the flags and the summary) and the
+//! trainer takes the flags on.
 
+use super::View;
 use crate::field::{self, Deltas, Mlp};
 use crate::splats::Splats;
 use scene::Camera;
@@ -143,6 +147,32 @@ pub struct SplitSummary {
     pub static_: usize,
     /// Quantiles 0.5, 0.9 and 0.99 of the Gaussians' motion in pixels.
     pub motion_px_quantiles: [f32; 3],
+}
+
+/// The split of `splats` by how far `field` moves each of them over the times of `views`
+/// in their pixels ([`field_motion_px`]): each Gaussian's dynamic flag (moved by more
+/// than `tolerance_px`) and the summary of a split at `iteration`.
+pub fn decide(
+    field: &Mlp<f32>,
+    splats: &Splats,
+    views: &[View],
+    tolerance_px: f32,
+    iteration: u32,
+) -> (Vec<bool>, SplitSummary) {
+    let cams: Vec<Camera> = views.iter().map(|v| v.camera).collect();
+    let times: Vec<f32> = views.iter().map(|v| v.time).collect();
+    let times = sample_times(&times);
+    let motion = field_motion_px(field, splats, &cams, &times);
+    let flags = dynamic_flags(&motion, tolerance_px);
+    let dynamic = flags.iter().filter(|&&d| d).count();
+    let summary = SplitSummary {
+        iteration,
+        tolerance_px,
+        dynamic,
+        static_: splats.len() - dynamic,
+        motion_px_quantiles: quantiles(&motion, [0.5, 0.9, 0.99]),
+    };
+    (flags, summary)
 }
 
 /// Quantiles `qs` (in [0, 1]) of `v` (nearest rank; 0 for an empty `v`).
