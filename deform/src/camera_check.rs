@@ -33,7 +33,7 @@ pub struct CameraCheck {
 }
 
 /// Centre distance and rotation angle (degrees) between two poses.
-pub fn pose_distance(a: &Pose, b: &Pose) -> (f64, f64) {
+pub(crate) fn pose_distance(a: &Pose, b: &Pose) -> (f64, f64) {
     let d = a
         .rotation
         .normalize()
@@ -47,7 +47,7 @@ pub fn pose_distance(a: &Pose, b: &Pose) -> (f64, f64) {
 }
 
 /// Mean and max of the distances between `estimated[k]` and `recorded[k]`.
-pub fn pose_error(estimated: &[Pose], recorded: &[Pose]) -> PoseError {
+pub(crate) fn pose_error(estimated: &[Pose], recorded: &[Pose]) -> PoseError {
     let n = estimated.len().min(recorded.len());
     let mut e = PoseError::default();
     for (a, b) in estimated.iter().zip(recorded) {

@@ -155,7 +155,7 @@ impl CameraPath {
     }
 
     /// From a `scene::Trajectory` (whose times are strictly increasing).
-    pub fn from_trajectory(tr: &Trajectory, interp: Interp) -> Result<Self, String> {
+    pub(crate) fn from_trajectory(tr: &Trajectory, interp: Interp) -> Result<Self, String> {
         Self::new(&tr.times, &tr.poses, interp)
     }
 
@@ -174,13 +174,13 @@ impl CameraPath {
     }
 
     /// `(t_first, t_last)`.
-    pub fn time_range(&self) -> (f64, f64) {
+    pub(crate) fn time_range(&self) -> (f64, f64) {
         (self.times[0], self.times[self.times.len() - 1])
     }
 
     /// `t` mapped to `[0, 1]` over the key times, clamped (0 for a single key): the
     /// input of the PoseNet.
-    pub fn normalised_time(&self, t: f64) -> f64 {
+    pub(crate) fn normalised_time(&self, t: f64) -> f64 {
         let (a, b) = self.time_range();
         if b > a && t.is_finite() {
             ((t - a) / (b - a)).clamp(0.0, 1.0)
@@ -191,7 +191,7 @@ impl CameraPath {
 
     /// The key times `(ta, tb)` of the segment holding `t` (`None` outside the covered
     /// time, for a single key or a NaN time).
-    pub fn bracket(&self, t: f64) -> Option<(f64, f64)> {
+    pub(crate) fn bracket(&self, t: f64) -> Option<(f64, f64)> {
         self.segment(t)
             .map(|(i, _)| (self.times[i], self.times[i + 1]))
     }
@@ -268,7 +268,7 @@ impl CameraPath {
 /// Symmetric-difference camera velocity between pose `a` (time `t − h/2`) and pose `b`
 /// (time `t + h/2`), in the frame of the mid rotation (module docs). Zero when `h` is
 /// zero or not finite.
-pub fn velocity_between(a: &Pose, b: &Pose, h: f64) -> CameraVelocity {
+pub(crate) fn velocity_between(a: &Pose, b: &Pose, h: f64) -> CameraVelocity {
     if h == 0.0 || !h.is_finite() {
         return CameraVelocity::ZERO;
     }
@@ -287,7 +287,7 @@ pub fn velocity_between(a: &Pose, b: &Pose, h: f64) -> CameraVelocity {
 /// `dφ = −J_l⁻¹(φ)·α + J_r⁻¹(φ)·β`, `du = [u]×·α − a + Exp(φ)·b`,
 /// `d(Q·u) = Q·du + Q·[u]×·J_r(−φ/2)·dφ/2` (α, β the rotation and a, b the translation
 /// parts of ε_a, ε_b).
-pub fn velocity_between_backward(
+pub(crate) fn velocity_between_backward(
     a: &Pose,
     b: &Pose,
     h: f64,

@@ -51,7 +51,7 @@ pub enum ContrastMode {
 }
 
 impl ContrastMode {
-    pub fn uses_estimate(self) -> bool {
+    pub(crate) fn uses_estimate(self) -> bool {
         matches!(self, ContrastMode::Estimate | ContrastMode::EstimateLearn)
     }
     pub fn learns(self) -> bool {
@@ -346,7 +346,7 @@ pub struct ContrastReport {
 /// `C` learned through `L_event`: Adam on `log C` (positive by construction; a step
 /// moves `C` by a ratio, the same for any scale of `C`).
 #[derive(Clone, Debug)]
-pub struct LearnedContrast {
+pub(crate) struct LearnedContrast {
     log_c: [f32; 1],
     adam: Adam,
 }

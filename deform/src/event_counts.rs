@@ -65,7 +65,7 @@ impl Planes {
 
 /// The `B + 1` bin edges of `[t0, t1)` with `bins` bins: `edges[0] = t0`,
 /// `edges[B] = t1` exactly, `t0 + b·(t1 − t0)/B` between.
-pub fn bin_edges(t0: f64, t1: f64, bins: usize) -> Vec<f64> {
+pub(crate) fn bin_edges(t0: f64, t1: f64, bins: usize) -> Vec<f64> {
     (0..=bins)
         .map(|b| match b {
             0 => t0,
@@ -77,7 +77,7 @@ pub fn bin_edges(t0: f64, t1: f64, bins: usize) -> Vec<f64> {
 
 /// Events left out of the counts (module docs): nothing by default.
 #[derive(Clone, Debug, Default, PartialEq)]
-pub struct Exclusion {
+pub(crate) struct Exclusion {
     /// Per interval, per bin: left out (an interval's entry empty or missing: none).
     pub bins: Vec<Vec<bool>>,
     /// Per pixel, row-major: left out (`None`: none).
@@ -118,7 +118,7 @@ impl IntervalCounts {
     /// [`IntervalCounts::build`] without the events of the bins flagged in
     /// `excluded_bins` (empty: none; else one flag per bin) and of the pixels flagged in
     /// `excluded_pixels` (module docs). Panics also if either has the wrong length.
-    pub fn build_excluding(
+    pub(crate) fn build_excluding(
         events: &EventSlice<'_>,
         t0: f64,
         t1: f64,
@@ -237,12 +237,12 @@ impl IntervalCounts {
     }
 
     /// Whether the events of bin `b` are left out.
-    pub fn bin_excluded(&self, b: usize) -> bool {
+    pub(crate) fn bin_excluded(&self, b: usize) -> bool {
         self.excluded_bins.get(b).copied().unwrap_or(false)
     }
 
     /// Whether the events of pixel `i` (row-major) are left out.
-    pub fn pixel_excluded(&self, i: usize) -> bool {
+    pub(crate) fn pixel_excluded(&self, i: usize) -> bool {
         self.excluded_pixels.as_ref().is_some_and(|p| p[i])
     }
 
@@ -322,7 +322,7 @@ impl IntervalCounts {
     /// negated when `tb < ta`. With `events` (the slice the counts were built from) the
     /// counts are exact, else interpolated within the partial bins (module docs).
     /// Panics if `events` is not that slice (offset or length differ).
-    pub fn signed_counts(
+    pub(crate) fn signed_counts(
         &self,
         ta: f64,
         tb: f64,
@@ -399,7 +399,7 @@ impl EventCounts {
     }
 
     /// [`EventCounts::build`] without the events `excluded` names (module docs).
-    pub fn build_excluding(
+    pub(crate) fn build_excluding(
         events: &EventSlice<'_>,
         frame_times: &[f64],
         settings: &CountSettings,

@@ -104,7 +104,7 @@ pub enum EventChannels {
 
 /// The inputs of a pseudo image: the interval's counts and its two frames.
 #[derive(Clone, Copy, Debug)]
-pub struct PseudoInputs<'a, R> {
+pub(crate) struct PseudoInputs<'a, R> {
     pub counts: &'a IntervalCounts,
     /// The event slice the counts were built from (exact counts), or `None`
     /// (interpolated within the partial bins).
@@ -157,7 +157,7 @@ fn side<R: Real>(i: R, n: R, c: R, eps: R, black: R, sat: R) -> Option<(R, R)> {
 
 /// Eq. 11 (and its two-sided variant): the pseudo image at `t_e` (clamped to the
 /// interval) into `out`.
-pub fn pseudo_image<R: Real>(
+pub(crate) fn pseudo_image<R: Real>(
     inp: &PseudoInputs<'_, R>,
     t_e: f64,
     mode: PseudoMode,
@@ -253,7 +253,7 @@ pub fn pseudo_image<R: Real>(
 
 /// The value of `L_event`, its gradient w.r.t. `C`, and the number of valid values.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct EventLoss<R> {
+pub(crate) struct EventLoss<R> {
     pub loss: R,
     pub d_contrast: R,
     pub valid: usize,
@@ -303,7 +303,7 @@ fn band_residual<R: Real>(p: &PseudoImage<R>, i: usize, x: R) -> (R, R) {
 /// the pseudo image), or with a dead zone ([`PseudoSettings::band`]) the distance of `R`
 /// outside `[lo, hi]`; with `grad_render`, writes `∂L/∂R` (0 on masked values and inside
 /// the band). No valid value gives a zero loss and zero gradients.
-pub fn event_loss<R: Real>(
+pub(crate) fn event_loss<R: Real>(
     render: &[R],
     pseudo: &PseudoImage<R>,
     grad_render: Option<&mut [R]>,
@@ -371,7 +371,7 @@ pub fn srgb_to_linear<R: Real>(c: R) -> R {
 
 /// Luminance (Rec. 709, [`LUMA`]) of a planar linear RGB image of `n` pixels (what an
 /// event pixel integrates).
-pub fn planar_luminance<R: Real>(rgb: &[R], n: usize) -> Vec<R> {
+pub(crate) fn planar_luminance<R: Real>(rgb: &[R], n: usize) -> Vec<R> {
     assert_eq!(
         rgb.len(),
         3 * n,
@@ -386,7 +386,7 @@ pub fn planar_luminance<R: Real>(rgb: &[R], n: usize) -> Vec<R> {
 /// `d linear / d encoded` of the sRGB curve, the linear segment below 0.04045 extended
 /// to negative values.
 #[inline]
-pub fn srgb_slope<R: Real>(c: R) -> R {
+pub(crate) fn srgb_slope<R: Real>(c: R) -> R {
     if c <= R::from_f64(0.040_45) {
         R::ONE / R::from_f64(12.92)
     } else {
@@ -398,7 +398,7 @@ pub fn srgb_slope<R: Real>(c: R) -> R {
 /// Eq. 11 on a render as stored (planar RGB, sRGB-encoded when `srgb`): linearised,
 /// reduced to luminance for [`EventChannels::Luminance`] (the pseudo image then has one
 /// plane), compared by [`event_loss`]; `grad` receives `∂L/∂(stored value)`.
-pub fn render_event_loss<R: Real>(
+pub(crate) fn render_event_loss<R: Real>(
     stored: &[R],
     srgb: bool,
     channels: EventChannels,
@@ -433,7 +433,7 @@ pub fn render_event_loss<R: Real>(
 
 /// Linear value in `[0, 1]` → sRGB-encoded (IEC 61966-2-1).
 #[inline]
-pub fn linear_to_srgb<R: Real>(l: R) -> R {
+pub(crate) fn linear_to_srgb<R: Real>(l: R) -> R {
     if l <= R::from_f64(0.003_130_8) {
         l * R::from_f64(12.92)
     } else {

@@ -24,7 +24,7 @@ use serde::Serialize;
 
 /// Why an iteration's `L_event` was skipped.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum EventSkip {
+pub(crate) enum EventSkip {
     /// The interval has zero length (frames at the same time).
     EmptyInterval,
     /// No event in the interval (a gap in the recording).
@@ -36,7 +36,7 @@ pub enum EventSkip {
 
 /// Why the interval `k` cannot supervise `L_event`, if it cannot (before any pseudo
 /// image is made).
-pub fn interval_skip(k: &IntervalCounts) -> Option<EventSkip> {
+pub(crate) fn interval_skip(k: &IntervalCounts) -> Option<EventSkip> {
     let (a, b) = k.span();
     if b <= a {
         Some(EventSkip::EmptyInterval)
@@ -84,7 +84,7 @@ pub struct Fallbacks {
 
 impl Fallbacks {
     /// Count one skipped `L_event`.
-    pub fn skip_event(&mut self, why: EventSkip) {
+    pub(crate) fn skip_event(&mut self, why: EventSkip) {
         self.event_steps_skipped += 1;
         *match why {
             EventSkip::EmptyInterval => &mut self.event_skipped_empty_interval,
@@ -94,7 +94,7 @@ impl Fallbacks {
     }
 
     /// Count the bound events one `L_motion` left out.
-    pub fn drop_bindings(&mut self, d: &DroppedBindings) {
+    pub(crate) fn drop_bindings(&mut self, d: &DroppedBindings) {
         self.bindings_dropped_no_flow += d.no_flow as u64;
         self.bindings_dropped_outliers += d.outliers as u64;
         self.bindings_dropped_disagreeing += d.disagreeing as u64;
@@ -105,7 +105,7 @@ impl Fallbacks {
 
 /// The bound events one `L_motion` left out, by reason.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct DroppedBindings {
+pub(crate) struct DroppedBindings {
     /// No (finite) flow.
     pub no_flow: usize,
     /// Outliers among their Gaussian's events.

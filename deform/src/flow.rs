@@ -48,7 +48,7 @@ pub struct Pinhole<R> {
 }
 
 impl<R: Real> Pinhole<R> {
-    pub fn from_intrinsics(k: &Intrinsics) -> Self {
+    pub(crate) fn from_intrinsics(k: &Intrinsics) -> Self {
         Pinhole {
             fx: R::from_f64(k.fx),
             fy: R::from_f64(k.fy),
@@ -83,7 +83,7 @@ impl<R: Real> Flow2<R> {
 
 /// Where `F_ego` is evaluated: pixel coordinates and inverse depth, one entry per point.
 #[derive(Clone, Copy, Debug)]
-pub struct EgoPoints<'a, R> {
+pub(crate) struct EgoPoints<'a, R> {
     pub u: &'a [R],
     pub v: &'a [R],
     pub inv_depth: &'a [R],
@@ -92,7 +92,7 @@ pub struct EgoPoints<'a, R> {
 /// Gradients of [`ego_flow_backward`]: per point w.r.t. inverse depth and pixel
 /// position, and w.r.t. the camera velocity `[v, ω]` (OpenGL camera frame), summed.
 #[derive(Clone, Debug, Default, PartialEq)]
-pub struct EgoGrad<R> {
+pub(crate) struct EgoGrad<R> {
     pub inv_depth: Vec<R>,
     pub u: Vec<R>,
     pub v: Vec<R>,
@@ -124,7 +124,7 @@ fn to_cv<R: Real>(vel: &[R; 6]) -> [R; 6] {
 /// pixel `(u, v)` with inverse depth `rho`, for the camera velocity `vel = [v, ω]`
 /// (OpenGL camera frame, units/s and rad/s). No validity check.
 #[inline]
-pub fn ego_flow_at<R: Real>(k: &Pinhole<R>, u: R, v: R, rho: R, vel: &[R; 6]) -> [R; 2] {
+pub(crate) fn ego_flow_at<R: Real>(k: &Pinhole<R>, u: R, v: R, rho: R, vel: &[R; 6]) -> [R; 2] {
     let [vx, vy, vz, wx, wy, wz] = to_cv(vel);
     let x = (u - k.cx) / k.fx;
     let y = (v - k.cy) / k.fy;
@@ -136,7 +136,7 @@ pub fn ego_flow_at<R: Real>(k: &Pinhole<R>, u: R, v: R, rho: R, vel: &[R; 6]) ->
 /// Backward of [`ego_flow_at`] for an upstream gradient `g` on the flow: returns
 /// `(∂/∂rho, ∂/∂u, ∂/∂v, ∂/∂vel)`.
 #[inline]
-pub fn ego_flow_at_backward<R: Real>(
+pub(crate) fn ego_flow_at_backward<R: Real>(
     k: &Pinhole<R>,
     u: R,
     v: R,
@@ -167,7 +167,7 @@ pub fn ego_flow_at_backward<R: Real>(
 }
 
 /// Eq. 9 at many points (rayon over chunks): `out` is resized to the number of points.
-pub fn ego_flow<R: Real>(
+pub(crate) fn ego_flow<R: Real>(
     k: &Pinhole<R>,
     vel: &[R; 6],
     pts: EgoPoints<'_, R>,
@@ -238,7 +238,7 @@ fn ego_flow_points<R: Real>(
 
 /// Backward of [`ego_flow`] from `g_u`, `g_v` (∂L/∂F_ego per point); invalid points get
 /// zero gradient. `grad` is resized and overwritten.
-pub fn ego_flow_backward<R: Real>(
+pub(crate) fn ego_flow_backward<R: Real>(
     k: &Pinhole<R>,
     vel: &[R; 6],
     pts: EgoPoints<'_, R>,
@@ -369,7 +369,7 @@ impl<R: Real> ProjCam<R> {
 
 /// The camera(s) of Eq. 10 (module docs).
 #[derive(Clone, Copy, Debug)]
-pub enum GsCameras<'a, R> {
+pub(crate) enum GsCameras<'a, R> {
     /// The paper's form: both centres projected by one camera.
     Same(&'a ProjCam<R>),
     /// `x(t0)` by the camera at `t0`, `x(t1)` by the camera at `t1`.
@@ -389,7 +389,7 @@ impl<'a, R> GsCameras<'a, R> {
 /// w.r.t. the camera-right twists of the cameras at `t0` and `t1` (for
 /// [`GsCameras::Same`] the whole camera gradient is in `cam0`, `cam1` is zero).
 #[derive(Clone, Debug, Default, PartialEq)]
-pub struct GsGrad<R> {
+pub(crate) struct GsGrad<R> {
     pub x0: Vec<[R; 3]>,
     pub x1: Vec<[R; 3]>,
     pub cam0: [R; 6],
@@ -398,7 +398,7 @@ pub struct GsGrad<R> {
 
 /// Eq. 10: `F_gs^i = Proj(x_i(t1)) − Proj(x_i(t0))` in px for every Gaussian (`x0`,
 /// `x1`: its deformed centres at `t0` and `t1`); `out` is resized.
-pub fn gaussian_flow<R: Real>(
+pub(crate) fn gaussian_flow<R: Real>(
     cams: GsCameras<'_, R>,
     x0: &[[R; 3]],
     x1: &[[R; 3]],
@@ -427,7 +427,7 @@ pub fn gaussian_flow<R: Real>(
 
 /// Backward of [`gaussian_flow`] from `g_u`, `g_v` (∂L/∂F_gs per Gaussian); invalid
 /// Gaussians get zero gradient. `grad` is resized and overwritten.
-pub fn gaussian_flow_backward<R: Real>(
+pub(crate) fn gaussian_flow_backward<R: Real>(
     cams: GsCameras<'_, R>,
     x0: &[[R; 3]],
     x1: &[[R; 3]],

@@ -23,7 +23,7 @@ pub fn skew(v: DVec3) -> DMat3 {
 }
 
 /// SO(3) exponential (Rodrigues' formula, as a unit quaternion); accurate for tiny angles.
-pub fn exp_so3(w: DVec3) -> DQuat {
+pub(crate) fn exp_so3(w: DVec3) -> DQuat {
     let th2 = w.length_squared();
     let th = th2.sqrt();
     // sin(θ/2)/θ and cos(θ/2), with their series below 1e-4 rad.
@@ -36,7 +36,7 @@ pub fn exp_so3(w: DVec3) -> DQuat {
 }
 
 /// SO(3) logarithm: the rotation vector of `q` with angle in `[0, π]`.
-pub fn log_so3(q: DQuat) -> DVec3 {
+pub(crate) fn log_so3(q: DQuat) -> DVec3 {
     let q = q.normalize();
     let q = if q.w < 0.0 { -q } else { q };
     let xyz = DVec3::new(q.x, q.y, q.z);
@@ -52,7 +52,7 @@ pub fn log_so3(q: DQuat) -> DVec3 {
 }
 
 /// Right Jacobian of SO(3): `Exp(φ + δ) ≈ Exp(φ)·Exp(J_r(φ)·δ)`.
-pub fn right_jacobian(phi: DVec3) -> DMat3 {
+pub(crate) fn right_jacobian(phi: DVec3) -> DMat3 {
     let th2 = phi.length_squared();
     let th = th2.sqrt();
     let (a, b) = if th < 1e-4 {
@@ -71,7 +71,7 @@ pub fn left_jacobian(phi: DVec3) -> DMat3 {
 
 /// Inverse of [`right_jacobian`]: `Exp(φ)·Exp(δ) ≈ Exp(φ + J_r⁻¹(φ)·δ)`. Singular at
 /// `|φ| = 2π`; fine for the angles between nearby poses.
-pub fn right_jacobian_inv(phi: DVec3) -> DMat3 {
+pub(crate) fn right_jacobian_inv(phi: DVec3) -> DMat3 {
     let th2 = phi.length_squared();
     let th = th2.sqrt();
     let c = if th < 1e-4 {
@@ -84,7 +84,7 @@ pub fn right_jacobian_inv(phi: DVec3) -> DMat3 {
 }
 
 /// Inverse of [`left_jacobian`]: `Exp(δ)·Exp(φ) ≈ Exp(φ + J_l⁻¹(φ)·δ)`.
-pub fn left_jacobian_inv(phi: DVec3) -> DMat3 {
+pub(crate) fn left_jacobian_inv(phi: DVec3) -> DMat3 {
     right_jacobian_inv(-phi)
 }
 

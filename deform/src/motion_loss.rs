@@ -119,7 +119,7 @@ pub fn robust<R: Real>(s: &MotionSettings, r: [R; 2]) -> (R, [R; 2]) {
 /// The Gaussian ↔ event bindings in CSR form: Gaussian `g` binds to
 /// `events[offsets[g]..offsets[g+1]]` with the matching `weights`.
 #[derive(Clone, Copy, Debug)]
-pub struct CsrBindings<'a> {
+pub(crate) struct CsrBindings<'a> {
     pub offsets: &'a [u32],
     pub events: &'a [u64],
     pub weights: &'a [f32],
@@ -127,7 +127,7 @@ pub struct CsrBindings<'a> {
 
 /// A per-Gaussian 2-D quantity with an optional validity flag.
 #[derive(Clone, Copy, Debug)]
-pub struct PerGaussian<'a, R> {
+pub(crate) struct PerGaussian<'a, R> {
     pub u: &'a [R],
     pub v: &'a [R],
     pub valid: Option<&'a [bool]>,
@@ -135,7 +135,7 @@ pub struct PerGaussian<'a, R> {
 
 /// Everything Eq. 12 needs.
 #[derive(Clone, Copy, Debug)]
-pub struct MotionInputs<'a, R> {
+pub(crate) struct MotionInputs<'a, R> {
     /// The span `Δt = t1 − t0` in seconds (signed).
     pub dt: R,
     pub bindings: CsrBindings<'a>,
@@ -152,7 +152,7 @@ pub struct MotionInputs<'a, R> {
 
 /// The value of `L_motion` and its counts.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct MotionLoss<R> {
+pub(crate) struct MotionLoss<R> {
     pub loss: R,
     /// Gaussians that contributed (`N`).
     pub bound: usize,
@@ -169,7 +169,7 @@ pub struct MotionLoss<R> {
 /// `∂L_motion/∂F_ego` (px/s) and `∂L_motion/∂F_gs` (px), per Gaussian; zero where a
 /// Gaussian does not contribute.
 #[derive(Clone, Debug, Default, PartialEq)]
-pub struct MotionGrad<R> {
+pub(crate) struct MotionGrad<R> {
     pub ego_u: Vec<R>,
     pub ego_v: Vec<R>,
     pub gs_u: Vec<R>,
@@ -320,7 +320,7 @@ fn residual<R: Real>(
 
 /// Eq. 12: `L_motion` (module docs); with `grad`, also its gradient (resized and
 /// overwritten). Deterministic: partial sums per fixed chunk, added in order.
-pub fn motion_loss<R: Real>(
+pub(crate) fn motion_loss<R: Real>(
     s: &MotionSettings,
     inp: &MotionInputs<'_, R>,
     grad: Option<&mut MotionGrad<R>>,

@@ -40,7 +40,11 @@ fn median(v: &mut [f32]) -> f32 {
 /// For each Gaussian (pixel `px`, mean flow over the span `flow` in px, `None` without
 /// one), whether it disagrees with its neighbours (module docs). Cost: a grid of
 /// `radius_px` cells, each Gaussian compared with the 3×3 cells around it.
-pub fn disagreeing(px: &[[f32; 2]], flow: &[Option<[f32; 2]>], s: &NeighbourSettings) -> Vec<bool> {
+pub(crate) fn disagreeing(
+    px: &[[f32; 2]],
+    flow: &[Option<[f32; 2]>],
+    s: &NeighbourSettings,
+) -> Vec<bool> {
     assert_eq!(px.len(), flow.len(), "disagreeing: one flow per Gaussian");
     let mut out = vec![false; px.len()];
     let r = s.radius_px as f32;

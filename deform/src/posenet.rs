@@ -212,7 +212,7 @@ impl<R: Real> PoseNet<R> {
     /// The correction at `t` anchored to zero at the neighbouring key times `ta ≤ t ≤ tb`
     /// (where the poses are known): `ξ(t) − (1 − s)·ξ(ta) − s·ξ(tb)`,
     /// `s = (t − ta)/(tb − ta)`. All times normalised.
-    pub fn forward_anchored(&self, t: R, ta: R, tb: R) -> [R; 6] {
+    pub(crate) fn forward_anchored(&self, t: R, ta: R, tb: R) -> [R; 6] {
         let mut out = [R::ZERO; 6];
         for (tk, w) in Self::anchor_weights(t, ta, tb) {
             let x = self.forward(tk);
@@ -222,7 +222,7 @@ impl<R: Real> PoseNet<R> {
     }
 
     /// [`Self::backward`] of [`Self::forward_anchored`].
-    pub fn backward_anchored(&self, t: R, ta: R, tb: R, g: [R; 6], grad: &mut [R]) {
+    pub(crate) fn backward_anchored(&self, t: R, ta: R, tb: R, g: [R; 6], grad: &mut [R]) {
         for (tk, w) in Self::anchor_weights(t, ta, tb) {
             self.backward(tk, g.map(|x| w * x), grad);
         }
@@ -230,7 +230,7 @@ impl<R: Real> PoseNet<R> {
 }
 
 /// The corrected pose `T·[Exp(ω) | v]`: `R' = R·Exp(ω)`, `c' = c + R·v`.
-pub fn apply_correction(pose: &Pose, xi: [f64; 6]) -> Pose {
+pub(crate) fn apply_correction(pose: &Pose, xi: [f64; 6]) -> Pose {
     let (v, w) = split(xi);
     Pose {
         rotation: (pose.rotation * exp_so3(w)).normalize(),
@@ -241,7 +241,7 @@ pub fn apply_correction(pose: &Pose, xi: [f64; 6]) -> Pose {
 /// From `∂L/∂ε` (camera-right twist of the *corrected* pose) to `∂L/∂ξ`:
 /// `ε_v = Exp(ω)ᵀ·dv`, `ε_ω = J_r(ω)·dω`, so `∂L/∂v = Exp(ω)·g_εv`,
 /// `∂L/∂ω = J_r(ω)ᵀ·g_εω` (the identity at `ξ = 0`).
-pub fn correction_backward(xi: [f64; 6], g_eps: [f64; 6]) -> [f64; 6] {
+pub(crate) fn correction_backward(xi: [f64; 6], g_eps: [f64; 6]) -> [f64; 6] {
     let (_, w) = split(xi);
     let (gv, gw) = split(g_eps);
     let gv: DVec3 = exp_so3(w) * gv;

@@ -140,7 +140,7 @@ fn median(v: &mut [f64]) -> f64 {
 impl RateOutliers {
     /// Test every pixel and every bin of the intervals between `frame_times` (sorted)
     /// with `bins` bins each, as the counts cut them.
-    pub fn detect(
+    pub(crate) fn detect(
         events: &EventSlice<'_>,
         frame_times: &[f64],
         bins: usize,
@@ -202,12 +202,12 @@ impl RateOutliers {
     }
 
     /// Number of burst bins over all intervals.
-    pub fn burst_bin_count(&self) -> usize {
+    pub(crate) fn burst_bin_count(&self) -> usize {
         self.burst_bins.iter().flatten().filter(|&&b| b).count()
     }
 
     /// The events the counts leave out: the burst bins and the hot pixels.
-    pub fn exclusion(&self) -> Exclusion {
+    pub(crate) fn exclusion(&self) -> Exclusion {
         Exclusion {
             bins: self.burst_bins.clone(),
             pixels: (!self.hot_pixels.is_empty()).then(|| Arc::from(self.hot.as_slice())),
@@ -216,7 +216,7 @@ impl RateOutliers {
 
     /// Whether an event at `t` in pixel `(x, y)` is left out (at a hot pixel or in a
     /// burst bin).
-    pub fn excludes(&self, t: f64, x: u16, y: u16) -> bool {
+    pub(crate) fn excludes(&self, t: f64, x: u16, y: u16) -> bool {
         let at_hot = self
             .hot
             .get(y as usize * self.width + x as usize)
@@ -232,7 +232,7 @@ impl RateOutliers {
     /// The events of `window` that are not left out, as a stream of their own, with the
     /// index of each in the stream `window` was cut from; `None` when none is left out
     /// (use `window` itself).
-    pub fn kept_events(&self, window: &EventSlice<'_>) -> Option<(EventStream, Vec<u64>)> {
+    pub(crate) fn kept_events(&self, window: &EventSlice<'_>) -> Option<(EventStream, Vec<u64>)> {
         let out = |i: usize| self.excludes(window.t[i], window.x[i], window.y[i]);
         if self.is_empty() || !(0..window.len()).any(out) {
             return None;

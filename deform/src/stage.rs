@@ -146,7 +146,7 @@ pub struct TrainOutcome {
 }
 
 /// Write `posenet.safetensors` (one tensor `params`) and `posenet.json` (its settings).
-pub fn save_posenet(p: &PoseNet<f32>, dir: &Path) -> Result<()> {
+pub(crate) fn save_posenet(p: &PoseNet<f32>, dir: &Path) -> Result<()> {
     let path = dir.join("posenet.safetensors");
     let bytes: Vec<u8> = p.params().iter().flat_map(|v| v.to_le_bytes()).collect();
     let view = TensorView::new(Dtype::F32, vec![p.params().len()], &bytes)

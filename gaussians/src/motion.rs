@@ -24,7 +24,7 @@ use std::borrow::Cow;
 pub const T0: f32 = 0.5;
 
 /// Values per Gaussian: velocity then acceleration, world units per normalised time.
-pub const WIDTH: usize = 6;
+pub(crate) const WIDTH: usize = 6;
 
 /// `(τ, τ²)` of normalised time `t`.
 fn powers(t: f32) -> (f32, f32) {
@@ -72,7 +72,7 @@ pub fn backward(s: &Splats, t: f32, g_means: &[[f32; 3]], out: &mut Vec<[f32; WI
 
 /// `s` deformed to time `t` by `field` and its trajectories (`s` itself without
 /// either).
-pub fn at_time<'s>(
+pub(crate) fn at_time<'s>(
     s: &'s Splats,
     field: Option<&Mlp<f32>>,
     dynamic_only: bool,

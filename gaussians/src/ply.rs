@@ -29,7 +29,7 @@ const ROT: usize = 58;
 
 /// One 3DGS vertex, parsed straight into fixed slots.
 #[derive(Clone, Debug)]
-pub struct Vertex(pub [f32; SLOTS]);
+pub(crate) struct Vertex(pub [f32; SLOTS]);
 
 /// Slot of a 3DGS property name.
 fn slot(name: &str) -> Option<usize> {
@@ -186,7 +186,7 @@ pub fn parse(path: &Path, bytes: &[u8]) -> Result<(Splats, u32)> {
 }
 
 /// [`read_counted`] from bytes already in memory.
-pub fn parse_counted(path: &Path, bytes: &[u8]) -> Result<PlyCloud> {
+pub(crate) fn parse_counted(path: &Path, bytes: &[u8]) -> Result<PlyCloud> {
     let bad = |msg: String| Error::invalid(path, msg);
     if bytes.is_empty() {
         return Err(bad("empty file, not a PLY".into()));

@@ -31,7 +31,7 @@ impl Rng {
     pub fn uniform(&mut self, a: f64, b: f64) -> f64 {
         a + (b - a) * (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
     }
-    pub fn vec3(&mut self, s: f64) -> DVec3 {
+    pub(crate) fn vec3(&mut self, s: f64) -> DVec3 {
         DVec3::new(
             self.uniform(-s, s),
             self.uniform(-s, s),
@@ -54,13 +54,13 @@ pub fn fd(x: &[f64], i: usize, h: f64, mut f: impl FnMut(&[f64]) -> f64) -> f64 
 }
 
 /// Central finite-difference gradient of `f` at `x`.
-pub fn fd_grad(x: &[f64], h: f64, mut f: impl FnMut(&[f64]) -> f64) -> Vec<f64> {
+pub(crate) fn fd_grad(x: &[f64], h: f64, mut f: impl FnMut(&[f64]) -> f64) -> Vec<f64> {
     (0..x.len()).map(|i| fd(x, i, h, &mut f)).collect()
 }
 
 /// Assert `|a − b| ≤ rel·max(|a|, |b|) + abs` element-wise, naming `what` and the index.
 #[track_caller]
-pub fn assert_close(what: &str, a: &[f64], b: &[f64], rel: f64, abs: f64) {
+pub(crate) fn assert_close(what: &str, a: &[f64], b: &[f64], rel: f64, abs: f64) {
     assert_eq!(a.len(), b.len(), "{what}: lengths differ");
     for (i, (&x, &y)) in a.iter().zip(b).enumerate() {
         let tol = rel * x.abs().max(y.abs()) + abs;

@@ -107,7 +107,7 @@ fn add_scaled(dst: &mut ModelGrads, src: &ModelGrads, w: f32) {
 
 /// Normalised time of the field at `t` seconds: linear between the neighbouring train
 /// frames' `(timestamp, time)`.
-pub fn field_time(d: &Inputs, t: f64) -> f32 {
+pub(crate) fn field_time(d: &Inputs, t: f64) -> f32 {
     let n = d.times.len();
     let j = d.times.partition_point(|&k| k <= t).clamp(1, n.max(2) - 1) - 1;
     if n < 2 || d.times[j + 1] <= d.times[j] {
@@ -211,7 +211,7 @@ impl JointTrainer {
 
     /// The camera's error at the held-out frames' times against their recorded poses
     /// (interpolated path, and with the PoseNet correction).
-    pub fn camera_check(&self, d: &Inputs) -> CameraCheck {
+    pub(crate) fn camera_check(&self, d: &Inputs) -> CameraCheck {
         let times: Vec<f64> = d.scene.test.frames.iter().map(|f| f.timestamp).collect();
         let recorded: Vec<_> = d.test.iter().map(|v| v.camera.cam_to_world).collect();
         let interp: Vec<_> = times.iter().map(|&t| d.path.pose_at(t)).collect();

@@ -27,7 +27,7 @@ impl Deltas {
         self.dx.is_empty()
     }
     /// `n` zero deltas in place (allocations kept).
-    pub fn set_zeros(&mut self, n: usize) {
+    pub(crate) fn set_zeros(&mut self, n: usize) {
         for v in [
             &mut self.dx as &mut dyn ZeroFill,
             &mut self.dq,

@@ -8,7 +8,7 @@ use scene::error::{Error, Result};
 use std::path::Path;
 
 pub const WEIGHTS_FILE: &str = "field.safetensors";
-pub const SETTINGS_FILE: &str = "field.json";
+pub(crate) const SETTINGS_FILE: &str = "field.json";
 
 /// Write `dir/field.safetensors` and `dir/field.json` atomically.
 pub fn save(mlp: &Mlp<f32>, dir: &Path) -> Result<()> {

@@ -23,7 +23,7 @@ pub struct LayerLayout {
 
 /// NeRF positional encoding with the raw input kept:
 /// `[v, sin(2⁰v), cos(2⁰v), …, sin(2^{L−1}v), cos(2^{L−1}v)]`.
-pub fn encoded_len(dims: usize, freqs: usize) -> usize {
+pub(crate) fn encoded_len(dims: usize, freqs: usize) -> usize {
     dims * (1 + 2 * freqs)
 }
 

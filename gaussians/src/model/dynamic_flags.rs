@@ -11,7 +11,7 @@ use std::path::Path;
 
 pub const FLAGS_FILE: &str = "dynamic.safetensors";
 /// Name of the tensor inside [`FLAGS_FILE`].
-pub const FLAGS_TENSOR: &str = "dynamic";
+pub(crate) const FLAGS_TENSOR: &str = "dynamic";
 
 /// Write `flags` to `path` atomically.
 pub fn write(path: &Path, flags: &[bool]) -> Result<()> {
@@ -61,7 +61,7 @@ pub fn read(path: &Path, n: usize) -> Result<Vec<bool>> {
 
 /// The format-1 string of `'1'` (dynamic) / `'0'` (static) for `n` Gaussians; errors
 /// name `path` (the `model.json` it came from).
-pub fn parse_legacy(path: &Path, text: &str, n: usize) -> Result<Vec<bool>> {
+pub(crate) fn parse_legacy(path: &Path, text: &str, n: usize) -> Result<Vec<bool>> {
     if text.len() != n || text.bytes().any(|b| b != b'0' && b != b'1') {
         return Err(Error::invalid(
             path,

@@ -25,7 +25,7 @@ pub use motion_file::MOTION_FILE;
 pub const PLY_FILE: &str = "point_cloud.ply";
 pub const INFO_FILE: &str = "model.json";
 /// Version of the `model.json` layout (2: dynamic flags in [`FLAGS_FILE`]).
-pub const FORMAT_VERSION: u32 = 2;
+pub(crate) const FORMAT_VERSION: u32 = 2;
 /// The layout that held the dynamic flags in `model.json` (still read).
 const LEGACY_FORMAT_VERSION: u32 = 1;
 

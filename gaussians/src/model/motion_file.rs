@@ -11,7 +11,7 @@ use std::path::Path;
 
 pub const MOTION_FILE: &str = "motion.safetensors";
 /// Name of the tensor inside [`MOTION_FILE`].
-pub const MOTION_TENSOR: &str = "motion";
+pub(crate) const MOTION_TENSOR: &str = "motion";
 
 /// Write `motion` to `path` atomically; refuses non-finite values.
 pub fn write(path: &Path, motion: &[[f32; WIDTH]]) -> Result<()> {

@@ -43,7 +43,7 @@ pub struct Bytes {
 }
 
 /// Trainable values per Gaussian at SH degree `degree`.
-pub fn parameters_per_gaussian(degree: u32) -> usize {
+pub(crate) fn parameters_per_gaussian(degree: u32) -> usize {
     3 + 3 + 4 + 1 + 3 * num_coeffs(degree.min(3))
 }
 

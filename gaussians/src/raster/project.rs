@@ -29,7 +29,7 @@ pub struct CamSetup {
 
 /// Limits `[x_lo, x_hi, y_lo, y_hi]` on `x/d`, `y/d` for the Jacobian: the image plus a
 /// 15 % margin on every side (3DGS's 1.3 × tan(fov/2) for a centred principal point).
-pub fn jacobian_limits(fx: f64, fy: f64, cx: f64, cy: f64, w: f64, h: f64) -> [f64; 4] {
+pub(crate) fn jacobian_limits(fx: f64, fy: f64, cx: f64, cy: f64, w: f64, h: f64) -> [f64; 4] {
     [
         (-0.5 - 0.15 * w - cx) / fx,
         (w - 0.5 + 0.15 * w - cx) / fx,
@@ -60,7 +60,7 @@ impl CamSetup {
 
 /// Rotation matrix of a unit quaternion `(w, x, y, z)`.
 #[inline]
-pub fn quat_to_mat(n: [f32; 4]) -> Mat3 {
+pub(crate) fn quat_to_mat(n: [f32; 4]) -> Mat3 {
     let [w, x, y, z] = n;
     Mat3::from_cols(
         Vec3::new(
@@ -275,7 +275,7 @@ pub fn project(s: &Splats, i: usize, cam: &CamSetup, sh_degree: u32) -> Option<G
 
 /// Gradients reaching one Gaussian from the image: `[u, v, conic a, b, c, opacity,
 /// r, g, b, depth]` (conic `b` is the off-diagonal entry, counted once).
-pub type ScreenGrad = [f32; 10];
+pub(crate) type ScreenGrad = [f32; 10];
 
 /// Parameter gradients of one Gaussian plus its contribution to the camera gradient.
 #[derive(Clone, Copy, Debug, Default)]

@@ -12,7 +12,7 @@ pub const C2: [f64; 5] = [
     -1.092_548_430_592_079_2,
     0.546_274_215_296_039_6,
 ];
-pub const C3: [f64; 7] = [
+pub(crate) const C3: [f64; 7] = [
     -0.590_043_589_926_643_5,
     2.890_611_442_640_554,
     -0.457_045_799_464_465_8,
@@ -23,7 +23,7 @@ pub const C3: [f64; 7] = [
 ];
 
 /// Number of SH coefficients per channel at `degree` (clamped to 3).
-pub fn num_coeffs(degree: u32) -> usize {
+pub(crate) fn num_coeffs(degree: u32) -> usize {
     let d = degree.min(3) as usize;
     (d + 1) * (d + 1)
 }

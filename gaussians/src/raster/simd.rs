@@ -10,7 +10,7 @@ pub use imp4::{F4, M4};
 pub use imp16::{F16, M16};
 
 /// Per-lane boolean mask.
-pub trait Mask: Copy {
+pub(crate) trait Mask: Copy {
     fn and(self, o: Self) -> Self;
     /// Lane k set ↔ bit k set.
     fn bits(self) -> u32;
@@ -18,7 +18,7 @@ pub trait Mask: Copy {
 }
 
 /// `N` f32 lanes.
-pub trait Lanes:
+pub(crate) trait Lanes:
     Copy + Add<Output = Self> + Sub<Output = Self> + Mul<Output = Self> + Div<Output = Self>
 {
     const N: usize;
@@ -61,7 +61,7 @@ pub trait Lanes:
 /// `|f| ≤ ½`, degree-6 Taylor polynomial for `2^f` (relative error < 5e-7 for
 /// `x ≥ −5`). NaN lanes map to `exp(−80)`.
 #[inline(always)]
-pub fn fast_exp<V: Lanes>(x: V) -> V {
+pub(crate) fn fast_exp<V: Lanes>(x: V) -> V {
     const C: [f32; 6] = [
         std::f32::consts::LN_2,
         0.240_226_5,

@@ -14,7 +14,7 @@ pub struct Grey {
 impl Grey {
     /// Luma (Rec. 601 weights) of a planar RGB image (all red, then green, then blue,
     /// as the train views hold it).
-    pub fn from_planar(rgb: &[f32], width: usize, height: usize) -> Grey {
+    pub(crate) fn from_planar(rgb: &[f32], width: usize, height: usize) -> Grey {
         let n = width * height;
         let data = (0..n)
             .map(|p| 0.299 * rgb[p] + 0.587 * rgb[n + p] + 0.114 * rgb[2 * n + p])

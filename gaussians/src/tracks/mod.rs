@@ -221,7 +221,12 @@ pub struct Image<'a> {
 /// the recording (every `stride`-th pixel) to `s`, with its trajectory; the Gaussians
 /// already in `s` stay still. Colour of the start pixel, opacity ½, a footprint of
 /// `stride` pixels at its depth. Returns how many were added.
-pub fn add_moving(s: &mut Splats, views: &[Image], stride: usize, st: &TrackSettings) -> usize {
+pub(crate) fn add_moving(
+    s: &mut Splats,
+    views: &[Image],
+    stride: usize,
+    st: &TrackSettings,
+) -> usize {
     let Some(first) = views.first() else {
         return 0;
     };

@@ -23,14 +23,14 @@ use super::settings::TrainSettings;
 use serde::Serialize;
 
 /// Hold out every this-many-th view (in time order) for the probe.
-pub const HOLD_OUT_EVERY: usize = 4;
+pub(crate) const HOLD_OUT_EVERY: usize = 4;
 /// No probe with fewer train views than this (too few to spare any).
-pub const MIN_VIEWS: usize = 8;
+pub(crate) const MIN_VIEWS: usize = 8;
 /// Narrowest field the probe tries.
-pub const MIN_WIDTH: usize = 8;
+pub(crate) const MIN_WIDTH: usize = 8;
 /// No probe shorter than this many iterations (a field that has barely moved ranks
 /// nothing).
-pub const MIN_PROBE_ITERATIONS: u32 = 50;
+pub(crate) const MIN_PROBE_ITERATIONS: u32 = 50;
 
 /// What the probe measured and chose (for `report.json`).
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]

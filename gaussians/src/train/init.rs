@@ -118,7 +118,7 @@ pub fn random_splats(n: usize, centre: DVec3, half: f64, seed: u64) -> Splats {
 /// `far_frac` × the camera's distance to the [`camera_bounds`] centre). Covers what the
 /// cameras see (walls and floors beyond the box included) with no geometry known.
 /// Scale: expected nearest-neighbour spacing of `n` points in one frustum.
-pub fn frustum_splats(
+pub(crate) fn frustum_splats(
     cams: &[Camera],
     n: usize,
     near_frac: f64,

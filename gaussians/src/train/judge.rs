@@ -69,7 +69,7 @@ impl<'a, R> Judge<'a, R> {
 }
 
 /// The middle of the views' time span (0 without views).
-pub fn middle_time(views: &[View]) -> f32 {
+pub(crate) fn middle_time(views: &[View]) -> f32 {
     let lo = views.iter().map(|v| v.time).fold(f32::INFINITY, f32::min);
     let hi = views
         .iter()
@@ -112,7 +112,7 @@ impl<R: Rasterizer> Judge<'_, R> {
 
     /// Fraction of the views' pixels where `b` is visibly worse than `a`: its largest
     /// channel error exceeds `a`'s by more than `by`.
-    pub fn worse_fraction(&mut self, a: &Candidate, b: &Candidate, by: f32) -> f64 {
+    pub(crate) fn worse_fraction(&mut self, a: &Candidate, b: &Candidate, by: f32) -> f64 {
         self.evaluations += 2;
         let (mut worse, mut pixels) = (0usize, 0usize);
         for (k, v) in self.views.iter().enumerate() {

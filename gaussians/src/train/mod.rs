@@ -392,7 +392,7 @@ impl Trainer {
     }
 
     /// Make the static/dynamic split when its iteration has come ([`static_split`]).
-    pub fn split_static_if_due(&mut self, views: &[View]) {
+    pub(crate) fn split_static_if_due(&mut self, views: &[View]) {
         if self.split.is_some() || self.static_split_iteration() != Some(self.iteration) {
             return;
         }

@@ -140,7 +140,7 @@ impl Neighbours {
     /// missing, older than `refresh` iterations, or for another number of Gaussians
     /// (built over the field-moved ones: the dynamic ones when `dynamic_only`); empty it
     /// when the term is off.
-    pub fn refresh(
+    pub(crate) fn refresh(
         slot: &mut Option<Neighbours>,
         s: &RigiditySettings,
         field_on: bool,

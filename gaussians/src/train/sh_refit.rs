@@ -20,7 +20,7 @@ const RIDGE: f64 = 1e-3;
 /// `s` with its colour refitted from SH degree `from` down to `to` (< `from`) at the
 /// directions from the camera centres `eyes` to each Gaussian's mean; coefficients above
 /// `to` zeroed. Geometry and flags are unchanged.
-pub fn refit_sh(s: &Splats, from: u32, to: u32, eyes: &[[f64; 3]]) -> Splats {
+pub(crate) fn refit_sh(s: &Splats, from: u32, to: u32, eyes: &[[f64; 3]]) -> Splats {
     let mut out = s.clone();
     let (n_hi, n_lo) = (num_coeffs(from), num_coeffs(to.min(from)));
     (out.sh_dc.par_iter_mut(), out.sh_rest.par_iter_mut())

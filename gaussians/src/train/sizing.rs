@@ -193,7 +193,7 @@ pub fn split(canonical: &Splats, frozen: &Splats, motion: &[f32], tolerance_px: 
 
 /// The lowest SH degree below `current` whose PSNR reaches `target` (`current` when
 /// none does), with the PSNR of each degree tested.
-pub fn choose_sh_degree(
+pub(crate) fn choose_sh_degree(
     mut psnr_at: impl FnMut(u32) -> f64,
     current: u32,
     target: f64,
@@ -223,7 +223,7 @@ pub fn top_k(weights: &[f64], k: usize) -> Vec<usize> {
 /// 0 (taken as failing) and `hi` (taken as passing when `ok(hi)`; else `n` is returned
 /// untested). Assumes `ok` monotone; where it is not, the result still passes `ok` or is
 /// `n`.
-pub fn smallest_count(n: usize, hi: usize, mut ok: impl FnMut(usize) -> bool) -> usize {
+pub(crate) fn smallest_count(n: usize, hi: usize, mut ok: impl FnMut(usize) -> bool) -> usize {
     let hi = hi.clamp(1, n.max(1));
     // At `hi = n` the model itself passes by definition.
     if hi < n && !ok(hi) {
@@ -265,7 +265,7 @@ pub fn gather(s: &Splats, keep: &[usize]) -> Splats {
 }
 
 /// Zero the SH coefficients above `degree` (in `sh_rest`, coefficient-major).
-pub fn truncate_sh(sh_rest: &mut [[f32; 45]], degree: u32) {
+pub(crate) fn truncate_sh(sh_rest: &mut [[f32; 45]], degree: u32) {
     let keep = 3 * (num_coeffs(degree) - 1);
     for r in sh_rest {
         r[keep..].fill(0.0);

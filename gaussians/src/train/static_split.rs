@@ -14,14 +14,14 @@ use crate::splats::Splats;
 use scene::Camera;
 
 /// Times at which the field is sampled between the first and last train time.
-pub const SAMPLES: usize = 33;
+pub(crate) const SAMPLES: usize = 33;
 
 /// How far the field moves each Gaussian, in pixels of the train views: over `times`,
 /// the largest of `|δμ| + s_max·(θ + |Δs|/s)` (centre displacement plus the motion of
 /// the Gaussian's outline from rotation by θ and relative scale change), divided by the
 /// Gaussian's smallest depth over `cams` and multiplied by the focal length. A Gaussian
 /// behind every camera scores 0 (no view sees it move).
-pub fn field_motion_px(
+pub(crate) fn field_motion_px(
     mlp: &Mlp<f32>,
     splats: &Splats,
     cams: &[Camera],
@@ -42,7 +42,7 @@ pub fn field_motion_px(
 /// multiplied by the focal length (0 behind every camera). Unlike [`field_motion_px`]
 /// it ignores what the field does at every time alike (a constant shift), which is no
 /// motion.
-pub fn centre_motion_px(
+pub(crate) fn centre_motion_px(
     mlp: &Mlp<f32>,
     splats: &Splats,
     dynamic_only: bool,
@@ -117,7 +117,7 @@ fn quat_angle(a: [f32; 4], b: [f32; 4]) -> f32 {
 }
 
 /// Uniform sample times over `[min, max]` of the views' times (one if they are equal).
-pub fn sample_times(view_times: &[f32]) -> Vec<f32> {
+pub(crate) fn sample_times(view_times: &[f32]) -> Vec<f32> {
     let lo = view_times.iter().copied().fold(f32::INFINITY, f32::min);
     let hi = view_times.iter().copied().fold(f32::NEG_INFINITY, f32::max);
     if !(lo.is_finite() && hi.is_finite()) {

@@ -107,7 +107,7 @@ pub struct StereoView<'a> {
 
 /// A reconstructed surface point.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct StereoPoint {
+pub(crate) struct StereoPoint {
     pub position: [f32; 3],
     pub colour: [f32; 3],
     /// Depth in the reference camera (for the footprint of the Gaussian).
@@ -339,7 +339,7 @@ pub fn fill_holes(depth: &[f32], w: usize, h: usize, radius: usize, consistency:
 
 /// Surface points of every train view's fused depth map ([`fused_depth_maps`]), holes
 /// filled ([`fill_holes`], radius `fill_radius` × the image width).
-pub fn stereo_points(
+pub(crate) fn stereo_points(
     views: &[StereoView],
     near: f64,
     far: f64,
