@@ -76,6 +76,7 @@ fn record(root: &Path, name: &str, stages: &[(&str, &str, f64, &str)]) -> RunRec
         exit_status: None,
         error: None,
         log: None,
+        progress: None,
     }];
     for (stage, key, built, report) in stages {
         let entry = root.join(stage).join(key);

@@ -125,3 +125,56 @@ fn sweep_j2_runs_two_experiments_at_a_time_and_j1_one() {
         }
     }
 }
+
+#[test]
+fn a_running_stage_shows_its_phase_position_and_time_left() {
+    // Not a terminal: a plain line per tenth of the work, and the last one in run.json.
+    let f = Fixture::new();
+    let exp = f.experiment("p", "");
+    let out = f
+        .command(&["run", exp.to_str().unwrap()])
+        .env("DEGS_FAKE_PROGRESS", "gaussians")
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = stderr(&out);
+    // Stage-clock 5.0 s for half of the work: 5 s left.
+    assert!(
+        text.contains("[degs] gaussians: iteration 5/10 (50 %), about 5 s left"),
+        "{text}"
+    );
+    assert!(
+        text.contains("[degs] gaussians: iteration 10/10 (100 %)\n"),
+        "{text}"
+    );
+    let lines = text
+        .lines()
+        .filter(|l| l.contains("gaussians: iteration"))
+        .count();
+    assert_eq!(lines, 10, "one line per tenth: {text}");
+    let rec = f.record("p");
+    let g = rec["stages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|s| s["stage"] == "gaussians")
+        .unwrap();
+    assert_eq!(g["progress"]["label"], "iteration");
+    assert_eq!(
+        (
+            g["progress"]["done"].as_u64(),
+            g["progress"]["total"].as_u64()
+        ),
+        (Some(10), Some(10))
+    );
+    let e = rec["stages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|s| s["stage"] == "evflow")
+        .unwrap();
+    assert!(
+        e.get("progress").is_none(),
+        "a stage that said nothing has none: {e}"
+    );
+}

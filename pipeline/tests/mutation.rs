@@ -106,6 +106,7 @@ fn stage(name: &str, action: Action) -> StageRecord {
         exit_status: Some(0),
         error: None,
         log: Some(PathBuf::from(format!("/cache/runs/tiny/{name}.log"))),
+        progress: None,
     }
 }
 

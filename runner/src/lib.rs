@@ -21,6 +21,7 @@ pub mod progress;
 pub mod record;
 pub mod run;
 pub mod settings;
+pub mod stage_progress;
 pub mod stages;
 pub mod status;
 pub mod synth;

@@ -4,14 +4,18 @@
 //!
 //! The lock is an advisory `flock` on `cache/<stage>/<key>.lock`, held while the stage
 //! runs and until its output is sealed and moved into place. The kernel drops it when
-//! the holder exits, killed or not, so a crashed runner never leaves a stale lock. Lock
-//! files are left in place (removing one that another runner holds open would let a
-//! third take a second lock on a new file); `degs gc` removes those nobody holds.
+//! the holder exits, killed or not, so a crashed runner never leaves a stale lock. The
+//! holder removes the file before it lets go; a runner that took the lock of a file
+//! removed meanwhile (it waited on the old one) sees that its file is no longer the one
+//! at the path and tries again, so two runners never hold locks on two different files of
+//! one entry. A killed holder's file stays until the next runner of that entry (or `degs
+//! gc`) removes it.
 
 use crate::cache::Cache;
 use anyhow::{Context as _, Result};
 use std::fs::{self, File, OpenOptions};
 use std::os::fd::AsRawFd;
+use std::os::unix::fs::MetadataExt;
 use std::path::{Path, PathBuf};
 
 /// The suffix of lock files in a stage's cache folder.
@@ -46,33 +50,27 @@ impl EntryLock {
         if let Some(dir) = path.parent() {
             fs::create_dir_all(dir).with_context(|| format!("{}", dir.display()))?;
         }
-        let file = OpenOptions::new()
-            .create(true)
-            .truncate(false)
-            .write(true)
-            .open(path)
-            .with_context(|| format!("{}: cannot open the lock file", path.display()))?;
-        let op = if wait {
-            libc::LOCK_EX
-        } else {
-            libc::LOCK_EX | libc::LOCK_NB
-        };
         loop {
-            // SAFETY: flock on a file descriptor this function owns.
-            let rc = unsafe { libc::flock(file.as_raw_fd(), op) };
-            if rc == 0 {
-                return Ok(Some(EntryLock {
-                    file,
-                    path: path.to_path_buf(),
-                }));
+            let file = OpenOptions::new()
+                .create(true)
+                .truncate(false)
+                .write(true)
+                .open(path)
+                .with_context(|| format!("{}: cannot open the lock file", path.display()))?;
+            if !flock(&file, wait).with_context(|| format!("{}: cannot lock", path.display()))? {
+                return Ok(None);
             }
-            let err = std::io::Error::last_os_error();
-            match err.raw_os_error() {
-                Some(libc::EINTR) => continue,
-                Some(libc::EWOULDBLOCK) if !wait => return Ok(None),
-                _ => {
-                    return Err(err).with_context(|| format!("{}: cannot lock", path.display()));
+            // The holder before us may have removed the file we waited on: ours only
+            // counts when it is still the file at `path`.
+            let ours = file.metadata()?;
+            match fs::metadata(path) {
+                Ok(m) if m.dev() == ours.dev() && m.ino() == ours.ino() => {
+                    return Ok(Some(EntryLock {
+                        file,
+                        path: path.to_path_buf(),
+                    }));
                 }
+                _ => continue,
             }
         }
     }
@@ -85,6 +83,8 @@ impl EntryLock {
 
 impl Drop for EntryLock {
     fn drop(&mut self) {
+        // Removed while still held: nobody can take this file's lock in between.
+        let _ = fs::remove_file(&self.path);
         // SAFETY: unlocking the descriptor this value owns; closing it would as well.
         unsafe {
             libc::flock(self.file.as_raw_fd(), libc::LOCK_UN);
@@ -92,7 +92,30 @@ impl Drop for EntryLock {
     }
 }
 
-/// Remove the lock files under `cache/` that nobody holds; returns how many.
+/// `flock` the file exclusively: Ok(true) when taken, Ok(false) when someone holds it
+/// and `wait` is false.
+fn flock(file: &File, wait: bool) -> std::io::Result<bool> {
+    let op = if wait {
+        libc::LOCK_EX
+    } else {
+        libc::LOCK_EX | libc::LOCK_NB
+    };
+    loop {
+        // SAFETY: flock on a file descriptor that `file` owns for the whole call.
+        if unsafe { libc::flock(file.as_raw_fd(), op) } == 0 {
+            return Ok(true);
+        }
+        let err = std::io::Error::last_os_error();
+        match err.raw_os_error() {
+            Some(libc::EINTR) => continue,
+            Some(libc::EWOULDBLOCK) if !wait => return Ok(false),
+            _ => return Err(err),
+        }
+    }
+}
+
+/// Remove the lock files under `cache/` that nobody holds (left by killed runners);
+/// returns how many.
 pub fn remove_free_locks(cache: &Cache) -> Result<usize> {
     let mut removed = 0;
     let Ok(stages) = fs::read_dir(cache.root.join("cache")) else {
@@ -108,9 +131,8 @@ pub fn remove_free_locks(cache: &Cache) -> Result<usize> {
                 .file_name()
                 .is_some_and(|n| n.to_string_lossy().ends_with(LOCK_SUFFIX));
             if is_lock && p.is_file() {
-                // Held while removed: nobody else can take it in between.
+                // Taking it removes it when let go.
                 if let Some(lock) = EntryLock::take_at(&p, false)? {
-                    fs::remove_file(&p).with_context(|| format!("{}", p.display()))?;
                     drop(lock);
                     removed += 1;
                 }
@@ -176,13 +198,38 @@ mod tests {
     }
 
     #[test]
-    fn gc_removes_only_free_lock_files() {
+    fn a_lock_leaves_no_file_and_gc_removes_only_free_leftovers() {
         let d = tempfile::tempdir().unwrap();
         let cache = Cache::new(d.path());
+        drop(EntryLock::take(&cache, "assoc", "done").unwrap());
+        assert!(!EntryLock::path(&cache, "assoc", "done").exists());
         let held = EntryLock::take(&cache, "assoc", "busy").unwrap();
-        drop(EntryLock::take(&cache, "assoc", "idle").unwrap());
+        // What a killed runner leaves: the file, no lock.
+        fs::write(EntryLock::path(&cache, "assoc", "killed"), "").unwrap();
         assert_eq!(remove_free_locks(&cache).unwrap(), 1);
         assert!(held.file().exists());
-        assert!(!EntryLock::path(&cache, "assoc", "idle").exists());
+        assert!(!EntryLock::path(&cache, "assoc", "killed").exists());
+    }
+
+    #[test]
+    fn waiters_on_a_removed_file_never_hold_the_lock_together() {
+        // Many threads take and let go of one entry's lock; each, while it holds it,
+        // checks that nobody else does.
+        let d = tempfile::tempdir().unwrap();
+        let inside = std::sync::atomic::AtomicUsize::new(0);
+        std::thread::scope(|s| {
+            for _ in 0..6 {
+                s.spawn(|| {
+                    let cache = Cache::new(d.path());
+                    for _ in 0..200 {
+                        let _l = EntryLock::take(&cache, "deform", "k").unwrap();
+                        let n = inside.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+                        assert_eq!(n, 0, "two holders at once");
+                        std::thread::yield_now();
+                        inside.fetch_sub(1, std::sync::atomic::Ordering::SeqCst);
+                    }
+                });
+            }
+        });
     }
 }

@@ -1,4 +1,6 @@
 //! Progress on stderr: a spinner per running stage on a terminal, plain lines otherwise.
+//! A stage's own progress lines ([`crate::stage_progress`]) show as its phase, position
+//! and time left: on the spinner, or as a plain line at each tenth of the work.
 
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 use std::collections::HashMap;
@@ -9,6 +11,8 @@ use std::time::Duration;
 pub struct Progress {
     multi: Option<MultiProgress>,
     bars: Mutex<HashMap<String, ProgressBar>>,
+    /// The last tenth of its work each stage's plain progress line showed.
+    tenths: Mutex<HashMap<String, (String, u64)>>,
     quiet: bool,
 }
 
@@ -19,6 +23,7 @@ impl Progress {
         Progress {
             multi: tty.then(MultiProgress::new),
             bars: Mutex::new(HashMap::new()),
+            tenths: Mutex::new(HashMap::new()),
             quiet,
         }
     }
@@ -60,15 +65,28 @@ impl Progress {
         }
     }
 
-    /// A line of the stage's own output (shown on the spinner only).
+    /// A line of the stage's own output: on a terminal the spinner shows it (a progress
+    /// line as phase, position and time left); otherwise a progress line is printed at
+    /// each new tenth of a phase's work, other lines only go to the stage's log.
     pub fn output(&self, stage: &str, line: &str) {
+        let read = crate::stage_progress::parse(line);
         if let Some(bar) = self
             .bars
             .lock()
             .unwrap_or_else(|e| e.into_inner())
             .get(stage)
         {
-            bar.set_message(line.to_string());
+            bar.set_message(read.map_or_else(|| line.to_string(), |p| p.line()));
+            return;
+        }
+        let Some(p) = read.filter(|_| !self.quiet && self.multi.is_none()) else {
+            return;
+        };
+        let mut tenths = self.tenths.lock().unwrap_or_else(|e| e.into_inner());
+        let now = (p.label.clone(), p.tenth());
+        if tenths.get(stage) != Some(&now) {
+            tenths.insert(stage.to_string(), now);
+            eprintln!("[degs] {stage:>9}: {}", p.line());
         }
     }
 

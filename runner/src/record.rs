@@ -70,6 +70,10 @@ pub struct StageRecord {
     /// Last line of the stage's error output when it failed; why it was skipped.
     pub error: Option<String>,
     pub log: Option<PathBuf>,
+    /// The stage's last progress line, read (phase, position, time left); kept after it
+    /// ends. Absent for stages that said none (and in records of older runners).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub progress: Option<crate::stage_progress::StageProgress>,
 }
 
 /// A whole run.

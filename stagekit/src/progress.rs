@@ -92,8 +92,9 @@ fn shows_line(pos: u64, total: u64) -> bool {
     pos.is_multiple_of((total / 20).max(1)) || pos == total
 }
 
-/// `[   12.3 s] LABEL POS/TOTAL: MSG` (without `: MSG` when the message is empty).
-fn plain_line(secs: f64, label: &str, pos: u64, total: u64, msg: &str) -> String {
+/// `[   12.3 s] LABEL POS/TOTAL: MSG` (without `: MSG` when the message is empty): the
+/// line the runner reads as a stage's progress (`runner::stage_progress`).
+pub fn plain_line(secs: f64, label: &str, pos: u64, total: u64, msg: &str) -> String {
     let mut line = format!("[{secs:7.1} s] {label} {pos}/{total}");
     if !msg.is_empty() {
         line += ": ";

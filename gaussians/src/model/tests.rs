@@ -2,7 +2,31 @@
 
 use super::*;
 use crate::field::FieldSettings;
-use crate::train::init::random_splats;
+use crate::splats::Gaussian;
+
+/// `n` scattered Gaussians with varied scales, opacities and colours, all dynamic (the
+/// model's files need no trainer to make them).
+fn random_splats(n: usize, _centre: glam::DVec3, half: f64, seed: u64) -> Splats {
+    let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+    let mut unit = move || {
+        state = state
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        (state >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let mut s = Splats::with_capacity(n);
+    for _ in 0..n {
+        let p: [f32; 3] = std::array::from_fn(|_| half as f32 * (2.0 * unit() - 1.0));
+        let log_scale = (0.02 + 0.1 * unit()).ln();
+        let opacity_logit = 4.0 * unit() - 2.0;
+        let sh_dc = std::array::from_fn(|_| unit() - 0.5);
+        s.push(Gaussian {
+            dynamic: true,
+            ..Gaussian::isotropic(p, log_scale, opacity_logit, sh_dc)
+        });
+    }
+    s
+}
 
 fn model(with_field: bool) -> Model {
     let mut splats = random_splats(50, glam::DVec3::ZERO, 1.0, 3);

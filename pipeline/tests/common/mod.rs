@@ -13,7 +13,8 @@ use std::process::{Command, Output};
 /// (`finetune`, `train`), checks its inputs, records its invocation in $DEGS_FAKE_LOG, writes
 /// $DEGS_FAKE_REPORTS/<stage>.json as its report when that exists (as `gaussians`, copies
 /// the scene's test images as its renders and its novel views as `renders/novel/`), fails when its settings say `seed = 666`,
-/// sleeps 30 s when $DEGS_FAKE_SLEEP names it and 1 s when $DEGS_FAKE_PAUSE does, meets the other stages named in
+/// sleeps 30 s when $DEGS_FAKE_SLEEP names it and 1 s when $DEGS_FAKE_PAUSE does,
+/// prints ten progress lines as the stage kit does when $DEGS_FAKE_PROGRESS names it, meets the other stages named in
 /// $DEGS_FAKE_MEET when it is one of them (see [`Fixture::meeting`]), and writes a few output
 /// files.
 pub const FAKE_STAGE: &str = r#"#!/bin/sh
@@ -58,6 +59,9 @@ if grep -q '^seed = 666' "$config"; then
 fi
 mkdir -p "$out/renders"
 case " $DEGS_FAKE_PAUSE " in *" $stage "*) sleep 1 ;; esac
+case " $DEGS_FAKE_PROGRESS " in *" $stage "*)
+  for k in 1 2 3 4 5 6 7 8 9 10; do echo "[    $k.0 s] iteration $k/10: loss 0.$k" >&2; done ;;
+esac
 if [ "$DEGS_FAKE_SLEEP" = "$stage" ]; then
   echo partial > "$out/partial.txt"
   sleep 30
@@ -168,6 +172,7 @@ impl Fixture {
             .env("DEGS_FAKE_LOG", &self.log)
             .env_remove("DEGS_FAKE_SLEEP")
             .env_remove("DEGS_FAKE_PAUSE")
+            .env_remove("DEGS_FAKE_PROGRESS")
             .env_remove("DEGS_FAKE_MEET");
         c
     }

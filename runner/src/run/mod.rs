@@ -82,6 +82,7 @@ fn base_record(n: &Node, i: usize, nodes: &[Node], ctx: &Context) -> StageRecord
         exit_status: None,
         error: None,
         log: None,
+        progress: None,
     }
 }
 

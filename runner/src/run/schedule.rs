@@ -9,8 +9,18 @@ use crate::graph::Node;
 use crate::lock::EntryLock;
 use crate::progress::Progress;
 use crate::record::{Action, RunRecord, StageRecord};
+use crate::stage_progress::{StageProgress, parse};
 use anyhow::Result;
 use std::sync::mpsc;
+use std::time::Instant;
+
+/// What a node's thread tells the scheduler.
+enum Message {
+    /// A progress line of the running stage, read.
+    Progress(StageProgress),
+    /// The stage ended (or another runner built its entry); the entry's lock.
+    Done(Result<(Started, EntryLock)>),
+}
 
 /// What the scheduler runs, and where.
 pub struct Schedule<'a> {
@@ -47,7 +57,8 @@ pub(crate) fn run_waiting(
 ) -> Result<()> {
     let jobs = s.jobs.max(1);
     std::thread::scope(|scope| -> Result<()> {
-        let (tx, rx) = mpsc::channel::<(usize, Result<(Started, EntryLock)>)>();
+        let (tx, rx) = mpsc::channel::<(usize, Message)>();
+        let mut saved = Instant::now();
         let mut running = 0usize;
         loop {
             skip_blocked(s, states, &mut record.stages);
@@ -59,7 +70,12 @@ pub(crate) fn run_waiting(
                 let threads = crate::process::thread_share(jobs * s.experiments_at_once);
                 let (tx, progress, nodes, ctx) = (tx.clone(), s.progress, s.nodes, s.ctx);
                 scope.spawn(move || {
-                    let on_line = |line: &str| progress.output(&label, line);
+                    let on_line = |line: &str| {
+                        progress.output(&label, line);
+                        if let Some(p) = parse(line) {
+                            let _ = tx.send((i, Message::Progress(p)));
+                        }
+                    };
                     let out = stage_process::lock_and_run(
                         nodes,
                         i,
@@ -67,7 +83,7 @@ pub(crate) fn run_waiting(
                         (&args, reuse, threads),
                         &on_line,
                     );
-                    let _ = tx.send((i, out));
+                    let _ = tx.send((i, Message::Done(out)));
                 });
                 states[i].state = State::Running;
                 running += 1;
@@ -76,7 +92,19 @@ pub(crate) fn run_waiting(
             if running == 0 {
                 break;
             }
-            let Ok((i, started)) = rx.recv() else { break };
+            let Ok((i, message)) = rx.recv() else { break };
+            let started = match message {
+                Message::Progress(p) => {
+                    // In the run record too, at most every two seconds.
+                    record.stages[i].progress = Some(p);
+                    if saved.elapsed().as_secs_f64() >= 2.0 {
+                        save(record)?;
+                        saved = Instant::now();
+                    }
+                    continue;
+                }
+                Message::Done(started) => started,
+            };
             running -= 1;
             let (started, lock) = started?;
             let rec = &mut record.stages[i];

@@ -51,6 +51,7 @@ pub fn stage(name: &str, action: Action, entry: Option<PathBuf>) -> StageRecord 
         exit_status: Some(0),
         error: None,
         log: None,
+        progress: None,
     }
 }
 

@@ -1,0 +1,126 @@
+//! What a running stage says about its progress, as the runner reads it: the plain lines
+//! every stage prints through `stagekit::Progress` when its stderr is not a terminal
+//! (`[   12.3 s] LABEL POS/TOTAL: MSG`, every twentieth of the work), turned into the
+//! phase, the position of the total and an estimate of the time the phase has left. The
+//! stage is not slowed: it prints these lines anyway.
+
+use serde::{Deserialize, Serialize};
+
+/// A stage's last progress line, read.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StageProgress {
+    /// What is counted (`iteration`, `deform`, `frame`, a fine-tuning phase).
+    pub label: String,
+    pub done: u64,
+    pub total: u64,
+    /// Seconds since the stage began this piece of work (its own clock).
+    pub elapsed_s: f64,
+    /// Seconds left at the rate so far; None before the first step is done.
+    pub eta_s: Option<f64>,
+}
+
+/// Read one output line; None for lines that are not progress lines.
+pub fn parse(line: &str) -> Option<StageProgress> {
+    let rest = line.strip_prefix('[')?;
+    let (secs, rest) = rest.split_once(" s] ")?;
+    let elapsed_s: f64 = secs.trim().parse().ok()?;
+    // `LABEL POS/TOTAL` then optionally `: MSG`; the label may hold spaces.
+    let head = rest.split_once(": ").map_or(rest, |(h, _)| h);
+    let (label, count) = head.rsplit_once(' ')?;
+    let (done, total) = count.split_once('/')?;
+    let (done, total): (u64, u64) = (done.parse().ok()?, total.parse().ok()?);
+    if label.is_empty() || total == 0 || done > total || !elapsed_s.is_finite() {
+        return None;
+    }
+    let eta_s = (done > 0).then(|| elapsed_s * (total - done) as f64 / done as f64);
+    Some(StageProgress {
+        label: label.to_string(),
+        done,
+        total,
+        elapsed_s,
+        eta_s,
+    })
+}
+
+/// `2 min 05 s`, `45 s`, `1 h 03 min`.
+pub fn fmt_duration(s: f64) -> String {
+    let s = s.max(0.0).round() as u64;
+    match s {
+        0..60 => format!("{s} s"),
+        60..3600 => format!("{} min {:02} s", s / 60, s % 60),
+        _ => format!("{} h {:02} min", s / 3600, (s % 3600) / 60),
+    }
+}
+
+impl StageProgress {
+    /// `iteration 1200/3000 (40 %), about 2 min 10 s left`.
+    pub fn line(&self) -> String {
+        let pct = 100 * self.done / self.total;
+        let mut s = format!("{} {}/{} ({pct} %)", self.label, self.done, self.total);
+        match self.eta_s {
+            Some(e) if self.done < self.total => s += &format!(", about {} left", fmt_duration(e)),
+            _ => {}
+        }
+        s
+    }
+
+    /// The tenth of the work this line reached (0–10): a plain log gets a line per tenth.
+    pub fn tenth(&self) -> u64 {
+        10 * self.done / self.total
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reads_the_stage_kit_lines_and_nothing_else() {
+        let p = parse("[   12.5 s] iteration 250/1000: loss 0.0123, 8123 Gaussians").unwrap();
+        assert_eq!(
+            (p.label.as_str(), p.done, p.total),
+            ("iteration", 250, 1000)
+        );
+        assert_eq!(p.elapsed_s, 12.5);
+        // 12.5 s for a quarter: 37.5 s for the rest.
+        assert!((p.eta_s.unwrap() - 37.5).abs() < 1e-12);
+        assert_eq!(p.line(), "iteration 250/1000 (25 %), about 38 s left");
+        assert_eq!(p.tenth(), 2);
+        let q = parse("[    0.0 s] fine-tune pass 0/40").unwrap();
+        assert_eq!(
+            (q.label.as_str(), q.done, q.eta_s),
+            ("fine-tune pass", 0, None)
+        );
+        assert_eq!(
+            parse("[  3.0 s] frame 3/3").unwrap().line(),
+            "frame 3/3 (100 %)"
+        );
+        for not in [
+            "gaussians: reading settings.toml",
+            "[   1.0 s] iteration 5/0",
+            "[   1.0 s] iteration 6/5",
+            "[x s] iteration 1/5",
+            "[   1.0 s] 1/5",
+            "error: [   1.0 s] iteration 1/5",
+        ] {
+            assert_eq!(parse(not), None, "{not}");
+        }
+    }
+
+    #[test]
+    fn durations_read_as_a_person_says_them() {
+        assert_eq!(fmt_duration(44.6), "45 s");
+        assert_eq!(fmt_duration(125.0), "2 min 05 s");
+        assert_eq!(fmt_duration(3780.0), "1 h 03 min");
+        assert_eq!(fmt_duration(-3.0), "0 s");
+    }
+
+    #[test]
+    fn the_stage_kit_writes_what_the_runner_reads() {
+        let line = stagekit::progress::plain_line(3.25, "deform", 40, 80, "loss 1");
+        let p = parse(&line).unwrap();
+        assert_eq!((p.label.as_str(), p.done, p.total), ("deform", 40, 80));
+        let line = stagekit::progress::plain_line(0.5, "fine-tune pass", 0, 12, "");
+        assert_eq!(parse(&line).unwrap().label, "fine-tune pass");
+    }
+}
