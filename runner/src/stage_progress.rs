@@ -58,7 +58,10 @@ impl StageProgress {
         let pct = 100 * self.done / self.total;
         let mut s = format!("{} {}/{} ({pct} %)", self.label, self.done, self.total);
         match self.eta_s {
-            Some(e) if self.done < self.total => s += &format!(", about {} left", fmt_duration(e)),
+            // Under a second left is not worth a word.
+            Some(e) if self.done < self.total && e >= 1.0 => {
+                s += &format!(", about {} left", fmt_duration(e))
+            }
             _ => {}
         }
         s
