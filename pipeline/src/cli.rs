@@ -280,6 +280,21 @@ pub enum Command {
         #[command(flatten)]
         place: Where,
     },
+    /// The run's dynamic model (the joint training's, else the warm-up's) as a sequence
+    /// of standard 3DGS PLY files, the Gaussians deformed to each time in world
+    /// coordinates, in runs/<name>/export/: frame_0001.ply … (SuperSplat plays such a
+    /// sequence on its timeline), sequence.zip (the same files; brush plays a zip of
+    /// PLYs), times.json (each file's time in seconds and normalised). Times: every train
+    /// and test frame's, or --fps N over the recording. Cached like a stage.
+    Export {
+        /// A run directory (<cache>/runs/<name>) or an experiment name
+        run: String,
+        /// Frames per second over the recording (default: the frames' times)
+        #[arg(long)]
+        fps: Option<f64>,
+        #[command(flatten)]
+        place: Where,
+    },
     /// Charts of accuracy against cost across runs, one per question and scene, PNG and
     /// SVG: test PSNR against total stage time (cached stages at their build cost),
     /// against model size on disk and against Gaussian count, flow EPE against LoCM

@@ -153,6 +153,20 @@ pub fn execute(command: Command) -> Result<()> {
             Ok(())
         }
         Command::Import(args) => import_recording(&args),
+        Command::Export { run, fps, place } => {
+            let dir = place.run_dir(&run)?;
+            let (out, stage) =
+                runner::export::export_run(&dir, &place.context()?, fps, &Progress::new(false))?;
+            let plys = std::fs::read_dir(&out)?
+                .flatten()
+                .filter(|e| e.path().extension().is_some_and(|x| x == "ply"))
+                .count();
+            println!(
+                "{plys} PLY files of the {stage} model in {} (and sequence.zip, times.json)",
+                out.display()
+            );
+            Ok(())
+        }
         Command::Eval { run, place } => {
             let dir = place.run_dir(&run)?;
             let m = eval::eval_run(&dir, &place.context()?, &Progress::new(false))?;

@@ -8,10 +8,9 @@
 
 use crate::baselines;
 use crate::context::Context;
-use crate::graph::{Input, Node, NodeKind, key_of};
+use crate::external::{self, External, Given};
 use crate::progress::Progress;
-use crate::record::{Action, RunRecord};
-use crate::run::{RunOptions, run_nodes};
+use crate::record::RunRecord;
 use crate::stages;
 use anyhow::{Context as _, Result, bail};
 pub use scene::evaluation::{FrameMetrics, Metrics, PSNR_CAP};
@@ -66,17 +65,8 @@ pub fn eval_run_with(
     progress: &Progress,
 ) -> Result<Metrics> {
     let record = RunRecord::read(&run_dir.join("run.json"))?;
-    let output = |stage: &str| {
-        record
-            .stage(stage)
-            .filter(|s| s.action.has_output())
-            .and_then(|s| Some((s.entry.clone()?, s.key.clone().unwrap_or_default())))
-    };
-    let scene = record
-        .stages
-        .first()
-        .filter(|s| s.action.has_output())
-        .and_then(|s| Some((s.entry.clone()?, s.key.clone().unwrap_or_default())))
+    let output = |stage: &str| external::output_of(&record, stage);
+    let scene = external::scene_of(&record)
         .with_context(|| format!("{}: the run has no scene", run_dir.display()))?;
     let render = render_entry(&|s| output(s).map(|(e, _)| e));
     let flows = stages::STAGES
@@ -84,95 +74,33 @@ pub fn eval_run_with(
         .find(|s| s.event_flow.is_some())
         .and_then(|s| output(s.name));
 
-    // The nodes: the run's outputs as they are, then the evaluation.
-    let mut nodes = Vec::new();
-    let mut inputs = Vec::new();
-    let mut given = |flag: &'static str, name: &str, (entry, key): (PathBuf, String)| {
-        // An entry's key names its content; its place is in the key too, so that two
-        // runs whose records give the same key to different folders stay apart.
-        let key = blake3::hash(format!("{key}\0{}", entry.display()).as_bytes()).to_hex()[..32]
-            .to_string();
-        inputs.push(Input {
-            flag,
-            node: nodes.len(),
-        });
-        nodes.push(Node {
-            stage: name.to_string(),
-            kind: NodeKind::Given(entry),
-            verb: None,
-            binary: None,
-            binary_hash: None,
-            settings: Table::new(),
-            inputs: vec![],
-            key: Some(key),
-            unavailable: None,
-        });
+    // The run's outputs as they are, then the evaluation over them.
+    let given = |flag: &'static str, name: &str, (entry, key): (PathBuf, String)| Given {
+        flag,
+        name: name.to_string(),
+        entry,
+        key,
     };
-    given("--scene", stages::SCENE, scene);
+    let mut inputs = vec![given("--scene", stages::SCENE, scene)];
     if let Some((stage, entry)) = &render {
         let key = output(stage).map(|(_, k)| k).unwrap_or_default();
-        given("--model", stage, (entry.clone(), key));
+        inputs.push(given("--model", stage, (entry.clone(), key)));
     }
     if let Some(f) = flows {
-        given("--flows", "evflow", f);
+        inputs.push(given("--flows", "evflow", f));
     }
-    let ctx = Context {
-        cache: crate::cache::Cache::new(record.cache_root.clone()),
-        ..ctx.clone()
-    };
-    let binary = ctx.stage_binary(BINARY).with_context(|| {
-        format!(
-            "cannot evaluate: {}",
-            stages::not_built(BINARY, PACKAGE, ctx.stage_dir.as_deref())
-        )
-    })?;
     let mut settings = Table::new();
     settings.insert("lpips".into(), Value::String(lpips.into()));
-    let mut hashes = crate::cache::BinaryHashes::load(&ctx.cache);
-    let binary_hash = hashes.hash(&binary)?;
-    hashes.save(&ctx.cache)?;
-    let in_keys: Vec<(&str, &str)> = inputs
-        .iter()
-        .map(|i| (i.flag, nodes[i.node].key.as_deref().unwrap_or("")))
-        .collect();
-    let key = key_of(STAGE, &binary_hash, &settings, &in_keys);
-    nodes.push(Node {
-        stage: STAGE.into(),
-        kind: NodeKind::External,
+    let ext = External {
+        what: "the evaluation",
+        stage: STAGE,
+        binary: BINARY,
+        package: PACKAGE,
         verb: None,
-        binary: Some(binary),
-        binary_hash: Some(binary_hash),
-        settings: settings.clone(),
-        inputs,
-        key: Some(key),
-        unavailable: None,
-    });
-    let config = crate::command_line::settings_path(&ctx.cache, &record.experiment, STAGE);
-    scene::atomic::write_bytes_atomic(&config, crate::canon::to_toml(&settings).as_bytes())?;
-    let opts = RunOptions {
-        until: Some(nodes.len() - 1),
-        jobs: 1,
-        ..RunOptions::default()
+        settings,
     };
-    let run = run_nodes(
-        &nodes,
-        (&record.experiment, None),
-        &ctx,
-        &opts,
-        progress,
-        None,
-    )?;
-    let done = run.stages.last().expect("the evaluation node");
-    if done.action == Action::Failed {
-        bail!(
-            "the evaluation failed: {} (log: {})",
-            done.error.as_deref().unwrap_or("?"),
-            done.log
-                .as_deref()
-                .map(|p| p.display().to_string())
-                .unwrap_or_default()
-        );
-    }
+    let where_ = (record.experiment.as_str(), record.cache_root.clone());
+    let done = external::run_external(&ext, inputs, where_, ctx, progress)?;
     let entry = done.entry.clone().unwrap_or_default();
     let path = entry.join("metrics.json");
     let bytes = std::fs::read(&path).with_context(|| format!("{}: cannot read", path.display()))?;

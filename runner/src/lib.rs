@@ -12,6 +12,8 @@ pub mod config_show;
 pub mod context;
 pub mod eval;
 pub mod experiment;
+pub mod export;
+pub mod external;
 pub mod graph;
 pub mod lock;
 pub mod overrides;

@@ -116,6 +116,39 @@ fn degs_run_builds_every_stage_once_and_beats_the_mean_colour() {
             "{s}"
         );
     }
+
+    // `degs export`: the joint model as a PLY sequence at 8 frames per second over the
+    // recording (its train frames span 0.25 s: 3 files), in runs/tiny/export/, each of
+    // the model's Gaussian count; a second export finds it cached and replaces the folder
+    let model = read_json(&entry(&first, "deform").join("model.json"));
+    let gaussians = model["gaussians"].as_u64().unwrap();
+    for _ in 0..2 {
+        let out = w.degs(&["export", "tiny", "--fps", "8"]);
+        assert!(out.status.success(), "{}", stderr(&out));
+    }
+    let dir = w.cache.join("runs/tiny/export");
+    let times = read_json(&dir.join("times.json"));
+    let times = times.as_array().unwrap();
+    assert_eq!(times.len(), 3, "{times:?}");
+    for (k, t) in times.iter().enumerate() {
+        let file = format!("frame_{:04}.ply", k + 1);
+        assert_eq!(t["file"], file.as_str());
+        assert!(
+            (t["seconds"].as_f64().unwrap() - k as f64 / 8.0).abs() < 1e-9,
+            "{t}"
+        );
+        let bytes = std::fs::read(dir.join(&file)).unwrap();
+        let header = String::from_utf8_lossy(&bytes[..bytes.len().min(400)]).to_string();
+        assert!(
+            header.contains(&format!("element vertex {gaussians}\n")),
+            "{header}"
+        );
+    }
+    assert!(dir.join("sequence.zip").is_file());
+    assert!(
+        !dir.join(".degs-entry.json").exists(),
+        "the cache's manifest stays out"
+    );
 }
 
 /// A stage's report has a `novel` section for the scene's two novel views, with a
