@@ -49,26 +49,7 @@ enum Verb {
     /// deformed to each time in world coordinates: OUT/frame_0001.ply … (SuperSplat plays
     /// such a sequence), OUT/sequence.zip (the same files; brush plays it), times.json and
     /// report.json. Times: every train and test frame's, or --fps N over the recording.
-    Export {
-        /// Model directory (`gaussians train` or `deform train` output)
-        #[arg(long)]
-        model: PathBuf,
-        /// The scene the model was trained on (its frames' times and clock)
-        #[arg(long)]
-        scene: PathBuf,
-        /// Output directory (written under a temporary name, renamed when complete)
-        #[arg(long)]
-        out: PathBuf,
-        /// Frames per second over the recording instead of the frames' times
-        #[arg(long)]
-        fps: Option<f64>,
-        /// Settings file (TOML: `fps = N`); --fps overrides it
-        #[arg(long)]
-        config: Option<PathBuf>,
-        /// Replace an earlier output of `gaussians export` at OUT
-        #[arg(long)]
-        force: bool,
-    },
+    Export(gaussians::export::ExportArgs),
     /// Write an RGB-only synthetic scene (no events), for tests and benchmarks.
     #[command(hide = true)]
     SynthRgb {
@@ -144,34 +125,8 @@ fn run(verb: Verb) -> scene::Result<ExitCode> {
             );
             Ok(ExitCode::SUCCESS)
         }
-        Verb::Export {
-            model,
-            scene,
-            out,
-            fps,
-            config,
-            force,
-        } => {
-            let s = stagekit::settings::resolve::<gaussians::export::ExportSettings>(
-                config.as_deref(),
-                |s| s.fps = fps.or(s.fps),
-            )?;
-            let fps = s.fps;
-            let mut progress = stagekit::Progress::new("ply", 0);
-            let r = gaussians::export::export(&model, &scene, &out, (fps, force), |k, n| {
-                progress.set_length(n as u64);
-                progress.set(k as u64, String::new);
-            })?;
-            progress.finish();
-            eprintln!(
-                "{}: {} PLY files of {} Gaussians ({:.3}–{:.3} s), and {}",
-                out.display(),
-                r.frames.len(),
-                r.gaussians,
-                r.frames.first().map_or(0.0, |f| f.seconds),
-                r.frames.last().map_or(0.0, |f| f.seconds),
-                r.zip
-            );
+        Verb::Export(args) => {
+            args.run()?;
             Ok(ExitCode::SUCCESS)
         }
         Verb::SynthRgb { preset, out, size } => {
