@@ -41,38 +41,32 @@ impl stagekit::Settings for ExportSettings {
 /// The command line of `gaussians export`.
 #[derive(Clone, Debug, clap::Args)]
 pub struct ExportArgs {
+    /// `--scene` (the scene the model was trained on: its frames' times and clock),
+    /// `--out`, `--force`, `--config` (TOML: `fps = N`)
+    #[command(flatten)]
+    pub stage: stagekit::StageArgs,
     /// Model directory (`gaussians train` or `deform train` output)
     #[arg(long)]
     pub model: PathBuf,
-    /// The scene the model was trained on (its frames' times and clock)
-    #[arg(long)]
-    pub scene: PathBuf,
-    /// Output directory (written under a temporary name, renamed when complete)
-    #[arg(long)]
-    pub out: PathBuf,
-    /// Frames per second over the recording instead of the frames' times
+    /// Frames per second over the recording instead of the frames' times (overrides the
+    /// settings file)
     #[arg(long)]
     pub fps: Option<f64>,
-    /// Settings file (TOML: `fps = N`); --fps overrides it
-    #[arg(long)]
-    pub config: Option<PathBuf>,
-    /// Replace an earlier output of `gaussians export` at OUT
-    #[arg(long)]
-    pub force: bool,
 }
 
 impl ExportArgs {
     /// Export with a progress display; one summary line on stderr.
     pub fn run(&self) -> Result<ExportReport> {
-        let s = stagekit::settings::resolve::<ExportSettings>(self.config.as_deref(), |s| {
+        let (scene, output) = (&self.stage.scene, &self.stage.output);
+        let s = stagekit::settings::resolve::<ExportSettings>(output.config.as_deref(), |s| {
             s.fps = self.fps.or(s.fps)
         })?;
         let mut progress = stagekit::Progress::new("ply", 0);
         let r = export(
             &self.model,
-            &self.scene,
-            &self.out,
-            (s.fps, self.force),
+            scene,
+            &output.out,
+            (s.fps, output.force),
             |k, n| {
                 progress.set_length(n as u64);
                 progress.set(k as u64, String::new);
@@ -81,7 +75,7 @@ impl ExportArgs {
         progress.finish();
         eprintln!(
             "{}: {} PLY files of {} Gaussians ({:.3}–{:.3} s), and {}",
-            self.out.display(),
+            output.out.display(),
             r.frames.len(),
             r.gaussians,
             r.frames.first().map_or(0.0, |f| f.seconds),
