@@ -6,9 +6,9 @@
 //! `runs/<name>/stress.json`, `report.md` and one chart per stress.
 //!
 //! A transformed scene is a cache entry `cache/stress-scene/<key>/` written by `synth
-//! stress` ([`synth::transform`]), its key blake3 of the `synth` binary's hash, the
-//! transform's settings and the clean scene's key; the runs read it as a scene
-//! directory.
+//! stress` ([`synth::transform`]) run as a cached node, its key blake3 of the `synth`
+//! binary's hash, the transform's settings and the clean scene's key and place; the runs
+//! read it as a scene directory.
 
 pub mod chart;
 pub mod report;
@@ -18,6 +18,7 @@ use anyhow::{Context as _, Result, bail};
 use report::{StressRecord, StressResult, VariantScene};
 use runner::context::Context;
 use runner::experiment::Experiment;
+use runner::external::{self, External, Given};
 use runner::progress::Progress;
 use runner::record::{Action, RunRecord};
 use runner::run::{self, RunOptions};
@@ -30,79 +31,42 @@ use variants::{METHODS, Recipe, StressFile, StressKind, Variant};
 pub const STAGE: &str = "stress-scene";
 
 /// The cache entry of `t` applied to the scene `base` (keyed `base_key`), made when
-/// missing by `synth stress` (its key from the `synth` binary's hash, the transform's
-/// settings and the clean scene's key).
+/// missing by `synth stress` run as a cached node ([`runner::external`]: its key from
+/// the `synth` binary's hash, the transform's settings and the clean scene's key and
+/// place; locked like any stage). `name` is the stress run's (its settings file goes
+/// under `runs/<name>/`).
 pub(crate) fn transformed_scene(
     ctx: &Context,
-    base: &Path,
-    base_key: &str,
+    (base, base_key): (&Path, &str),
     t: &SceneTransform,
+    name: &str,
 ) -> Result<(PathBuf, TransformSummary)> {
     let settings = match toml::Value::try_from(t)? {
         toml::Value::Table(tb) => runner::canon::canonical_table(&tb),
         _ => toml::Table::new(),
     };
-    let synth = ctx.stage_binary(runner::stages::SYNTH).with_context(|| {
-        format!(
-            "cannot transform scenes: {}",
-            runner::stages::not_built(
-                runner::stages::SYNTH,
-                "degs-synth",
-                ctx.stage_dir.as_deref()
-            )
-        )
-    })?;
-    let mut hashes = runner::cache::BinaryHashes::load(&ctx.cache);
-    let binary_hash = hashes.hash(&synth)?;
-    hashes.save(&ctx.cache)?;
-    let key = runner::graph::key_of(STAGE, &binary_hash, &settings, &[("--scene", base_key)]);
-    let entry = ctx.cache.entry(STAGE, &key);
-    let summary_of = |dir: &Path| -> Result<TransformSummary> {
-        let p = dir.join("stress.json");
-        let bytes = std::fs::read(&p).with_context(|| format!("{}: cannot read", p.display()))?;
-        serde_json::from_slice(&bytes)
-            .with_context(|| format!("{}: not a transform summary", p.display()))
+    let ext = External {
+        what: "the stress transform (synth stress)",
+        stage: STAGE,
+        binary: runner::stages::SYNTH,
+        package: "degs-synth",
+        verb: Some("stress"),
+        settings,
     };
-    // Held until the entry is in place: another runner making the same variant waits.
-    let _lock = runner::lock::EntryLock::take(&ctx.cache, STAGE, &key)?;
-    if runner::cache::read_manifest(&entry).is_some() {
-        return Ok((entry.clone(), summary_of(&entry)?));
-    }
-    for old in [&entry, &ctx.cache.temp_entry(STAGE, &key)] {
-        if old.exists() {
-            // An unsealed entry of the cache (ours to replace): a partial or tampered one.
-            std::fs::remove_dir_all(old)
-                .with_context(|| format!("{}: cannot remove", old.display()))?;
-        }
-    }
-    let tmp = ctx.cache.temp_entry(STAGE, &key);
-    std::fs::create_dir_all(ctx.cache.stage_dir(STAGE))?;
-    let config = scene::atomic::temp_path(&entry.with_extension("toml"));
-    scene::atomic::write_bytes_atomic(&config, runner::canon::to_toml(&settings).as_bytes())?;
-    let args: Vec<String> = [
-        synth.as_os_str(),
-        "stress".as_ref(),
-        "--scene".as_ref(),
-        base.as_os_str(),
-        "--config".as_ref(),
-        config.as_os_str(),
-        "--out".as_ref(),
-        tmp.as_os_str(),
-    ]
-    .iter()
-    .map(|a| a.to_string_lossy().to_string())
-    .collect();
-    let outcome = runner::process::run(&args, None, &|_| {});
-    let _ = std::fs::remove_file(&config);
-    let out = outcome?;
-    if !out.success() {
-        let _ = std::fs::remove_dir_all(&tmp);
-        bail!("synth stress: {}", out.error_line());
-    }
-    runner::cache::seal(&tmp, STAGE, &key, out.wall_s, out.peak_rss_kib)?;
-    std::fs::rename(&tmp, &entry)
-        .with_context(|| format!("{}: cannot move into place", entry.display()))?;
-    Ok((entry.clone(), summary_of(&entry)?))
+    let given = vec![Given {
+        flag: "--scene",
+        name: runner::stages::SCENE.to_string(),
+        entry: base.to_path_buf(),
+        key: base_key.to_string(),
+    }];
+    let quiet = Progress::new(true);
+    let done = external::run_external(&ext, given, (name, ctx.cache.root.clone()), ctx, &quiet)?;
+    let entry = done.entry.unwrap_or_default();
+    let p = entry.join("stress.json");
+    let bytes = std::fs::read(&p).with_context(|| format!("{}: cannot read", p.display()))?;
+    let summary = serde_json::from_slice(&bytes)
+        .with_context(|| format!("{}: not a transform summary", p.display()))?;
+    Ok((entry, summary))
 }
 
 /// Run the stress file; the record is also written to `runs/<name>/stress.json`.
@@ -150,7 +114,7 @@ pub fn run(
         let dir = match &v.recipe {
             Recipe::Transform(t) => {
                 progress.note(&format!("stress {}: scene {}", file.name, v.name));
-                match transformed_scene(ctx, &base_dir, &base_key, t) {
+                match transformed_scene(ctx, (&base_dir, &base_key), t, &file.name) {
                     Ok((d, s)) => {
                         vs.transform = Some(s);
                         Some(d)

@@ -266,12 +266,12 @@ fn a_transformed_scene_is_a_cache_entry_keyed_by_its_settings() {
         gap_fraction: g,
         ..Default::default()
     };
-    let (a, _) = super::transformed_scene(&ctx, base_scene(), "k1", &t(0.2)).unwrap();
+    let (a, _) = super::transformed_scene(&ctx, (base_scene(), "k1"), &t(0.2), "s").unwrap();
     let stamp = std::fs::metadata(a.join("events.evs"))
         .unwrap()
         .modified()
         .unwrap();
-    let (again, s) = super::transformed_scene(&ctx, base_scene(), "k1", &t(0.2)).unwrap();
+    let (again, s) = super::transformed_scene(&ctx, (base_scene(), "k1"), &t(0.2), "s").unwrap();
     assert_eq!(a, again);
     assert_eq!(
         std::fs::metadata(a.join("events.evs"))
@@ -281,8 +281,8 @@ fn a_transformed_scene_is_a_cache_entry_keyed_by_its_settings() {
         stamp
     );
     assert_eq!(s.settings, t(0.2));
-    let (b, _) = super::transformed_scene(&ctx, base_scene(), "k1", &t(0.3)).unwrap();
-    let (c, _) = super::transformed_scene(&ctx, base_scene(), "k2", &t(0.2)).unwrap();
+    let (b, _) = super::transformed_scene(&ctx, (base_scene(), "k1"), &t(0.3), "s").unwrap();
+    let (c, _) = super::transformed_scene(&ctx, (base_scene(), "k2"), &t(0.2), "s").unwrap();
     assert!(a != b && a != c && b != c);
     assert!(a.starts_with(dir.path().join("cache").join(super::STAGE)));
 }
