@@ -42,11 +42,12 @@ fn rgb(img: &Image) -> Vec<f32> {
         .collect()
 }
 
-/// LPIPS of two image files (the first three channels; grey images repeated).
-pub(crate) fn lpips_of_files(m: &Lpips, test: &Path, render: &Path) -> Result<f64> {
+/// LPIPS and its spatial map of two image files (the first three channels; grey images
+/// repeated).
+pub(crate) fn scored_files(m: &Lpips, test: &Path, render: &Path) -> Result<lpips::Scored> {
     let (a, b) = (read_image(test)?, read_image(render)?);
     let (ra, rb) = (rgb(&a), rgb(&b));
-    let d = m.distance(
+    let d = m.distance_and_map(
         Rgb {
             data: &ra,
             width: a.width as usize,
@@ -61,16 +62,17 @@ pub(crate) fn lpips_of_files(m: &Lpips, test: &Path, render: &Path) -> Result<f6
     d.with_context(|| format!("LPIPS of {} against {}", render.display(), test.display()))
 }
 
-/// LPIPS of every (held-out image, render) pair of each set, and the network's name;
+/// LPIPS (and its map) of every (held-out image, render) pair of each set, and the
+/// network's name;
 /// `Err` says why there are none (no weights, or a pair that cannot be scored).
 pub(crate) fn score_sets(
     sets: &[Vec<(&Path, &Path)>],
     how: LpipsUse,
-) -> std::result::Result<(String, Vec<Vec<f64>>), String> {
+) -> std::result::Result<(String, Vec<Vec<lpips::Scored>>), String> {
     let m = metric(how)?;
-    let scores: Result<Vec<Vec<f64>>> = sets
+    let scores: Result<Vec<Vec<lpips::Scored>>> = sets
         .iter()
-        .map(|set| set.iter().map(|(t, r)| lpips_of_files(&m, t, r)).collect())
+        .map(|set| set.iter().map(|(t, r)| scored_files(&m, t, r)).collect())
         .collect();
     let scores = scores.map_err(|e| format!("LPIPS not computed: {e:#}"))?;
     Ok((EVAL_VARIANT.name().to_string(), scores))

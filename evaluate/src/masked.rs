@@ -28,6 +28,35 @@ pub(crate) fn moving_ids(scene_dir: &Path) -> Option<Vec<u16>> {
     )
 }
 
+/// The two masks of novel view `k`, each None where the scene lacks it.
+pub(crate) struct NovelMasks {
+    /// The pixels a moving object covers (`gt/novel/object_kkkk.png`).
+    pub moving: Option<Vec<bool>>,
+    /// The pixels some train view saw (`gt/novel/covisible_kkkk.png`).
+    pub covisible: Option<Vec<bool>>,
+}
+
+impl NovelMasks {
+    /// `ids`: the moving objects' ids ([`moving_ids`]); None: no moving mask.
+    pub fn read(scene_dir: &Path, k: usize, ids: Option<&[u16]>) -> Result<NovelMasks> {
+        let mask_of = |name: &str, keep: &dyn Fn(u16) -> bool| -> Result<Option<Vec<bool>>> {
+            let path = scene_dir.join(format!("gt/novel/{name}_{k:04}.png"));
+            if !path.is_file() {
+                return Ok(None);
+            }
+            let (_, _, values) = synth::gt::read_object_png(&path)?;
+            Ok(Some(values.iter().map(|&v| keep(v)).collect()))
+        };
+        Ok(NovelMasks {
+            moving: match ids {
+                Some(ids) => mask_of("object", &|o| ids.contains(&o))?,
+                None => None,
+            },
+            covisible: mask_of("covisible", &|v| v != 0)?,
+        })
+    }
+}
+
 /// A novel view and its render, read once, with their per-pixel SSIM map
 /// ([`scene::metrics::ssim_map_u8`]), to score on any number of masks.
 struct Pair {
@@ -134,19 +163,7 @@ pub(crate) fn novel_masks(
     let ids = moving_ids(scene_dir);
     let mut out = Vec::with_capacity(pairs.len());
     for (k, (test, render)) in pairs.iter().enumerate() {
-        let mask_of = |name: &str, keep: &dyn Fn(u16) -> bool| -> Result<Option<Vec<bool>>> {
-            let path = scene_dir.join(format!("gt/novel/{name}_{k:04}.png"));
-            if !path.is_file() {
-                return Ok(None);
-            }
-            let (_, _, values) = synth::gt::read_object_png(&path)?;
-            Ok(Some(values.iter().map(|&v| keep(v)).collect()))
-        };
-        let moving = match &ids {
-            Some(ids) => mask_of("object", &|o| ids.contains(&o))?,
-            None => None,
-        };
-        let covisible = mask_of("covisible", &|v| v != 0)?;
+        let NovelMasks { moving, covisible } = NovelMasks::read(scene_dir, k, ids.as_deref())?;
         let mut f = MaskFigures::default();
         if moving.is_none() && covisible.is_none() {
             out.push(f);

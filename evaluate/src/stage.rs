@@ -80,7 +80,7 @@ pub fn evaluate(inputs: Inputs, s: &EvalSettings, dir: &Path) -> Result<Metrics>
         f.masks = *m;
     }
     let trajectory = inputs.model.and_then(crate::masked::trajectory);
-    let (lpips_net, lpips_note) = add_lpips(&mut frames, &mut novel_frames, s.lpips);
+    let (lpips_net, lpips_note) = add_lpips(&mut frames, &mut novel_frames, s.lpips, &scene)?;
     let mean = |frames: &[FrameMetrics], f: &dyn Fn(&FrameMetrics) -> f64| {
         (!frames.is_empty()).then(|| frames.iter().map(f).sum::<f64>() / frames.len() as f64)
     };
@@ -105,6 +105,8 @@ pub fn evaluate(inputs: Inputs, s: &EvalSettings, dir: &Path) -> Result<Metrics>
         novel_moving_depth_error_mean: mean_of(
             novel_frames.iter().map(|f| f.masks.moving_depth_error),
         ),
+        novel_moving_lpips_mean: mean_of(novel_frames.iter().map(|f| f.masks.moving_lpips)),
+        novel_covisible_lpips_mean: mean_of(novel_frames.iter().map(|f| f.masks.covisible_lpips)),
         novel_ssim_mean: mean(&novel_frames, &|f| f.ssim),
         novel_frames,
         baselines,
@@ -141,24 +143,35 @@ fn pairs(s: &[FrameMetrics]) -> Vec<(&Path, &Path)> {
         .collect()
 }
 
-/// LPIPS of the test and novel frames in place; the network, or why none.
+/// LPIPS of the test and novel frames in place, and of the novel views over their masks
+/// ([`crate::masked::NovelMasks`]); the network, or why none. `Err` only for a mask
+/// that cannot be read.
 fn add_lpips(
     test: &mut [FrameMetrics],
     novel: &mut [FrameMetrics],
     how: LpipsUse,
-) -> (Option<String>, Option<String>) {
+    scene: &Scene,
+) -> Result<(Option<String>, Option<String>)> {
     if test.is_empty() && novel.is_empty() {
-        return (None, None);
+        return Ok((None, None));
     }
-    match score_sets(&[pairs(test), pairs(novel)], how) {
-        Ok((net, scores)) => {
-            for (f, d) in test.iter_mut().chain(novel.iter_mut()).zip(scores.concat()) {
-                f.lpips = Some(d);
-            }
-            (Some(net), None)
-        }
-        Err(why) => (None, Some(why)),
+    let (net, mut scores) = match score_sets(&[pairs(test), pairs(novel)], how) {
+        Ok(found) => found,
+        Err(why) => return Ok((None, Some(why))),
+    };
+    let novel_scores = scores.pop().unwrap_or_default();
+    for (f, d) in test.iter_mut().zip(scores.concat()) {
+        f.lpips = Some(d.distance);
     }
+    let ids = crate::masked::moving_ids(&scene.root);
+    for (k, (f, d)) in novel.iter_mut().zip(novel_scores).enumerate() {
+        f.lpips = Some(d.distance);
+        let masks = crate::masked::NovelMasks::read(&scene.root, k, ids.as_deref())?;
+        let masked = |m: Option<Vec<bool>>| m.map(|m| d.masked_mean(&m)).transpose();
+        f.masks.moving_lpips = masked(masks.moving)?.flatten();
+        f.masks.covisible_lpips = masked(masks.covisible)?.flatten();
+    }
+    Ok((Some(net), None))
 }
 
 /// The 2D baselines: the model's report's when it has them (the deform stage writes

@@ -5,7 +5,7 @@
 //! puts the moving objects at the wrong depth.
 //!
 //! ```text
-//! cargo run --release -p degs-gaussians --example gt_init -- SCENE OUT.ply [FRAMES] [MOVING_IDS] [MOTION]
+//! cargo run --release -p degs-gaussians --example gt_init -- SCENE OUT.ply [FRAMES] [MOVING_IDS] [MOTION] [SCALE]
 //! ```
 //!
 //! `FRAMES`: comma-separated train frame indices (default `0`). `MOVING_IDS`: object ids
@@ -17,7 +17,10 @@
 //! `--init-motion`: the moving objects' Gaussians get the quadratic (about the
 //! recording's middle, `gaussians::motion`) fitted by least squares to their surface
 //! point's analytic positions at the train times, and sit where that fit puts them at the
-//! middle; every other Gaussian is still.
+//! middle; every other Gaussian is still. `SCALE` (default 1): the moving objects'
+//! points as a camera whose images are the same would see them at another distance:
+//! at every train time `c + SCALE·(x − c)` with `c` the camera's centre then (the
+//! one-parameter family one moving camera cannot tell apart, BENCHMARKS.md).
 
 use gaussians::splats::{Gaussian, Splats};
 use glam::{DMat3, DVec2, DVec3};
@@ -67,6 +70,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let frames: Vec<usize> = list(args.get(3), vec![0]);
     let moving: Vec<u16> = list(args.get(4), Vec::new());
     let motion_out = args.get(5);
+    let along_ray: f64 = args.get(6).map_or(Ok(1.0), |s| s.parse())?;
     let world = match motion_out {
         None => None,
         Some(_) => {
@@ -105,10 +109,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 {
                     let path: Vec<(f64, DVec3)> = (scene.train.frames.iter())
                         .map(|f| {
-                            (
-                                f.time,
-                                world.material_to_world(hit.object, hit.local, f.timestamp),
-                            )
+                            let c = scene.camera(f).cam_to_world.centre();
+                            let x = world.material_to_world(hit.object, hit.local, f.timestamp);
+                            (f.time, c + along_ray * (x - c))
                         })
                         .collect();
                     let (mu, v, a) = fit_quadratic(&path);
@@ -117,6 +120,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 }
                 let c = &rgb.data[3 * i..3 * i + 3];
                 let sh = [c[0], c[1], c[2]].map(|v| (v - 0.5) / SH_C0);
+                let d = if moving.contains(&ids[i]) {
+                    d * along_ray
+                } else {
+                    d
+                };
                 let scale = (0.5 * d / cam.intrinsics.fx) as f32;
                 let mean = [p.x as f32, p.y as f32, p.z as f32];
                 splats.push(Gaussian::isotropic(mean, scale.ln(), 0.0, sh));

@@ -81,12 +81,26 @@ impl Lpips {
     /// official `test_network.py` prints, with `spatial=True`); close to
     /// [`Lpips::distance`], not equal.
     pub fn distance_spatial_mean(&self, a: Rgb, b: Rgb) -> Result<f64> {
+        Ok(mean(&self.distance_and_map(a, b)?.map))
+    }
+
+    /// [`Lpips::distance`] and the spatial distance map at the image size (`w · h`,
+    /// row-major: each tap's map upsampled bilinearly and summed, the official
+    /// `spatial=True` output), from one pass of the network. The map's mean over a mask
+    /// is the masked LPIPS ([`Scored::masked_mean`]).
+    pub fn distance_and_map(&self, a: Rgb, b: Rgb) -> Result<Scored> {
         let size = (a.width, a.height);
-        Ok(self
-            .maps(a, b)?
-            .iter()
-            .map(|(m, wh)| mean(&net::upsample_bilinear(m, *wh, size)))
-            .sum())
+        let taps = self.maps(a, b)?;
+        let mut map = vec![0.0; a.width * a.height];
+        for (m, wh) in &taps {
+            for (o, v) in map.iter_mut().zip(net::upsample_bilinear(m, *wh, size)) {
+                *o += v;
+            }
+        }
+        Ok(Scored {
+            distance: taps.iter().map(|(m, _)| mean(m)).sum(),
+            map,
+        })
     }
 
     /// Per tap: the distance map and its (w, h).
@@ -104,6 +118,34 @@ impl Lpips {
 
 /// A tap's distance map and its (w, h).
 type TapMap = (Vec<f64>, (usize, usize));
+
+/// One image pair's LPIPS ([`Lpips::distance_and_map`]).
+#[derive(Clone, Debug)]
+pub struct Scored {
+    /// The distance ([`Lpips::distance`]).
+    pub distance: f64,
+    /// The spatial map at the image size, row-major.
+    pub map: Vec<f64>,
+}
+
+impl Scored {
+    /// The map's mean over the pixels where `mask` holds (masked LPIPS, as the masked
+    /// PSNR of Gao et al. 2022); None where it holds nowhere. `Err` when the mask is not
+    /// the map's size.
+    pub fn masked_mean(&self, mask: &[bool]) -> Result<Option<f64>> {
+        if mask.len() != self.map.len() {
+            return Err(Error::Other(format!(
+                "a mask of {} pixels for an LPIPS map of {}",
+                mask.len(),
+                self.map.len()
+            )));
+        }
+        let (sum, n) = (self.map.iter().zip(mask))
+            .filter(|(_, m)| **m)
+            .fold((0.0, 0usize), |(s, n), (v, _)| (s + v, n + 1));
+        Ok((n > 0).then(|| sum / n as f64))
+    }
+}
 
 fn mean(v: &[f64]) -> f64 {
     v.iter().sum::<f64>() / v.len().max(1) as f64

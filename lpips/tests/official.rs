@@ -115,3 +115,59 @@ fn img(data: &[f32], width: usize, height: usize) -> Rgb<'_> {
         height,
     }
 }
+
+/// The masked LPIPS (the spatial map's mean over a mask): over every pixel it is the
+/// official spatial mean checked above, and it stays where the images differ. `ex_ref`
+/// against a copy whose top-right quadrant alone is `ex_p0`'s: the map over that quadrant
+/// is several times its mean over the opposite one (a map transposed or flipped on
+/// either axis would swap them), and the two together with the rest add up to the whole.
+#[test]
+fn masked_lpips_is_the_spatial_map_where_the_images_differ() {
+    let Some(m) = metric(Variant::Alex) else {
+        return;
+    };
+    let (r, p) = (image("ex_ref.png"), image("ex_p0.png"));
+    let (w, h) = (r.1, r.2);
+    let top_right = |x: usize, y: usize| x >= w / 2 && y < h / 2;
+    let mut patched = r.clone();
+    for y in 0..h {
+        for x in (0..w).filter(|&x| top_right(x, y)) {
+            let i = 3 * (y * w + x);
+            patched.0[i..i + 3].copy_from_slice(&p.0[i..i + 3]);
+        }
+    }
+    let full = m.distance_and_map(rgb(&r), rgb(&p)).unwrap();
+    assert!(
+        (full.distance - 0.7218806).abs() < 1e-4,
+        "{}",
+        full.distance
+    );
+    let all = full.masked_mean(&vec![true; w * h]).unwrap().unwrap();
+    assert!(
+        (all - 0.722).abs() <= 1e-3,
+        "masked over every pixel: {all}"
+    );
+    assert_eq!(full.masked_mean(&vec![false; w * h]).unwrap(), None);
+    assert!(full.masked_mean(&[true; 3]).is_err());
+
+    let s = m.distance_and_map(rgb(&r), rgb(&patched)).unwrap();
+    let mask = |f: &dyn Fn(usize, usize) -> bool| -> Vec<bool> {
+        (0..w * h).map(|i| f(i % w, i / w)).collect()
+    };
+    let changed = s.masked_mean(&mask(&top_right)).unwrap().unwrap();
+    let opposite = s
+        .masked_mean(&mask(&|x, y| x < w / 2 && y >= h / 2))
+        .unwrap()
+        .unwrap();
+    let rest = s
+        .masked_mean(&mask(&|x, y| !top_right(x, y)))
+        .unwrap()
+        .unwrap();
+    eprintln!(
+        "masked LPIPS: changed quadrant {changed:.4}, opposite {opposite:.4}, rest {rest:.4}"
+    );
+    assert!(changed > 4.0 * opposite, "{changed} vs {opposite}");
+    let whole = s.map.iter().sum::<f64>() / (w * h) as f64;
+    let parts = (changed * (w * h / 4) as f64 + rest * (w * h - w * h / 4) as f64) / (w * h) as f64;
+    assert!((whole - parts).abs() < 1e-9, "{whole} vs {parts}");
+}

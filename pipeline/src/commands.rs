@@ -178,7 +178,10 @@ pub fn execute(command: Command) -> Result<()> {
                 eval::compare_table(&[(m.experiment.clone(), m.clone())])
             );
             print!("\n{}", eval::baseline_block(&m));
-            let ssim = |s: Option<f64>| s.map_or(String::new(), |s| format!(", SSIM {s:.4}"));
+            let ssim = |s: Option<f64>, l: Option<f64>| {
+                let l = l.map_or(String::new(), |l| format!(", LPIPS {l:.4}"));
+                s.map_or(l.clone(), |s| format!(", SSIM {s:.4}{l}"))
+            };
             if let Some(p) = m.novel_moving_psnr_mean {
                 let depth = m.novel_moving_depth_error_mean.map_or(String::new(), |e| {
                     format!(", depth off by {:.1} % of the true depth", 100.0 * e)
@@ -186,13 +189,13 @@ pub fn execute(command: Command) -> Result<()> {
                 println!(
                     "  novel views, pixels of moving objects: PSNR {p:.2} dB{}{depth} \
                      (where a model wrong in 3D smears)",
-                    ssim(m.novel_moving_ssim_mean)
+                    ssim(m.novel_moving_ssim_mean, m.novel_moving_lpips_mean)
                 );
             }
             if let Some(p) = m.novel_covisible_psnr_mean {
                 println!(
                     "  novel views, pixels some train view saw: PSNR {p:.2} dB{}",
-                    ssim(m.novel_covisible_ssim_mean)
+                    ssim(m.novel_covisible_ssim_mean, m.novel_covisible_lpips_mean)
                 );
             }
             if let Some(t) = &m.trajectory {

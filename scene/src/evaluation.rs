@@ -48,6 +48,11 @@ pub struct Metrics {
     pub novel_covisible_ssim_mean: Option<f64>,
     #[serde(default)]
     pub novel_moving_depth_error_mean: Option<f64>,
+    /// The means of the masked LPIPS ([`MaskFigures::moving_lpips`]).
+    #[serde(default)]
+    pub novel_moving_lpips_mean: Option<f64>,
+    #[serde(default)]
+    pub novel_covisible_lpips_mean: Option<f64>,
     /// The render stage's Gaussians against the moving objects' true 3D motion.
     #[serde(default)]
     pub trajectory: Option<Trajectory>,
@@ -129,6 +134,12 @@ pub struct MaskFigures {
     pub covisible_psnr: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub covisible_ssim: Option<f64>,
+    /// LPIPS over each mask: the mean of the spatial LPIPS map there
+    /// (`lpips::Scored::masked_mean`); None without LPIPS or the mask.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub moving_lpips: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub covisible_lpips: Option<f64>,
 }
 
 /// The render stage's figures of its Gaussians' motion against the moving objects' true

@@ -206,3 +206,60 @@ fn eval_scores_ssim_on_the_masks_and_the_depth_of_moving_objects() {
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(out.contains("depth off by 55.0 %"), "{out}");
 }
+
+/// LPIPS on the masks: renders equal to the ground truth score 0 on both; a render whose
+/// moving objects alone are painted grey (frame 0) scores far more over their pixels
+/// than over the whole image, where the unchanged rest dilutes it.
+#[test]
+fn eval_scores_lpips_on_the_masks() {
+    let Exact {
+        dir: _dir,
+        root,
+        scene_dir,
+        scene: _,
+        g,
+    } = exact_renders(true);
+    let ids = |k: usize| {
+        synth::gt::read_object_png(scene_dir.join(format!("gt/novel/object_{k:04}.png")))
+            .unwrap()
+            .2
+    };
+    let cfg: synth::SynthConfig =
+        serde_json::from_str(&fs::read_to_string(scene_dir.join("synth.json")).unwrap()).unwrap();
+    let moves = |o: u16| o > 0 && cfg.objects[o as usize - 1].moves();
+    let p = g.join("renders/novel/0000.png");
+    let mut img = read_image(&p).unwrap();
+    for (i, _) in ids(0).iter().enumerate().filter(|(_, o)| moves(**o)) {
+        img.data[3 * i..3 * i + 3].fill(0.5);
+    }
+    write_png(&p, &img).unwrap();
+    fabricate_run(&root, "lp", &scene_dir, &g, None);
+    let run = root.join("runs/lp");
+    let o = degs_lpips(&["eval", run.to_str().unwrap()], "fetch");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let m: serde_json::Value =
+        serde_json::from_slice(&fs::read(run.join("metrics.json")).unwrap()).unwrap();
+    if m["lpips_net"].is_null() {
+        assert!(
+            std::env::var("DEGS_SKIP_LPIPS").is_ok_and(|s| s == "1"),
+            "no LPIPS weights ({}); opt out with DEGS_SKIP_LPIPS=1",
+            m["lpips_note"]
+        );
+        eprintln!("SKIPPED: {} and DEGS_SKIP_LPIPS=1", m["lpips_note"]);
+        return;
+    }
+    let novel = m["novel_frames"].as_array().unwrap();
+    for f in &novel[1..] {
+        assert!(f["moving_lpips"].as_f64().unwrap().abs() < 1e-9, "{f}");
+        assert!(f["covisible_lpips"].as_f64().unwrap().abs() < 1e-9, "{f}");
+    }
+    let (moving, whole) = (
+        novel[0]["moving_lpips"].as_f64().unwrap(),
+        novel[0]["lpips"].as_f64().unwrap(),
+    );
+    assert!(moving > 2.0 * whole && whole > 0.0, "{moving} vs {whole}");
+    let mean = m["novel_moving_lpips_mean"].as_f64().unwrap();
+    assert!((mean - moving / novel.len() as f64).abs() < 1e-9, "{mean}");
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("LPIPS"), "{out}");
+}
