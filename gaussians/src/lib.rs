@@ -14,6 +14,7 @@ pub mod model;
 pub mod motion;
 pub use stagekit::optim;
 pub mod ply;
+pub mod preview;
 pub mod progress;
 pub mod raster;
 pub mod splats;
@@ -21,6 +22,7 @@ pub mod stage;
 pub mod tracks;
 pub mod train;
 pub mod trajectory;
+pub mod video;
 
 pub use raster::{Rasterizer, RenderedImage, TileRasterizer};
 pub use splats::{Gaussian, SplatGrads, Splats};

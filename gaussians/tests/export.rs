@@ -180,3 +180,144 @@ fn fps_gives_a_regular_grid_over_the_recording_and_bad_rates_are_refused() {
         assert!(e.to_string().contains("--fps"), "{e}");
     }
 }
+
+/// The frames of `gaussians video` in `out/frames/`, decoded.
+fn video_frames(out: &Path, n: usize) -> Vec<scene::image_io::Image> {
+    (1..=n)
+        .map(|k| {
+            let p = out.join("frames").join(gaussians::video::frame_file(k));
+            scene::image_io::read_image(&p).unwrap()
+        })
+        .collect()
+}
+
+/// The largest difference in 8-bit levels between a PNG frame and a fresh render.
+fn max_level_diff(a: &scene::image_io::Image, b: &scene::image_io::Image) -> f32 {
+    assert_eq!((a.width, a.height), (b.width, b.height));
+    (a.data.iter().zip(&b.data))
+        .map(|(x, y)| ((x - y) * 255.0).abs())
+        .fold(0.0, f32::max)
+}
+
+/// `gaussians video`: along the recorded path at the train frames' own rate, each frame
+/// is the model rendered at that train camera and time; the orbit's first frame is the
+/// middle train camera, its cameras all look at one point at one distance; the written
+/// `cameras.json` renders the same frames again as a cameras file; the GIF decodes to
+/// the frames (within its 256-colour palette); without `ffmpeg` the report says why
+/// there is no MP4.
+#[test]
+fn videos_render_the_model_along_recorded_orbit_and_file_paths() {
+    use gaussians::video::{VideoSettings, render_video};
+    let tmp = tempfile::tempdir().unwrap();
+    let (scene_dir, model_dir) = trained_model(tmp.path());
+    let scene = Scene::open(&scene_dir).unwrap();
+    let model = Model::load(&model_dir).unwrap();
+    let train = &scene.train.frames;
+    let span = train.last().unwrap().timestamp - train[0].timestamp;
+    let rate = (train.len() - 1) as f64 / span;
+    let settings = |path: &str, fps: Option<f64>| VideoSettings {
+        path: path.to_string(),
+        fps,
+        ..VideoSettings::default()
+    };
+    // Recorded, at the train rate: frame k is train frame k; by the binary, with a
+    // PATH that has no ffmpeg.
+    let rec = tmp.path().join("recorded");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_gaussians"))
+        .args(["video", "--path", "recorded", "--fps", &rate.to_string()])
+        .arg("--scene")
+        .arg(&scene_dir)
+        .arg("--model")
+        .arg(&model_dir)
+        .arg("--out")
+        .arg(&rec)
+        .env("PATH", tmp.path())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("ffmpeg is not on the PATH"), "{err}");
+    let r: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(rec.join("report.json")).unwrap()).unwrap();
+    assert!(r["mp4"].is_null(), "{r}");
+    let n = r["frames"].as_u64().unwrap() as usize;
+    assert_eq!(n, train.len());
+    let frames = video_frames(&rec, n);
+    for (k, f) in train.iter().enumerate() {
+        let want = model.render(&scene.camera(f), f.time as f32).rgb_image();
+        let d = max_level_diff(&frames[k], &want);
+        assert!(
+            d <= 0.5 + 1e-3,
+            "frame {k}: {d} levels off the train camera's render"
+        );
+    }
+    // The GIF: as many frames, each within the palette's error of its PNG.
+    let gif = std::fs::File::open(rec.join("preview.gif")).unwrap();
+    let dec = image::codecs::gif::GifDecoder::new(std::io::BufReader::new(gif)).unwrap();
+    let decoded = image::AnimationDecoder::into_frames(dec)
+        .collect_frames()
+        .unwrap();
+    assert_eq!(decoded.len(), frames.len());
+    for (g, p) in decoded.iter().zip(&frames) {
+        let buf = g.buffer();
+        assert_eq!((buf.width(), buf.height()), (p.width, p.height));
+        let mean: f64 = (buf.pixels().enumerate())
+            .map(|(i, px)| {
+                (0..3)
+                    .map(|c| (px[c] as f64 - (p.data[3 * i + c] * 255.0).round() as f64).abs())
+                    .sum::<f64>()
+            })
+            .sum::<f64>()
+            / (3 * p.width * p.height) as f64;
+        assert!(
+            mean < 6.0,
+            "GIF frame off its PNG by {mean:.2} levels on average"
+        );
+    }
+    // The cameras file renders the same frames again.
+    let again = tmp.path().join("again");
+    let cams = rec.join("cameras.json");
+    let r2 = render_video(
+        &model_dir,
+        &scene_dir,
+        &again,
+        &settings(cams.to_str().unwrap(), None),
+        false,
+        |_, _| {},
+    )
+    .unwrap();
+    assert_eq!(r2.frames, n);
+    for (a, b) in video_frames(&again, r2.frames).iter().zip(&frames) {
+        assert!(max_level_diff(a, b) <= 0.5 + 1e-3);
+    }
+    // Orbit: starts at the middle train camera; every optical axis meets one point.
+    let orbit = tmp.path().join("orbit");
+    let r3 = render_video(
+        &model_dir,
+        &scene_dir,
+        &orbit,
+        &settings("orbit", Some(3.0 * rate)),
+        false,
+        |_, _| {},
+    )
+    .unwrap();
+    let m = scene::manifest::Manifest::read(orbit.join("cameras.json")).unwrap();
+    assert_eq!(m.frames.len(), r3.frames);
+    let middle = train[train.len() / 2].cam_to_world;
+    let p0 = m.frames[0].cam_to_world;
+    assert!((p0.translation - middle.translation).length() < 1e-9);
+    assert!(p0.rotation.angle_between(middle.rotation) < 1e-9);
+    let axis = |p: &scene::camera::Pose| (p.translation, p.rotation * glam::DVec3::NEG_Z);
+    let (o1, d1) = axis(&m.frames[r3.frames / 4].cam_to_world);
+    let (o2, d2) = axis(&m.frames[3 * r3.frames / 4].cam_to_world);
+    // Closest points of the two axes (they swing ±20° apart: not parallel).
+    let w = o1 - o2;
+    let (b, d, e) = (d1.dot(d2), d1.dot(w), d2.dot(w));
+    let (s, t) = ((b * e - d) / (1.0 - b * b), (e - b * d) / (1.0 - b * b));
+    let (c1, c2) = (o1 + s * d1, o2 + t * d2);
+    assert!((c1 - c2).length() < 1e-6 && s > 0.0, "{c1} vs {c2}");
+    for f in &m.frames {
+        let dist = (f.cam_to_world.translation - c1).length();
+        assert!((dist - s).abs() < 1e-6, "{dist} vs {s}");
+    }
+}

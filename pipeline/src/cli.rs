@@ -295,6 +295,28 @@ pub enum Command {
         #[command(flatten)]
         place: Where,
     },
+    /// The run's dynamic model (the joint training's, else the warm-up's) rendered along
+    /// a camera path over the recording, in runs/<name>/video/: frames/0001.png …,
+    /// preview.gif, preview.mp4 (when ffmpeg is on the PATH; the output says when it is
+    /// not), cameras.json (the rendered poses and times, a manifest usable as --path
+    /// FILE). Cached like a stage.
+    Render {
+        /// A run directory (<cache>/runs/<name>) or an experiment name
+        run: String,
+        /// recorded (the camera's own path: slow motion), orbit (a swing of ±20° about
+        /// the scene's centre while time runs), or a cameras file (a manifest in the
+        /// scene's format: camera, each frame's transform_matrix and time)
+        #[arg(long, default_value = "recorded")]
+        path: String,
+        /// Rendered frames per second of recording time [default: 4× the train frames']
+        #[arg(long)]
+        fps: Option<f64>,
+        /// Frames per second of the preview animation [default: 10]
+        #[arg(long)]
+        playback_fps: Option<f64>,
+        #[command(flatten)]
+        place: Where,
+    },
     /// Charts of accuracy against cost across runs, one per question and scene, PNG and
     /// SVG: test PSNR against total stage time (cached stages at their build cost),
     /// against model size on disk and against Gaussian count, flow EPE against LoCM

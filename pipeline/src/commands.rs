@@ -167,6 +167,24 @@ pub fn execute(command: Command) -> Result<()> {
             );
             Ok(())
         }
+        Command::Render {
+            run,
+            path,
+            fps,
+            playback_fps,
+            place,
+        } => {
+            let dir = place.run_dir(&run)?;
+            let req = runner::video::VideoRequest {
+                path,
+                fps,
+                playback_fps,
+            };
+            let (out, stage) =
+                runner::video::render_run(&dir, &place.context()?, &req, &Progress::new(false))?;
+            println!("{}", video_summary(&out, stage)?);
+            Ok(())
+        }
         Command::Eval { run, place } => {
             let dir = place.run_dir(&run)?;
             let m = eval::eval_run(&dir, &place.context()?, &Progress::new(false))?;
@@ -468,4 +486,21 @@ fn import_recording(a: &ImportArgs) -> Result<()> {
     let summary = import::import(a.layout.layout(), &a.src, &opts, &a.out)?;
     print!("{summary}");
     Ok(())
+}
+
+/// One line on a `degs render` output folder: frames, previews, and why no MP4.
+pub(crate) fn video_summary(out: &std::path::Path, stage: &str) -> anyhow::Result<String> {
+    let r: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("report.json"))?)?;
+    let mp4 = match r["mp4"].as_str() {
+        Some(m) => format!(", {m}"),
+        None => format!(" ({})", r["mp4_note"].as_str().unwrap_or("no MP4")),
+    };
+    Ok(format!(
+        "{} frames of the {stage} model ({} path, {}×{}) in {}: frames/, preview.gif{mp4}",
+        r["frames"],
+        r["path"].as_str().unwrap_or("?"),
+        r["width"],
+        r["height"],
+        out.display()
+    ))
 }

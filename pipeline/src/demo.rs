@@ -64,6 +64,9 @@ pub struct DemoSummary {
     /// The charts of the run (`degs chart`: its warm-up and joint points against
     /// time, size, Gaussians; flow error against LoCM time) and their numbers.
     pub charts: Vec<PathBuf>,
+    /// The final model along the recorded path in slow motion (`degs render`):
+    /// `video/preview.gif` and its frames; None when it could not be made (said then).
+    pub video: Option<PathBuf>,
     pub wall_s: f64,
 }
 
@@ -182,6 +185,18 @@ pub fn demo(opts: &DemoOptions, ctx: &Context, progress: &Progress) -> Result<De
             eprintln!("[degs] demo: no charts: {e:#}");
             Vec::new()
         });
+    let req = runner::video::VideoRequest {
+        path: "recorded".into(),
+        fps: None,
+        playback_fps: None,
+    };
+    let video = match runner::video::render_run(&run_dir, ctx, &req, &Progress::new(true)) {
+        Ok((dir, _)) => Some(dir.join("preview.gif")),
+        Err(e) => {
+            progress.note(&format!("no preview video: {e:#}"));
+            None
+        }
+    };
     let summary = DemoSummary {
         out: out.clone(),
         experiment_file: file,
@@ -197,6 +212,7 @@ pub fn demo(opts: &DemoOptions, ctx: &Context, progress: &Progress) -> Result<De
         renders,
         metrics: metrics.map(|_| run_dir.join("metrics.json")),
         charts,
+        video,
         wall_s: record.wall_s,
     };
     scene::atomic::write_json_atomic(&out.join("summary.json"), &summary)?;
@@ -379,6 +395,17 @@ pub fn format_summary(s: &DemoSummary) -> String {
         line(
             "charts:",
             format!("{} ({n} PNG + SVG, chart.json, chart.csv)", dir.display()),
+        );
+    }
+    if let Some(v) = &s.video {
+        line(
+            "preview video:",
+            format!(
+                "{} (slow motion along the recorded path; `degs render demo --cache {} --path \
+                 orbit` swings the view about the scene)",
+                v.display(),
+                s.out.display()
+            ),
         );
     }
     line("summary:", s.out.join("summary.json").display().to_string());

@@ -27,3 +27,4 @@ pub mod stage_progress;
 pub mod stages;
 pub mod status;
 pub mod synth;
+pub mod video;

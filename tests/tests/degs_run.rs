@@ -149,6 +149,35 @@ fn degs_run_builds_every_stage_once_and_beats_the_mean_colour() {
         !dir.join(".degs-entry.json").exists(),
         "the cache's manifest stays out"
     );
+
+    // `degs render`: the joint model along the recorded path at 12 frames per second of
+    // recording time (0.25 s: 4 frames) in runs/tiny/video/; then along the cameras it
+    // wrote, given back as a file: the same frames again, a node of its own.
+    let out = w.degs(&["render", "tiny", "--fps", "12"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let said = String::from_utf8_lossy(&out.stdout).to_string();
+    assert!(
+        said.contains("4 frames of the deform model (recorded path"),
+        "{said}"
+    );
+    let video = w.cache.join("runs/tiny/video");
+    let first_frames: Vec<Vec<u8>> = (1..=4)
+        .map(|k| std::fs::read(video.join(format!("frames/{k:04}.png"))).unwrap())
+        .collect();
+    assert!(video.join("preview.gif").is_file());
+    let cams = w.cache.join("cams.json");
+    std::fs::copy(video.join("cameras.json"), &cams).unwrap();
+    let out = w.degs(&["render", "tiny", "--path", cams.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    for (k, before) in first_frames.iter().enumerate() {
+        let again = std::fs::read(video.join(format!("frames/{:04}.png", k + 1))).unwrap();
+        assert!(
+            again == *before,
+            "frame {k} differs when rendered from cameras.json"
+        );
+    }
+    let report = read_json(&video.join("report.json"));
+    assert_eq!(report["path"], cams.to_str().unwrap(), "{report}");
 }
 
 /// A stage's report has a `novel` section for the scene's two novel views, with a
