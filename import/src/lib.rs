@@ -10,6 +10,8 @@
 pub mod aedat4;
 pub mod aligned;
 pub mod blender;
+pub mod colmap;
+mod colmap_files;
 pub mod convention;
 pub mod ecd;
 pub mod hsergb;
@@ -40,6 +42,9 @@ pub enum Layout {
     /// nerfies / HyperNeRF / NeRF-DS: dataset.json, metadata.json, camera/, rgb/Nx/,
     /// with an event file beside them.
     Nerfies,
+    /// A COLMAP sparse model (sparse/0/, images/) with an event file and the frames'
+    /// times (timestamps.txt, or numbers in the image names).
+    Colmap,
 }
 
 impl Layout {
@@ -50,6 +55,7 @@ impl Layout {
             Layout::Hsergb => "hsergb",
             Layout::Blender => "blender",
             Layout::Nerfies => "nerfies",
+            Layout::Colmap => "colmap",
         }
     }
 }
@@ -64,7 +70,10 @@ pub fn import(
     let mut rule = scene::atomic::OutputRule::new(recording::IMPORT_COMMAND)
         .force(opts.force)
         .source(src);
-    for p in opts.calib.iter().chain(&opts.alignment.events) {
+    for p in (opts.calib.iter())
+        .chain(&opts.alignment.events)
+        .chain(&opts.timestamps)
+    {
         rule = rule.source(p);
     }
     rule.check(out)?;
@@ -73,6 +82,14 @@ pub fn import(
         Layout::Hsergb => hsergb::read_hsergb(src, opts.calib.as_deref())?,
         Layout::Blender => blender::read_blender(src, &opts.alignment)?,
         Layout::Nerfies => nerfies::read_nerfies(src, &opts.alignment, opts.downscale)?,
+        Layout::Colmap => colmap::read_colmap(
+            src,
+            &colmap::ColmapOptions {
+                events: opts.alignment.events.clone(),
+                timestamps: opts.timestamps.clone(),
+                name_seconds: opts.name_seconds,
+            },
+        )?,
         Layout::Aedat4 => {
             aedat4::read_aedat4_recording(src, opts.calib.as_deref(), opts.static_camera)?
         }

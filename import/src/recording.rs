@@ -76,6 +76,11 @@ pub struct ImportOptions {
     pub alignment: EventsAlignment,
     /// Nerfies: read the frames of `rgb/{N}x/` (default: 1, else the smallest there).
     pub downscale: Option<u32>,
+    /// COLMAP: the frames' times (`NAME SECONDS` lines; default SRC/timestamps.txt).
+    pub timestamps: Option<PathBuf>,
+    /// COLMAP without a timestamps file: seconds per unit of the number in each image's
+    /// name (default 1).
+    pub name_seconds: Option<f64>,
     /// Replace an earlier output of `degs import` at the output folder.
     pub force: bool,
 }
@@ -91,6 +96,8 @@ impl Default for ImportOptions {
             calib: None,
             alignment: Default::default(),
             downscale: None,
+            timestamps: None,
+            name_seconds: None,
             force: false,
         }
     }

@@ -362,6 +362,9 @@ pub enum ImportLayout {
     /// nerfies / HyperNeRF / NeRF-DS capture (dataset.json, metadata.json, camera/,
     /// rgb/Nx/) with an event file beside it
     Nerfies,
+    /// COLMAP sparse model (sparse/0/ cameras, images, points3D; .bin or .txt) with its
+    /// images/ and an event file; times from timestamps.txt or the image names
+    Colmap,
 }
 
 impl ImportLayout {
@@ -372,6 +375,7 @@ impl ImportLayout {
             ImportLayout::Hsergb => import::Layout::Hsergb,
             ImportLayout::Blender => import::Layout::Blender,
             ImportLayout::Nerfies => import::Layout::Nerfies,
+            ImportLayout::Colmap => import::Layout::Colmap,
         }
     }
 }
@@ -411,8 +415,8 @@ pub struct ImportArgs {
     /// k3]); without it they are guessed (fx = fy = width) with a warning
     #[arg(long, value_name = "FILE")]
     pub calib: Option<PathBuf>,
-    /// blender, nerfies: the event file (default: events.* beside the layout's files, or
-    /// the blender manifest's events.path)
+    /// blender, nerfies, colmap: the event file (default: events.* beside the layout's
+    /// files, or the blender manifest's events.path)
     #[arg(long, value_name = "FILE")]
     pub events: Option<PathBuf>,
     /// blender, nerfies: seconds on the events' clock of normalised time 0 (default: the first
@@ -427,6 +431,14 @@ pub struct ImportArgs {
     /// else the smallest N there)
     #[arg(long, value_name = "N")]
     pub downscale: Option<u32>,
+    /// colmap: the frames' times, `NAME SECONDS` per line (NAME as in images.bin/txt;
+    /// default: SRC/timestamps.txt, else the last number in each image's name)
+    #[arg(long, value_name = "FILE")]
+    pub timestamps: Option<PathBuf>,
+    /// colmap without a timestamps file: seconds per unit of the number in the image
+    /// names (1e-6 for microsecond names, 1/fps for frame indices) [default: 1]
+    #[arg(long, value_name = "S")]
+    pub name_seconds: Option<f64>,
 }
 
 #[derive(Clone, Copy, Debug, clap::ValueEnum)]

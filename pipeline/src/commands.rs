@@ -481,6 +481,8 @@ fn import_recording(a: &ImportArgs) -> Result<()> {
             duration: a.duration,
         },
         downscale: a.downscale,
+        timestamps: a.timestamps.clone(),
+        name_seconds: a.name_seconds,
         force: a.force,
     };
     let summary = import::import(a.layout.layout(), &a.src, &opts, &a.out)?;
