@@ -59,7 +59,7 @@ enum Verb {
     /// Write an RGB-only synthetic scene (no events), for tests and benchmarks.
     #[command(hide = true)]
     SynthRgb {
-        /// Preset: static, rigid, nonrigid, fast
+        /// Preset: static, rigid, nonrigid, fast, moderate
         #[arg(long, default_value = "static")]
         preset: String,
         /// Output scene directory

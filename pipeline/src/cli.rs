@@ -136,7 +136,7 @@ pub enum Command {
     /// train and test frames along the camera path, and novel views at the test times
     /// from a camera rotated about the scene's centre (`novel_angle_deg`).
     Synth {
-        /// Preset: static, rigid, nonrigid, fast
+        /// Preset: static, rigid, nonrigid, fast, moderate
         #[arg(long, default_value = "rigid")]
         preset: String,
         /// A full settings file instead of a preset (as written by `degs run`/`plan`)
@@ -247,7 +247,7 @@ pub enum Command {
         /// Look for stage binaries only in DIR [env: DEGS_STAGE_DIR]
         #[arg(long, value_name = "DIR")]
         stages: Option<PathBuf>,
-        /// Synthetic preset: static, rigid, nonrigid, fast
+        /// Synthetic preset: static, rigid, nonrigid, fast, moderate
         #[arg(long, default_value = "rigid")]
         preset: String,
         /// Override a scene setting, e.g. --set width=128 --set height=128

@@ -190,13 +190,15 @@ fn synth_writes_every_preset_in_the_scene_layout() {
         let o = degs(&args);
         assert!(o.status.success(), "{preset}: {}", text(&o));
         let scene = Scene::open(&out).unwrap();
-        // train frames at k / train_fps over 0.25 s at 8 fps: 0, 0.125, 0.25
-        assert_eq!(scene.train.frames.len(), 3, "{preset}");
+        // train frames at k / train_fps over 0.25 s: at 8 fps 0, 0.125, 0.25 (3); the
+        // moderate preset's 20 fps gives 0, 0.05, …, 0.25 (6)
+        let train = if *preset == "moderate" { 6 } else { 3 };
+        assert_eq!(scene.train.frames.len(), train, "{preset}");
         assert_eq!(scene.test.frames.len(), 2, "{preset}");
         // the novel views: one per test time, 15° off the path
         assert_eq!(scene.novel.frames.len(), 2, "{preset}");
         assert!(
-            text(&o).contains("3 train + 2 test frames + 2 novel views"),
+            text(&o).contains(&format!("{train} train + 2 test frames + 2 novel views")),
             "{preset}: {}",
             text(&o)
         );

@@ -55,6 +55,30 @@ pub struct SynthConfig {
     pub camera: CameraPath,
     /// Objects; object id `k + 1` is `objects[k]` (0 is the background).
     pub objects: Vec<ObjectSpec>,
+    /// A directional light: each surface's texture colour × `ambient + (1 − ambient)
+    /// · max(0, n·l)`, so a turning surface changes its brightness as in real footage.
+    /// None: unlit (every surface shows its texture as is).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub light: Option<Light>,
+}
+
+/// A directional light ([`SynthConfig::light`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Light {
+    /// Direction towards the light, world axes (any length but zero).
+    pub direction: DVec3,
+    /// The fraction of a surface's colour it keeps facing away from the light.
+    pub ambient: f64,
+}
+
+impl Default for Light {
+    fn default() -> Self {
+        Light {
+            direction: DVec3::new(-0.4, 1.0, 0.6),
+            ambient: 0.35,
+        }
+    }
 }
 
 /// A smooth camera path. Position `eye + sway ⊙ sin(2π·sway_hz·t + φ)` with phases

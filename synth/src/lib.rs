@@ -34,7 +34,9 @@ pub mod texture;
 pub mod transform;
 pub mod world;
 
-pub use config::{CameraPath, Deform, Motion, ObjectSpec, Pattern, Shape, SynthConfig, Texture};
+pub use config::{
+    CameraPath, Deform, Light, Motion, ObjectSpec, Pattern, Shape, SynthConfig, Texture,
+};
 pub use presets::PRESETS;
 pub use rgb::write_rgb_synthetic_scene;
 pub use scene_dir::{

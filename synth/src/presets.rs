@@ -6,7 +6,7 @@ use crate::sim::SimConfig;
 use glam::DVec3;
 
 /// Names accepted by [`SynthConfig::preset`].
-pub const PRESETS: &[&str] = &["static", "rigid", "nonrigid", "fast"];
+pub const PRESETS: &[&str] = &["static", "rigid", "nonrigid", "fast", "moderate"];
 
 impl Default for SynthConfig {
     fn default() -> Self {
@@ -174,8 +174,11 @@ fn props(moving: f64, nonrigid: bool) -> Vec<ObjectSpec> {
 impl SynthConfig {
     /// A named preset (see [`PRESETS`]): `static` (still objects, moving camera),
     /// `rigid` (rigidly moving objects), `nonrigid` (adds a non-uniformly pulsing
-    /// ellipsoid and a waving flag), `fast` (nonrigid with 3× faster motion). `None` for
-    /// other names. Every preset has the same objects (floor, wall, box, ball, blob,
+    /// ellipsoid and a waving flag), `fast` (nonrigid with 3× faster motion), `moderate`
+    /// (nonrigid as a recording looks: lit by a directional light so that turning
+    /// surfaces change brightness, RGB frames at 20 fps, events from a sensor with
+    /// per-pixel threshold spread σ = 0.02, 0.5 Hz shot noise and a 0.1 ms refractory
+    /// period). `None` for other names. Every preset has the same objects (floor, wall, box, ball, blob,
     /// flag: ids 1–6); only their motion differs.
     pub fn preset(name: &str) -> Option<SynthConfig> {
         let (moving, nonrigid, speed) = match name {
@@ -183,6 +186,7 @@ impl SynthConfig {
             "rigid" => (1.0, false, 1.0),
             "nonrigid" => (1.0, true, 1.0),
             "fast" => (1.0, true, 3.0),
+            "moderate" => (1.0, true, 1.0),
             _ => return None,
         };
         let mut objects = room();
@@ -200,7 +204,7 @@ impl SynthConfig {
                 o.deform.wave_hz *= speed;
             }
         }
-        Some(SynthConfig {
+        let mut cfg = SynthConfig {
             preset: name.to_string(),
             width: 128,
             height: 128,
@@ -229,6 +233,15 @@ impl SynthConfig {
             },
             camera,
             objects,
-        })
+            light: None,
+        };
+        if name == "moderate" {
+            cfg.light = Some(crate::config::Light::default());
+            cfg.train_fps = 20.0;
+            cfg.events.threshold_sigma = 0.02;
+            cfg.events.shot_noise_hz = 0.5;
+            cfg.events.refractory_s = 1e-4;
+        }
+        Some(cfg)
     }
 }

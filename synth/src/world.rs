@@ -461,10 +461,46 @@ impl Frame<'_> {
         match hit {
             Some(h) => {
                 let spec = &self.world.cfg.objects[h.object];
-                texture::shade(&spec.texture, texture_coords(&spec.shape, h.local))
+                let c = texture::shade(&spec.texture, texture_coords(&spec.shape, h.local));
+                match &self.world.cfg.light {
+                    Some(light) => c.map(|v| v * self.lit(h, light)),
+                    None => c,
+                }
             }
             None => self.world.cfg.background,
         }
+    }
+
+    /// `ambient + (1 − ambient)·max(0, n·l)` at `h`, with `n` the surface normal turned
+    /// towards the camera: the material normal of the shape (a plane's wave is left
+    /// out), to world by `(R·S)⁻ᵀ = (S⁻¹·Rᵀ)ᵀ`.
+    fn lit(&self, h: &Hit, light: &crate::config::Light) -> f64 {
+        let st = &self.objects[h.object];
+        let q = h.local;
+        let n_local = match &self.world.cfg.objects[h.object].shape {
+            Shape::Plane { .. } => DVec3::Z,
+            Shape::Cuboid { half_size } => {
+                let r = q / *half_size;
+                let a = r.abs();
+                let (i, s) = if a.x >= a.y && a.x >= a.z {
+                    (0, r.x)
+                } else if a.y >= a.z {
+                    (1, r.y)
+                } else {
+                    (2, r.z)
+                };
+                let mut n = DVec3::ZERO;
+                n[i] = s.signum();
+                n
+            }
+            Shape::Ellipsoid { radii } => q / (*radii * *radii),
+        };
+        let mut n = (st.to_local.transpose() * n_local).normalize_or_zero();
+        if n.dot(h.world - self.cam.eye) > 0.0 {
+            n = -n;
+        }
+        let l = light.direction.normalize_or_zero();
+        light.ambient + (1.0 - light.ambient) * n.dot(l).max(0.0)
     }
 
     /// Analytic flow at `px` given what its ray hits (see the module doc).
