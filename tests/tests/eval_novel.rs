@@ -235,19 +235,9 @@ fn eval_scores_lpips_on_the_masks() {
     write_png(&p, &img).unwrap();
     fabricate_run(&root, "lp", &scene_dir, &g, None);
     let run = root.join("runs/lp");
-    let o = degs_lpips(&["eval", run.to_str().unwrap()], "fetch");
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let m: serde_json::Value =
-        serde_json::from_slice(&fs::read(run.join("metrics.json")).unwrap()).unwrap();
-    if m["lpips_net"].is_null() {
-        assert!(
-            std::env::var("DEGS_SKIP_LPIPS").is_ok_and(|s| s == "1"),
-            "no LPIPS weights ({}); opt out with DEGS_SKIP_LPIPS=1",
-            m["lpips_note"]
-        );
-        eprintln!("SKIPPED: {} and DEGS_SKIP_LPIPS=1", m["lpips_note"]);
+    let Some((o, m)) = eval_with_lpips(&run) else {
         return;
-    }
+    };
     let novel = m["novel_frames"].as_array().unwrap();
     for f in &novel[1..] {
         assert!(f["moving_lpips"].as_f64().unwrap().abs() < 1e-9, "{f}");

