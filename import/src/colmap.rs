@@ -17,7 +17,11 @@
 //! OpenCV model with fewer terms (SIMPLE_RADIAL, RADIAL, OPENCV); the others (fisheye,
 //! FOV, thin prism, full OpenCV's rational terms) are refused by name. The images must
 //! share one camera. Images COLMAP did not register have no pose and are left out (a
-//! warning counts them when the images folder holds more).
+//! warning counts them when the images folder holds more). COLMAP's world has an
+//! arbitrary origin and unit: the import moves the median of its 3D points to the
+//! origin and scales it so the cameras are [`SCENE_DISTANCE`] from there (said in the
+//! summary), which is where the warm-up looks for the scene when the cameras' axes are
+//! nearly parallel (`gaussians::train::init::camera_bounds`).
 
 use crate::aligned::{EventsAlignment, event_file, read_for_sensor};
 use crate::recording::{FrameImage, Recording, SourceFrame};
@@ -184,6 +188,31 @@ pub fn pose(img: &ColmapImage) -> Pose {
     crate::convention::opencv_to_opengl(Pose::new(inv, -(inv * t)))
 }
 
+/// The median distance from the cameras to the scene's centre after the import.
+pub const SCENE_DISTANCE: f64 = 3.0;
+
+/// The similarity the import applies to COLMAP's world, `x ↦ scale·(x − centre)`: the
+/// centre is the per-axis median of the 3D points (robust to stray ones), the scale
+/// brings the median camera distance to it to [`SCENE_DISTANCE`]. None without points.
+pub fn normalisation(model: &ColmapModel, poses: &[Pose]) -> Option<(DVec3, f64)> {
+    if model.points.is_empty() || poses.is_empty() {
+        return None;
+    }
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let axis = |k: usize| median(model.points.iter().map(|(p, _)| p[k]).collect());
+    let centre = DVec3::new(axis(0), axis(1), axis(2));
+    let d = median(
+        poses
+            .iter()
+            .map(|p| (p.translation - centre).length())
+            .collect(),
+    );
+    (d > 0.0 && d.is_finite()).then(|| (centre, SCENE_DISTANCE / d))
+}
+
 /// Read SRC (layout above) into a recording.
 pub(crate) fn read_colmap(src: &Path, o: &ColmapOptions) -> Result<Recording> {
     let dir = ColmapModel::find(src)?;
@@ -208,11 +237,24 @@ pub(crate) fn read_colmap(src: &Path, o: &ColmapOptions) -> Result<Recording> {
         })?;
     let camera = intrinsics(cam, &cameras_file)?;
     let times = crate::colmap_files::timestamps(src, o, &model.images)?;
-    let mut frames: Vec<SourceFrame> = (model.images.iter().zip(&times))
-        .map(|(img, &timestamp)| SourceFrame {
+    let poses: Vec<Pose> = model.images.iter().map(pose).collect();
+    let (centre, scale) = normalisation(&model, &poses).ok_or_else(|| {
+        Error::invalid(
+            &dir,
+            "no 3D points in front of the cameras: cannot place the scene",
+        )
+    })?;
+    let mut warnings = vec![format!(
+        "COLMAP's world is moved by −({:.4}, {:.4}, {:.4}) and scaled by {scale:.6}: the \
+         scene's centre (the median of its 3D points) at the origin, the cameras {SCENE_DISTANCE} \
+         units from it (COLMAP's unit is arbitrary; the defaults were tuned at that size)",
+        centre.x, centre.y, centre.z
+    )];
+    let mut frames: Vec<SourceFrame> = (model.images.iter().zip(&times).zip(&poses))
+        .map(|((img, &timestamp), p)| SourceFrame {
             image: FrameImage::File(src.join("images").join(&img.name)),
             timestamp,
-            pose: pose(img),
+            pose: Pose::new(p.rotation, scale * (p.translation - centre)),
         })
         .collect();
     frames.sort_by(|a, b| a.timestamp.total_cmp(&b.timestamp));
@@ -232,7 +274,6 @@ pub(crate) fn read_colmap(src: &Path, o: &ColmapOptions) -> Result<Recording> {
             ));
         }
     }
-    let mut warnings = Vec::new();
     let on_disk = std::fs::read_dir(src.join("images")).map_or(0, |d| d.count());
     if on_disk > frames.len() {
         warnings.push(format!(

@@ -118,6 +118,18 @@ fn a_model_colmap_built_imports_within_a_degree_and_a_percent() {
     for (g, w) in got.iter().zip(&want) {
         assert_eq!(g.0, w.0, "timestamps from timestamps.txt");
     }
+    // COLMAP's arbitrary world is brought to the origin at the scene and cameras 3 units
+    // from it (the median of the points; the median camera distance).
+    let mut d: Vec<f64> = got.iter().map(|g| g.1.translation.length()).collect();
+    d.sort_by(f64::total_cmp);
+    assert!(
+        (d[d.len() / 2] - import::colmap::SCENE_DISTANCE).abs() < 1e-9,
+        "{d:?}"
+    );
+    assert!(
+        summary.warnings.iter().any(|w| w.contains("scaled by")),
+        "{summary}"
+    );
     let from: Vec<_> = got.iter().map(|g| g.1).collect();
     let to: Vec<_> = want.iter().map(|w| w.1).collect();
     let (s, r, t) = align(&from, &to);
