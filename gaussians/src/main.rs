@@ -50,11 +50,9 @@ enum Verb {
     /// such a sequence), OUT/sequence.zip (the same files; brush plays it), times.json and
     /// report.json. Times: every train and test frame's, or --fps N over the recording.
     Export(gaussians::export::ExportArgs),
-    /// Render a saved model along a camera path over the recording: OUT/frames/NNNN.png,
-    /// OUT/preview.gif, OUT/preview.mp4 (when ffmpeg is on the PATH), cameras.json (the
-    /// rendered poses and times, a manifest usable as --path FILE) and report.json.
-    /// Paths: recorded (the camera's own, slow motion at 4× the frame rate by default),
-    /// orbit (a swing about the scene's centre while time runs), or a cameras FILE.
+    /// Render a saved model along a path (recorded, orbit or a cameras FILE) over the
+    /// recording: OUT/frames/NNNN.png, preview.gif, preview.mp4 (with ffmpeg on the
+    /// PATH), cameras.json (a manifest usable as --path FILE), report.json.
     Video(gaussians::video::VideoArgs),
     /// Write an RGB-only synthetic scene (no events), for tests and benchmarks.
     #[command(hide = true)]

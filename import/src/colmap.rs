@@ -24,6 +24,8 @@
 //! nearly parallel (`gaussians::train::init::camera_bounds`).
 
 use crate::aligned::{EventsAlignment, event_file, read_for_sensor};
+use crate::colmap_files::model_params;
+pub use crate::colmap_files::{ColmapCamera, ColmapImage, ColmapModel, ColmapOptions};
 use crate::recording::{FrameImage, Recording, SourceFrame};
 use glam::{DQuat, DVec3};
 use scene::camera::Distortion;
@@ -31,62 +33,6 @@ use scene::error::{Error, Result};
 use scene::manifest::FrameEncoding;
 use scene::{Intrinsics, Pose};
 use std::path::{Path, PathBuf};
-
-/// One camera of `cameras.*`.
-#[derive(Clone, Debug, PartialEq)]
-pub struct ColmapCamera {
-    pub id: u32,
-    pub model: String,
-    pub width: u32,
-    pub height: u32,
-    pub params: Vec<f64>,
-}
-
-/// One registered image of `images.*`: world → camera rotation `(w, x, y, z)` and
-/// translation, OpenCV axes.
-#[derive(Clone, Debug, PartialEq)]
-pub struct ColmapImage {
-    pub id: u32,
-    pub q: [f64; 4],
-    pub t: [f64; 3],
-    pub camera_id: u32,
-    pub name: String,
-}
-
-/// A sparse model: its cameras, images and 3D points (position, colour).
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct ColmapModel {
-    pub cameras: Vec<ColmapCamera>,
-    pub images: Vec<ColmapImage>,
-    pub points: Vec<([f64; 3], [u8; 3])>,
-}
-
-/// COLMAP's camera models by id, with their parameter counts.
-const MODELS: [(&str, usize); 11] = [
-    ("SIMPLE_PINHOLE", 3),
-    ("PINHOLE", 4),
-    ("SIMPLE_RADIAL", 4),
-    ("RADIAL", 5),
-    ("OPENCV", 8),
-    ("OPENCV_FISHEYE", 8),
-    ("FULL_OPENCV", 12),
-    ("FOV", 5),
-    ("SIMPLE_RADIAL_FISHEYE", 4),
-    ("RADIAL_FISHEYE", 5),
-    ("THIN_PRISM_FISHEYE", 12),
-];
-
-/// What `degs import colmap` needs beside the model.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct ColmapOptions {
-    /// The event file (`--events`; default `events.*` in SRC).
-    pub events: Option<PathBuf>,
-    /// `NAME SECONDS` per line (`--timestamps`; default SRC/timestamps.txt).
-    pub timestamps: Option<PathBuf>,
-    /// Seconds per unit of the number in an image's name, when there is no timestamps
-    /// file (default 1: the names are seconds; 1e-6 for microseconds; 1/fps for indices).
-    pub name_seconds: Option<f64>,
-}
 
 impl ColmapModel {
     /// The folder with the model: `sparse/0`, else `sparse`, else `src` itself.
@@ -117,15 +63,6 @@ impl ColmapModel {
 /// exporter of the round-trip tests.
 pub fn write_txt(model: &ColmapModel, dir: &Path) -> Result<()> {
     crate::colmap_files::write_txt(model, dir)
-}
-
-/// A model's name and parameter count by name or id; None for an unknown model.
-pub(crate) fn model_params(id_or_name: &str) -> Option<(&'static str, usize)> {
-    MODELS
-        .iter()
-        .enumerate()
-        .find(|(i, (n, _))| *n == id_or_name || i.to_string() == id_or_name)
-        .map(|(_, m)| *m)
 }
 
 /// The camera's intrinsics in degs' convention (pixel centres at integers).
