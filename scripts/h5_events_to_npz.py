@@ -22,6 +22,7 @@ degs's npz reader (`scene::formats::npz`). Pass it with `--events events.npz` to
 `degs import`, or name it `events.npz` beside the frames.
 """
 import argparse
+import os
 import sys
 
 import numpy as np
@@ -58,6 +59,10 @@ def main():
     a.add_argument("npz")
     a.add_argument("--t-seconds", action="store_true", help="flat layout: t is in seconds")
     args = a.parse_args()
+    if not args.npz.endswith(".npz"):
+        sys.exit(f"{args.npz}: give a name ending in .npz (numpy would add it)")
+    if os.path.exists(args.npz):
+        sys.exit(f"{args.npz}: exists; not overwritten (give a new file name)")
     x, y, t, p = read(args.h5, args.t_seconds)
     p = np.where(np.asarray(p) > 0, 1, -1).astype(np.int8)
     np.savez(args.npz, x=np.asarray(x, np.uint16), y=np.asarray(y, np.uint16), t=t, p=p)
