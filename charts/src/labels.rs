@@ -8,11 +8,15 @@ fn overlaps(a: Rect, b: Rect) -> bool {
     a.0 < b.0 + b.2 && b.0 < a.0 + a.2 && a.1 < b.1 + b.3 && b.1 < a.1 + a.3
 }
 
+/// How many rows of places are tried above and below a point: enough for a dozen
+/// labels of points that (nearly) coincide, as a sweep's repeats often do.
+const ROWS: i32 = 6;
+
 /// The offset (dx, dy) of each label's top-left corner from its point, in the order
 /// given (earlier labels take the better places): right above, right below, left
-/// above, left below, then further up or down; the first that stays inside `area`
-/// (left, top, right, bottom) and clears the markers and the labels already placed, else the first
-/// inside the area, else right above.
+/// above, left below, then a row further up or down each time (up to [`ROWS`]); the
+/// first that stays inside `area` (left, top, right, bottom) and clears the markers and
+/// the labels already placed, else the first inside the area, else right above.
 pub fn place(
     points: &[(i32, i32)],
     sizes: &[(i32, i32)],
@@ -25,16 +29,12 @@ pub fn place(
         .collect();
     let mut out = Vec::with_capacity(points.len());
     for (&(x, y), &(w, h)) in points.iter().zip(sizes) {
-        let candidates = [
-            (9, -h - 4),
-            (9, 5),
-            (-9 - w, -h - 4),
-            (-9 - w, 5),
-            (9, -2 * h - 8),
-            (9, h + 9),
-            (-9 - w, -2 * h - 8),
-            (-9 - w, h + 9),
-        ];
+        let candidates: Vec<(i32, i32)> = (0..ROWS)
+            .flat_map(|k| {
+                let (up, down) = (-h - 4 - k * (h + 4), 5 + k * (h + 4));
+                [(9, up), (9, down), (-9 - w, up), (-9 - w, down)]
+            })
+            .collect();
         let rect = |(dx, dy): (i32, i32)| (x + dx, y + dy, w, h);
         let inside =
             |r: Rect| r.0 >= area.0 && r.1 >= area.1 && r.0 + r.2 <= area.2 && r.1 + r.3 <= area.3;
@@ -71,6 +71,17 @@ mod tests {
         let o = place(&[(50, 50), (100, 40)], &[(60, 12), (10, 12)], area);
         assert_eq!(o[0], (9, 5));
         assert!(overlaps((0, 0, 10, 10), (5, 5, 10, 10)));
+        // eight labels of one point (a sweep's repeats) all find free places
+        let o = place(&[(100, 100); 8], &[(60, 12); 8], (0, 0, 300, 200));
+        let rects: Vec<Rect> = o
+            .iter()
+            .map(|&(dx, dy)| (100 + dx, 100 + dy, 60, 12))
+            .collect();
+        for (i, a) in rects.iter().enumerate() {
+            for b in &rects[i + 1..] {
+                assert!(!overlaps(*a, *b), "{a:?} overlaps {b:?}");
+            }
+        }
         assert!(!overlaps((0, 0, 10, 10), (10, 0, 10, 10)));
     }
 }

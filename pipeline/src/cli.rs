@@ -42,8 +42,8 @@ pub struct RunFlags {
     pub jobs: usize,
     /// Experiments of a sweep or stress run to run at the same time, each with its -j
     /// stages; a stage they share is built once (the others wait on its cache entry's
-    /// lock, as a second `degs` on the same cache does); stage processes share the cores
-    /// evenly (RAYON_NUM_THREADS, unless set)
+    /// lock, as a second `degs` on the same cache does); the experiments share the cores
+    /// evenly, each stage of one getting its whole share (RAYON_NUM_THREADS, unless set)
     #[arg(short = 'J', long = "experiments", default_value_t = 1)]
     pub experiments: usize,
     /// Re-hash every cached file (default: only files whose size or mtime changed)

@@ -46,7 +46,7 @@ impl Outcome {
 /// Run `args[0]` with `args[1..]`, calling `on_line` for each output line. The child
 /// is killed (SIGKILL) if this thread's process dies, so an interrupted runner leaves
 /// no orphan writing into the cache. `threads`: the child's share of the cores
-/// (`RAYON_NUM_THREADS`, unless the user set it), when several stages run at once.
+/// (`RAYON_NUM_THREADS`, unless the user set it), when several experiments run at once.
 pub fn run(
     args: &[String],
     threads: Option<usize>,
@@ -143,8 +143,12 @@ pub fn fmt_kib(kib: Option<u64>) -> String {
     }
 }
 
-/// Each stage's share of the cores when `at_once` stages run at the same time: None
-/// for one (it has them all), else the cores divided evenly, at least one each.
+/// A stage's share of the cores when `at_once` experiments run at the same time: None
+/// for one (it has them all), else the cores divided evenly, at least one each. The
+/// stages of one experiment (`-j`) each get the experiment's whole share: a stage's
+/// thread pool is sized once at its start, and the stages beside it often end long
+/// before it (LoCM beside the warm-up), so an even split left the warm-up on half the
+/// cores for most of its run.
 pub fn thread_share(at_once: usize) -> Option<usize> {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     (at_once > 1).then(|| (cores / at_once).max(1))

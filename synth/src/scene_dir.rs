@@ -48,6 +48,7 @@ use scene::manifest::{
 };
 use serde::{Deserialize, Serialize};
 use stagekit::Settings;
+use stagekit::progress::Progress;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -98,6 +99,14 @@ impl Summary {
 /// Render the recording at the internal rate and simulate its events, with the
 /// per-event ground truth (see the module doc).
 pub fn simulate_scene(world: &SynthWorld) -> Result<(EventStream, EventFlowGt)> {
+    simulate_scene_shown(world, None)
+}
+
+/// [`simulate_scene`], one step of `progress` per internal render.
+fn simulate_scene_shown(
+    world: &SynthWorld,
+    progress: Option<&Progress>,
+) -> Result<(EventStream, EventFlowGt)> {
     let cfg = world.config();
     let (w, h) = (cfg.width, cfg.height);
     cfg.events
@@ -112,7 +121,10 @@ pub fn simulate_scene(world: &SynthWorld) -> Result<(EventStream, EventFlowGt)> 
         ..Default::default()
     };
     let mut prev: Option<(f64, Render)> = None;
-    for t in cfg.render_times() {
+    for (k, t) in cfg.render_times().into_iter().enumerate() {
+        if let Some(p) = progress {
+            p.set(k as u64 + 1, || format!("{} events", events.len()));
+        }
         let render = world.render(t);
         let start = events.len();
         sim.push_frame_flagged(t, &luminance(&render.rgb), &mut events, Some(&mut noise))?;
@@ -133,6 +145,19 @@ pub fn simulate_scene(world: &SynthWorld) -> Result<(EventStream, EventFlowGt)> 
         prev = Some((t, render));
     }
     Ok((events, gt))
+}
+
+/// The frames' progress across the three splits.
+struct Shown {
+    progress: Progress,
+    done: u64,
+}
+
+impl Shown {
+    fn step(&mut self, split: &str) {
+        self.done += 1;
+        self.progress.set(self.done, || split.to_string());
+    }
 }
 
 /// Flow and object at pixel `pix`, fraction `a` of the way from render `r0` to `r1`.
@@ -172,13 +197,20 @@ fn train_image(world: &SynthWorld, t: f64, sharp: &Render) -> Vec<f32> {
 
 /// Render and write the frames of one split (`train`, `test` or `novel`: from the
 /// novel-view cameras) with their ground truth; returns the manifest frames.
-fn write_split(world: &SynthWorld, root: &Path, split: &str, times: &[f64]) -> Result<Vec<Frame>> {
+fn write_split(
+    world: &SynthWorld,
+    root: &Path,
+    split: &str,
+    times: &[f64],
+    progress: &mut Shown,
+) -> Result<Vec<Frame>> {
     let cfg = world.config();
     let (w, h) = (cfg.width, cfg.height);
     let gt_dir = root.join("gt").join(split);
     let novel = split == "novel";
     let mut frames = Vec::with_capacity(times.len());
     for (k, &t) in times.iter().enumerate() {
+        progress.step(split);
         let (r, camera) = if novel {
             (world.render_novel_frame(t), world.novel_camera_at(t))
         } else {
@@ -250,16 +282,27 @@ pub fn write_synthetic_scene_with(
     let root = dir.path().to_path_buf();
 
     let t_sim = Instant::now();
-    let (events, gt) = simulate_scene(&world)?;
+    let renders = cfg.render_times().len() as u64;
+    let sim_progress = Progress::new("events", renders);
+    let (events, gt) = simulate_scene_shown(&world, Some(&sim_progress))?;
+    sim_progress.finish();
     scene::formats::write_evs(root.join(EVENTS_FILE), &events)?;
     write_event_flow_gt(root.join("gt").join("event_flow.bin"), &gt)?;
     let simulate_s = t_sim.elapsed().as_secs_f64();
 
     let t_frames = Instant::now();
     let camera = world.intrinsics();
+    let (train_t, test_t, novel_t) = (cfg.train_times(), cfg.test_times(), cfg.novel_times());
+    let mut shown = Shown {
+        progress: Progress::new(
+            "frames",
+            (train_t.len() + test_t.len() + novel_t.len()) as u64,
+        ),
+        done: 0,
+    };
     let train = Manifest {
         camera,
-        frames: write_split(&world, &root, "train", &cfg.train_times())?,
+        frames: write_split(&world, &root, "train", &train_t, &mut shown)?,
         events: Some(EventsRef {
             path: EVENTS_FILE.into(),
             contrast_threshold: cfg.events.nominal_threshold(),
@@ -268,11 +311,12 @@ pub fn write_synthetic_scene_with(
     };
     let test = Manifest {
         camera,
-        frames: write_split(&world, &root, "test", &cfg.test_times())?,
+        frames: write_split(&world, &root, "test", &test_t, &mut shown)?,
         events: None,
         frame_encoding: Some(FrameEncoding::Linear),
     };
-    let novel = write_split(&world, &root, "novel", &cfg.novel_times())?;
+    let novel = write_split(&world, &root, "novel", &novel_t, &mut shown)?;
+    shown.progress.finish();
     train.write(root.join(TRAIN_FILE))?;
     test.write(root.join(TEST_FILE))?;
     if !novel.is_empty() {

@@ -68,6 +68,20 @@ impl<'a, R> Judge<'a, R> {
     }
 }
 
+/// At most `n` of `views` spread evenly over them, first and last included (all of
+/// them when `n` is 0 or no smaller than their count).
+pub(crate) fn spread(views: &[View], n: usize) -> Cow<'_, [View]> {
+    if n == 0 || n >= views.len() {
+        return Cow::Borrowed(views);
+    }
+    let last = views.len() - 1;
+    let pick = |k: usize| match n {
+        1 => last / 2,
+        _ => (k * last + (n - 1) / 2) / (n - 1),
+    };
+    Cow::Owned((0..n).map(|k| views[pick(k)].clone()).collect())
+}
+
 /// The middle of the views' time span (0 without views).
 pub(crate) fn middle_time(views: &[View]) -> f32 {
     let lo = views.iter().map(|v| v.time).fold(f32::INFINITY, f32::min);
@@ -148,5 +162,45 @@ impl<R: Rasterizer> Judge<'_, R> {
             }
         }
         Some(acc)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use scene::Camera;
+    use scene::camera::{Intrinsics, Pose};
+
+    #[test]
+    fn spread_picks_evenly_with_both_ends() {
+        let camera = Camera {
+            intrinsics: Intrinsics::from_fov_x(8, 8, 1.0),
+            cam_to_world: Pose::default(),
+        };
+        for len in [1usize, 2, 9, 21, 61, 100] {
+            let views: Vec<View> = (0..len)
+                .map(|i| View {
+                    camera,
+                    time: i as f32,
+                    rgb: Vec::new(),
+                })
+                .collect();
+            for n in [1usize, 2, 3, 16, 61, 200] {
+                let picked: Vec<usize> =
+                    spread(&views, n).iter().map(|v| v.time as usize).collect();
+                assert_eq!(picked.len(), n.min(len), "{n} of {len}");
+                if n >= len {
+                    continue;
+                }
+                let gaps: Vec<usize> = picked.windows(2).map(|w| w[1] - w[0]).collect();
+                assert!(gaps.iter().all(|&g| g >= 1), "{picked:?}");
+                if n >= 2 {
+                    assert_eq!((picked[0], picked[n - 1]), (0, len - 1), "{picked:?}");
+                    let (lo, hi) = (gaps.iter().min().unwrap(), gaps.iter().max().unwrap());
+                    assert!(hi - lo <= 1, "uneven: {picked:?}");
+                }
+            }
+            assert_eq!(spread(&views, 0).len(), len);
+        }
     }
 }

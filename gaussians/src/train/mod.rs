@@ -2,8 +2,8 @@
 //! canonical Gaussians optimised with Adam under L1 (+ D-SSIM), densified as 3DGS, and
 //! after a static phase a deformation field `F(γ(x), γ(t))` (Deform-GS).
 //!
-//! The rasterizer is reached through the [`Rasterizer`] trait so the loop can be tested
-//! on its own; [`Splats`] holds the trainable parameters. The loop calls [`static_split`],
+//! The rasterizer is reached through the [`Rasterizer`] trait so the loop can be tested on
+//! its own; [`Splats`] holds the trainable parameters. The loop calls [`static_split`],
 //! [`sizing`] and [`field_probe`] when due and takes on what they decide.
 
 pub mod field_probe;
@@ -26,7 +26,7 @@ use crate::optim::{Adam, ExpSchedule};
 use crate::raster::{Rasterizer, RenderedImage};
 use crate::splats::{SplatGrads, Splats};
 use field_probe::FieldProbeSummary;
-use judge::{Candidate, Judge};
+use judge::{Candidate, Judge, spread};
 pub use run::{RunSummary, run};
 use scene::Camera;
 use scene::metrics;
@@ -46,9 +46,8 @@ pub struct Trainer {
     pub stats: GradStats,
     pub extent: f32,
     pub iteration: u32,
-    /// The static/dynamic split, once made.
+    /// The static/dynamic split, once made; what the sizing decided, once done.
     pub split: Option<SplitSummary>,
-    /// What the sizing decided, once done ([`sizing`]).
     pub sizing: Option<SizingSummary>,
     /// What the field's width probe measured and chose, once done ([`field_probe`]).
     pub field_probe: Option<FieldProbeSummary>,
@@ -114,9 +113,8 @@ impl Trainer {
         }
     }
 
-    /// Give back a view when done with it (after [`Self::view_backward`]): a later
-    /// [`Self::render_view`] with the same rasterizer reuses its buffers. Optional; a
-    /// view not given back is simply dropped.
+    /// Give back a view after [`Self::view_backward`]: a later [`Self::render_view`]
+    /// with the same rasterizer reuses its buffers. Optional (else simply dropped).
     pub fn recycle_view<S: Send + 'static>(&self, v: ViewRender<S>) {
         self.spare.lock().put_view(v);
     }
@@ -419,7 +417,8 @@ impl Trainer {
             return;
         }
         let start = std::time::Instant::now();
-        let mut judge = Judge::new(r, views, self.settings.background);
+        let judged = spread(views, self.settings.size.views);
+        let mut judge = Judge::new(r, &judged, self.settings.background);
         let field_trained = self.iteration > self.settings.static_iterations;
         let size = self.settings.size;
         let d = sizing::decide(&mut judge, self.candidate(), &size, field_trained);
@@ -441,6 +440,7 @@ impl Trainer {
             gaussian_cap_before: cap_before,
             train_psnr_after,
             gaussians: self.splats.len(),
+            views: judged.len(),
             evaluations: judge.evaluations,
             seconds: start.elapsed().as_secs_f64(),
             ..sum

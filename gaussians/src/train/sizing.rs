@@ -85,6 +85,12 @@ pub struct SizeSettings {
     pub field_probe: u32,
     /// Candidate widths: `field.width` and this many halvings of it (none below 8).
     pub field_halvings: u32,
+    /// Train views the sizing renders each candidate at: this many, spread evenly over
+    /// the recording (first and last included), or every view when there are no more
+    /// (0 = every view). Its ~30 passes over 61 views of 346×260 took 183 s, a sixth of
+    /// that warm-up; 16 views hold the figures of a scene whose frames are close in time
+    /// (BENCHMARKS.md, "Sensor-size recordings").
+    pub views: usize,
 }
 
 impl Default for SizeSettings {
@@ -100,6 +106,7 @@ impl Default for SizeSettings {
             prune: true,
             field_probe: 0,
             field_halvings: 1,
+            views: 16,
         }
     }
 }
@@ -158,7 +165,9 @@ pub struct SizingSummary {
     pub gaussian_cap_before: usize,
     /// Gaussians with no weight in any train view (dropped at no cost).
     pub gaussians_without_weight: usize,
-    /// Passes over the train views the sizing took, and its wall seconds.
+    /// Train views each pass rendered (`SizeSettings::views`), passes over them the
+    /// sizing took, and its wall seconds.
+    pub views: usize,
     pub evaluations: usize,
     pub seconds: f64,
 }

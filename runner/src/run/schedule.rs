@@ -67,7 +67,7 @@ pub(crate) fn run_waiting(
                 let label = s.label(i);
                 s.progress.start(&label, &start_message(&states[i]));
                 let reuse = !states[i].forced && states[i].rebuild_reason.is_none();
-                let threads = crate::process::thread_share(jobs * s.experiments_at_once);
+                let threads = crate::process::thread_share(s.experiments_at_once);
                 let (tx, progress, nodes, ctx) = (tx.clone(), s.progress, s.nodes, s.ctx);
                 scope.spawn(move || {
                     let on_line = |line: &str| {
