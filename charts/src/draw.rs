@@ -475,8 +475,9 @@ fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, spec: &Spec) -> Resul
     let sizes: Vec<(i32, i32)> = order
         .iter()
         .map(|&i| {
+            // the measured box is the glyphs' tight box: a little room around it
             let (w, h) = font(i).font.box_size(pts[i].2).unwrap_or((0, 0));
-            (w as i32, h as i32)
+            (w as i32 + 2, h as i32 + 3)
         })
         .collect();
     let (xs, ys) = chart.plotting_area().get_pixel_range();
@@ -487,6 +488,17 @@ fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, spec: &Spec) -> Resul
         }))
         .map_err(|e| err(&e))?;
     lines_drawn.extend(&anchors);
+    // the legend keeps off the labels too: each label's corners and centre
+    for ((&(x, y), &(dx, dy)), &(w, h)) in anchors.iter().zip(&offsets).zip(&sizes) {
+        let (l, t) = (x + dx, y + dy);
+        lines_drawn.extend([
+            (l, t),
+            (l + w, t),
+            (l, t + h),
+            (l + w, t + h),
+            (l + w / 2, t + h / 2),
+        ]);
+    }
     draw_legend(&mut chart, &lines_drawn, &labels)
 }
 
