@@ -23,6 +23,10 @@ pub struct BaselineScore {
     pub psnr_mean: f64,
     pub ssim_mean: f64,
     pub psnr: Vec<f64>,
+    /// The predictions themselves, one per test frame (planar RGB in the frames'
+    /// stored encoding, like [`View::rgb`]), for a user to look at.
+    #[serde(skip)]
+    pub images: Vec<Vec<f32>>,
 }
 
 /// The three baselines (`events` is absent when the recording has no events).
@@ -63,7 +67,7 @@ fn neighbours(times: &[f64], t: f64) -> (usize, usize, f64) {
     (j, j + 1, s)
 }
 
-fn score(preds: &[Vec<f32>], targets: &[&View]) -> BaselineScore {
+fn score(preds: Vec<Vec<f32>>, targets: &[&View]) -> BaselineScore {
     let mut out = BaselineScore::default();
     let mut ssim = 0.0;
     for (p, v) in preds.iter().zip(targets) {
@@ -77,6 +81,7 @@ fn score(preds: &[Vec<f32>], targets: &[&View]) -> BaselineScore {
     let n = preds.len().max(1) as f64;
     out.psnr_mean = out.psnr.iter().sum::<f64>() / n;
     out.ssim_mean = ssim / n;
+    out.images = preds;
     out
 }
 
@@ -144,11 +149,11 @@ pub fn evaluate(rec: &Recording<'_>, test: &[View], test_times: &[f64]) -> Basel
                         .collect()
                 })
                 .collect::<Vec<Vec<f32>>>();
-            score(&preds, &targets)
+            score(preds, &targets)
         });
     Baselines {
-        nearest: score(&nearest, &targets),
-        blend: score(&blend, &targets),
+        nearest: score(nearest, &targets),
+        blend: score(blend, &targets),
         events,
     }
 }

@@ -1,42 +1,30 @@
 //! The 2D baselines beside a model's figures: what the nearest train frame, the linear
 //! blend of the two neighbouring train frames and the two-sided event pseudo image
-//! score on the test frames. Taken from the evaluated model's report (`baselines`,
-//! which the deform stage writes) when it has them, else computed from the scene with
-//! `deform::baselines` (with the scene's frame encoding and contrast threshold, where
-//! the deform stage may have overridden them by its settings).
+//! score on the test frames. Computed from the scene with `deform::baselines` (with the
+//! scene's frame encoding and contrast threshold, where the deform stage may have
+//! overridden them by its settings), their images written beside the metrics so that
+//! they can be scored like the model (LPIPS, moving pixels) and looked at.
 //!
 //! They predict the recorded camera's image at a time; none can render a new
 //! viewpoint, so the novel views have no baseline figures.
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use deform::baselines::{BaselineScore, Recording};
 use gaussians::stage::load_views;
-use scene::evaluation::{BaselineFigures, COMPUTED, FROM_REPORT, Score};
+use scene::evaluation::{BaselineFigures, COMPUTED, Score};
+use scene::image_io::{Image, write_png};
 use scene::manifest::Scene;
-use serde_json::Value;
+use std::path::{Path, PathBuf};
 
-/// The `baselines` section of a deform stage's report; None when it has none or a
-/// figure is missing.
-pub(crate) fn from_report(report: &Value) -> Option<BaselineFigures> {
-    let b = report.get("baselines")?;
-    let score = |k: &str| {
-        let s = b.get(k)?;
-        Some(Score {
-            psnr_mean: s.get("psnr_mean")?.as_f64()?,
-            ssim_mean: s.get("ssim_mean")?.as_f64()?,
-        })
-    };
-    Some(BaselineFigures {
-        nearest: score("nearest")?,
-        blend: score("blend")?,
-        events: score("events"),
-        source: FROM_REPORT.to_string(),
-    })
-}
+/// The images of the baselines on the test frames, written by [`compute`]: per baseline
+/// its name (`nearest`, `blend`, `events`) and its PNG per test frame, in order.
+pub(crate) type BaselineImages = Vec<(&'static str, Vec<PathBuf>)>;
 
-/// Score the baselines on the scene's test frames; None when it has none. Errors name
-/// the file that could not be read (an image, the event stream).
-pub fn compute(scene: &Scene) -> Result<Option<BaselineFigures>> {
+/// Score the baselines on the scene's test frames and write their images under
+/// `dir/baselines/NAME/NNNN.png` (8-bit, the frames' encoding); None when the scene has
+/// no test frames. Errors name the file that could not be read (an image, the event
+/// stream).
+pub fn compute(scene: &Scene, dir: &Path) -> Result<Option<(BaselineFigures, BaselineImages)>> {
     if scene.test.frames.is_empty() {
         return Ok(None);
     }
@@ -59,35 +47,44 @@ pub fn compute(scene: &Scene) -> Result<Option<BaselineFigures>> {
     let score = |s: &BaselineScore| Score {
         psnr_mean: s.psnr_mean,
         ssim_mean: s.ssim_mean,
+        ..Score::default()
     };
-    Ok(Some(BaselineFigures {
+    let mut images = Vec::new();
+    for (name, s) in [
+        ("nearest", Some(&b.nearest)),
+        ("blend", Some(&b.blend)),
+        ("events", b.events.as_ref()),
+    ] {
+        let Some(s) = s else { continue };
+        let out = dir.join("baselines").join(name);
+        std::fs::create_dir_all(&out).with_context(|| format!("{}", out.display()))?;
+        let mut paths = Vec::with_capacity(s.images.len());
+        for (k, (planar, view)) in s.images.iter().zip(&test).enumerate() {
+            let (w, h) = (view.camera.intrinsics.width, view.camera.intrinsics.height);
+            let n = (w * h) as usize;
+            let data = (0..n)
+                .flat_map(|i| [planar[i], planar[n + i], planar[2 * n + i]])
+                .map(|v| v.clamp(0.0, 1.0))
+                .collect();
+            let path = out.join(format!("{k:04}.png"));
+            write_png(
+                &path,
+                &Image {
+                    width: w,
+                    height: h,
+                    channels: 3,
+                    data,
+                },
+            )?;
+            paths.push(path);
+        }
+        images.push((name, paths));
+    }
+    let figures = BaselineFigures {
         nearest: score(&b.nearest),
         blend: score(&b.blend),
         events: b.events.as_ref().map(score),
         source: COMPUTED.to_string(),
-    }))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_report_section_is_read_and_a_missing_figure_gives_none() {
-        let r: Value = serde_json::from_str(
-            r#"{"baselines": {"nearest": {"psnr_mean": 20.5, "ssim_mean": 0.6, "psnr": [20.5]},
-                "blend": {"psnr_mean": 22.25, "ssim_mean": 0.7}, "events": null}}"#,
-        )
-        .unwrap();
-        let b = from_report(&r).unwrap();
-        assert_eq!(
-            (b.nearest.psnr_mean, b.blend.ssim_mean, b.events),
-            (20.5, 0.7, None)
-        );
-        assert_eq!(b.source, FROM_REPORT);
-        let missing: Value =
-            serde_json::from_str(r#"{"baselines": {"nearest": {"psnr_mean": 20.5}}}"#).unwrap();
-        assert!(from_report(&missing).is_none());
-        assert!(from_report(&serde_json::json!({"test": {}})).is_none());
-    }
+    };
+    Ok(Some((figures, images)))
 }

@@ -13,45 +13,68 @@ use scene::evaluation::{MaskFigures, Trajectory};
 use scene::image_io::{Image, read_image};
 use std::path::Path;
 
-/// Object ids (`k + 1` for `objects[k]`) of the objects that move; None when the scene
-/// does not say (no `synth.json`: a recording).
-pub(crate) fn moving_ids(scene_dir: &Path) -> Option<Vec<u16>> {
-    let text = std::fs::read_to_string(scene_dir.join("synth.json")).ok()?;
-    let cfg: synth::SynthConfig = serde_json::from_str(&text).ok()?;
-    Some(
+/// Which values of a `gt/novel/object_NNNN.png` mark a moving object.
+pub(crate) enum Moving {
+    /// A `degs synth` scene: ids `k + 1` of the `objects[k]` that move by `synth.json`.
+    Ids(Vec<u16>),
+    /// Any other scene (an outside renderer's, `scripts/outside_scene.py`): every
+    /// nonzero value.
+    NonZero,
+}
+
+impl Moving {
+    fn keeps(&self, v: u16) -> bool {
+        match self {
+            Moving::Ids(ids) => ids.contains(&v),
+            Moving::NonZero => v != 0,
+        }
+    }
+}
+
+/// What marks a moving object in the scene's object images: the ids of the objects
+/// that move by `synth.json` when the scene has one, else every nonzero value; an error
+/// when `synth.json` exists but cannot be read (never a silently missing mask).
+pub(crate) fn moving_ids(scene_dir: &Path) -> Result<Moving> {
+    let path = scene_dir.join("synth.json");
+    if !path.is_file() {
+        return Ok(Moving::NonZero);
+    }
+    let text =
+        std::fs::read_to_string(&path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    let cfg: synth::SynthConfig = serde_json::from_str(&text)
+        .map_err(|e| anyhow::anyhow!("{}: not a synth settings file: {e}", path.display()))?;
+    Ok(Moving::Ids(
         cfg.objects
             .iter()
             .enumerate()
             .filter(|(_, o)| o.moves())
             .map(|(k, _)| k as u16 + 1)
             .collect(),
-    )
+    ))
 }
 
-/// The two masks of novel view `k`, each None where the scene lacks it.
-pub(crate) struct NovelMasks {
-    /// The pixels a moving object covers (`gt/novel/object_kkkk.png`).
+/// The two masks of view `k` of a split (`test` or `novel`), each None where the scene
+/// lacks it.
+pub(crate) struct ViewMasks {
+    /// The pixels a moving object covers (`gt/SPLIT/object_kkkk.png`).
     pub moving: Option<Vec<bool>>,
-    /// The pixels some train view saw (`gt/novel/covisible_kkkk.png`).
+    /// The pixels some train view saw (`gt/SPLIT/covisible_kkkk.png`).
     pub covisible: Option<Vec<bool>>,
 }
 
-impl NovelMasks {
-    /// `ids`: the moving objects' ids ([`moving_ids`]); None: no moving mask.
-    pub fn read(scene_dir: &Path, k: usize, ids: Option<&[u16]>) -> Result<NovelMasks> {
+impl ViewMasks {
+    /// `moving`: which object values move ([`moving_ids`]).
+    pub fn read(scene_dir: &Path, split: &str, k: usize, moving: &Moving) -> Result<ViewMasks> {
         let mask_of = |name: &str, keep: &dyn Fn(u16) -> bool| -> Result<Option<Vec<bool>>> {
-            let path = scene_dir.join(format!("gt/novel/{name}_{k:04}.png"));
+            let path = scene_dir.join(format!("gt/{split}/{name}_{k:04}.png"));
             if !path.is_file() {
                 return Ok(None);
             }
             let (_, _, values) = synth::gt::read_object_png(&path)?;
             Ok(Some(values.iter().map(|&v| keep(v)).collect()))
         };
-        Ok(NovelMasks {
-            moving: match ids {
-                Some(ids) => mask_of("object", &|o| ids.contains(&o))?,
-                None => None,
-            },
+        Ok(ViewMasks {
+            moving: mask_of("object", &|o| moving.keeps(o))?,
             covisible: mask_of("covisible", &|v| v != 0)?,
         })
     }
@@ -150,20 +173,21 @@ pub(crate) fn depth_error(render: &Path, gt: &Path, mask: &[bool]) -> Result<Opt
     Ok((n > 0).then(|| sum / n as f64))
 }
 
-/// The masked figures of each novel `(ground truth, render)` pair, in order (novel view
-/// k has `gt/novel/*_kkkk.png`); a mask the scene lacks leaves its figures None.
-/// `depth_dir`: where the render stage wrote the novel views' depth (`NAME.exr` for
-/// render `NAME.png`).
-pub(crate) fn novel_masks(
+/// The masked figures of each `(ground truth, render)` pair of a split (`test`, `novel`),
+/// in order (view k has `gt/SPLIT/*_kkkk.png`); a mask the scene lacks leaves its
+/// figures None. `depth_dir`: where the render stage wrote the views' depth (`NAME.exr`
+/// for render `NAME.png`).
+pub(crate) fn split_masks(
     scene_dir: &Path,
+    split: &str,
     pairs: &[(&Path, &Path)],
     depth_dir: Option<&Path>,
     cap: f64,
 ) -> Result<Vec<MaskFigures>> {
-    let ids = moving_ids(scene_dir);
+    let ids = moving_ids(scene_dir)?;
     let mut out = Vec::with_capacity(pairs.len());
     for (k, (test, render)) in pairs.iter().enumerate() {
-        let NovelMasks { moving, covisible } = NovelMasks::read(scene_dir, k, ids.as_deref())?;
+        let ViewMasks { moving, covisible } = ViewMasks::read(scene_dir, split, k, &ids)?;
         let mut f = MaskFigures::default();
         if moving.is_none() && covisible.is_none() {
             out.push(f);
@@ -175,7 +199,7 @@ pub(crate) fn novel_masks(
             let s = pair.scores(mask, cap)?;
             (f.moving_pixels, f.moving_psnr, f.moving_ssim) =
                 (Some(count(mask)), s.map(|s| s.0), s.map(|s| s.1));
-            let gt_depth = scene_dir.join(format!("gt/novel/depth_{k:04}.exr"));
+            let gt_depth = scene_dir.join(format!("gt/{split}/depth_{k:04}.exr"));
             let depth = depth_dir
                 .and_then(|d| Some(d.join(render.file_stem()?).with_extension("exr")))
                 .filter(|d| d.is_file() && gt_depth.is_file());
@@ -198,4 +222,43 @@ pub fn trajectory(entry: &Path) -> Option<Trajectory> {
     let bytes = std::fs::read(entry.join("report.json")).ok()?;
     let v: serde_json::Value = serde_json::from_slice(&bytes).ok()?;
     serde_json::from_value(v.get("trajectory")?.clone()).ok()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An outside renderer's scene (no `synth.json`) marks moving objects by any nonzero
+    /// value; a `synth.json` that does not parse is an error naming it.
+    #[test]
+    fn object_images_without_synth_settings_mark_every_nonzero_pixel() {
+        let d = tempfile::tempdir().unwrap();
+        std::fs::create_dir_all(d.path().join("gt/novel")).unwrap();
+        synth::gt::write_object_png(
+            d.path().join("gt/novel/object_0000.png"),
+            4,
+            1,
+            &[0, 255, 7, 0],
+        )
+        .unwrap();
+        let moving = moving_ids(d.path()).unwrap();
+        let masks = ViewMasks::read(d.path(), "novel", 0, &moving).unwrap();
+        assert_eq!(masks.moving, Some(vec![false, true, true, false]));
+        assert!(masks.covisible.is_none());
+        assert!(
+            ViewMasks::read(d.path(), "novel", 1, &moving)
+                .unwrap()
+                .moving
+                .is_none()
+        );
+        assert!(
+            ViewMasks::read(d.path(), "test", 0, &moving)
+                .unwrap()
+                .moving
+                .is_none()
+        );
+        std::fs::write(d.path().join("synth.json"), "{ not json").unwrap();
+        let e = moving_ids(d.path()).err().unwrap().to_string();
+        assert!(e.contains("synth.json"), "{e}");
+    }
 }

@@ -5,13 +5,15 @@
 //! and `OUT/settings.toml`, all at once or not at all.
 
 use crate::baselines;
+use crate::baselines::BaselineImages;
 use crate::flow::{FlowError, find_epe, flow_error};
 use crate::images::{images_in, pair_renders, score_pairs};
 use crate::lpips_use::{LpipsUse, mean_all, score_sets};
+use crate::masked::split_masks;
 use crate::settings::EvalSettings;
 use anyhow::{Context, Result};
 use scene::atomic::{AtomicDir, OutputRule, write_json_atomic};
-use scene::evaluation::{BaselineFigures, FrameMetrics, Metrics, PSNR_CAP};
+use scene::evaluation::{BaselineFigures, FrameMetrics, Metrics, PSNR_CAP, Score};
 use scene::manifest::{Manifest, Scene};
 use std::path::{Path, PathBuf};
 
@@ -70,28 +72,94 @@ pub fn evaluate(inputs: Inputs, s: &EvalSettings, dir: &Path) -> Result<Metrics>
         }
         _ => Vec::new(),
     };
-    let novel_pairs = pairs(&novel_frames);
+    let owned = |f: &[FrameMetrics]| -> Vec<(PathBuf, PathBuf)> {
+        f.iter()
+            .map(|f| (f.test_image.clone(), f.render.clone()))
+            .collect()
+    };
+    let (test_owned, novel_owned) = (owned(&frames), owned(&novel_frames));
+    let (test_pairs, novel_pairs) = (borrowed(&test_owned), borrowed(&novel_owned));
     let depth_dir = renders.as_ref().map(|r| r.join("novel_depth"));
-    let masks =
-        crate::masked::novel_masks(inputs.scene, &novel_pairs, depth_dir.as_deref(), PSNR_CAP)?;
+    let cap = PSNR_CAP;
+    let test_masks = split_masks(inputs.scene, "test", &test_pairs, None, cap)?;
+    let masks = split_masks(
+        inputs.scene,
+        "novel",
+        &novel_pairs,
+        depth_dir.as_deref(),
+        cap,
+    )?;
+    let novel_rows: Vec<(&Path, Vec<&Path>)> =
+        novel_pairs.iter().map(|&(g, r)| (g, vec![r])).collect();
     let novel_sheet =
-        crate::sheet::write_sheet(&novel_pairs, &dir.join(SHEET))?.map(|_| PathBuf::from(SHEET));
+        crate::sheet::write_sheet(&novel_rows, &dir.join(SHEET))?.map(|_| PathBuf::from(SHEET));
+    for (f, m) in frames.iter_mut().zip(&test_masks) {
+        f.masks = *m;
+    }
     for (f, m) in novel_frames.iter_mut().zip(&masks) {
         f.masks = *m;
     }
     let trajectory = inputs.model.and_then(crate::masked::trajectory);
-    let (lpips_net, lpips_note) = add_lpips(&mut frames, &mut novel_frames, s.lpips, &scene)?;
+    let (mut baselines, baselines_note, base_images) = model_baselines(&scene, dir);
+    let test_images = images(&scene.test);
+    let base_pairs: Vec<(&str, Vec<(&Path, &Path)>)> = base_images
+        .iter()
+        .map(|(name, paths)| {
+            let p = test_images.iter().zip(paths);
+            (*name, p.map(|(a, b)| (a.as_path(), b.as_path())).collect())
+        })
+        .collect();
+    if let Some(b) = baselines.as_mut() {
+        for (name, pairs) in &base_pairs {
+            let m = split_masks(inputs.scene, "test", pairs, None, cap)?;
+            if let Some(score) = baseline_score(b, name) {
+                score.moving_psnr_mean = mean_of(m.iter().map(|f| f.moving_psnr));
+            }
+        }
+    }
+    let mut sets = vec![("test", test_pairs.clone()), ("novel", novel_pairs.clone())];
+    sets.extend(base_pairs.iter().map(|(_, p)| ("test", p.clone())));
+    let (lpips_net, lpips_note) = if sets.iter().all(|(_, p)| p.is_empty()) {
+        (None, None)
+    } else {
+        match lpips_sets(&sets, s.lpips, &scene)? {
+            Ok((net, mut scores)) => {
+                let base_scores = scores.split_off(2);
+                let novel_scores = scores.pop().unwrap_or_default();
+                for (f, d) in frames.iter_mut().zip(scores.concat()) {
+                    (f.lpips, f.masks.moving_lpips) = (Some(d.0), d.1);
+                }
+                for (f, d) in novel_frames.iter_mut().zip(novel_scores) {
+                    f.lpips = Some(d.0);
+                    (f.masks.moving_lpips, f.masks.covisible_lpips) = (d.1, d.2);
+                }
+                if let Some(b) = baselines.as_mut() {
+                    for ((name, _), sc) in base_pairs.iter().zip(base_scores) {
+                        if let Some(score) = baseline_score(b, name) {
+                            score.lpips_mean = mean_all(sc.iter().map(|d| Some(d.0)));
+                            score.moving_lpips_mean = mean_of(sc.iter().map(|d| d.1));
+                        }
+                    }
+                }
+                (Some(net), None)
+            }
+            Err(why) => (None, Some(why)),
+        }
+    };
+    let test_sheet = crate::sheet::test_sheet(&test_images, &test_pairs, &base_images, dir)?;
     let mean = |frames: &[FrameMetrics], f: &dyn Fn(&FrameMetrics) -> f64| {
         (!frames.is_empty()).then(|| frames.iter().map(f).sum::<f64>() / frames.len() as f64)
     };
     let lpips_mean = |f: &[FrameMetrics]| mean_all(f.iter().map(|f| f.lpips));
-    let (baselines, baselines_note) = model_baselines(inputs.model, &scene);
     let (flow, flow_source) = eval_flow(inputs.flows, inputs.scene).unzip();
     Ok(Metrics {
         psnr_mean: mean(&frames, &|f| f.psnr),
         ssim_mean: mean(&frames, &|f| f.ssim),
         lpips_mean: lpips_mean(&frames),
         novel_lpips_mean: lpips_mean(&novel_frames),
+        moving_psnr_mean: mean_of(frames.iter().map(|f| f.masks.moving_psnr)),
+        moving_lpips_mean: mean_of(frames.iter().map(|f| f.masks.moving_lpips)),
+        test_sheet,
         lpips_net,
         lpips_note,
         frames,
@@ -137,61 +205,69 @@ fn mean_of(v: impl Iterator<Item = Option<f64>>) -> Option<f64> {
     (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
 }
 
-fn pairs(s: &[FrameMetrics]) -> Vec<(&Path, &Path)> {
-    s.iter()
-        .map(|f| (f.test_image.as_path(), f.render.as_path()))
-        .collect()
+fn borrowed(s: &[(PathBuf, PathBuf)]) -> Vec<(&Path, &Path)> {
+    s.iter().map(|(a, b)| (a.as_path(), b.as_path())).collect()
 }
 
-/// LPIPS of the test and novel frames in place, and of the novel views over their masks
-/// ([`crate::masked::NovelMasks`]); the network, or why none. `Err` only for a mask
-/// that cannot be read.
-fn add_lpips(
-    test: &mut [FrameMetrics],
-    novel: &mut [FrameMetrics],
+/// The figures of baseline `name` (`nearest`, `blend`, `events`) in `b`.
+fn baseline_score<'a>(b: &'a mut BaselineFigures, name: &str) -> Option<&'a mut Score> {
+    match name {
+        "nearest" => Some(&mut b.nearest),
+        "blend" => Some(&mut b.blend),
+        "events" => b.events.as_mut(),
+        _ => None,
+    }
+}
+
+/// LPIPS of each `(split, pairs)` set, per pair its distance and its mean over the
+/// view's moving-object and co-visible masks (`gt/SPLIT/…`; None where the scene lacks
+/// them); `Ok(Err(why))` when LPIPS cannot be had. `Err` only for a mask that cannot be
+/// read.
+type Lpipsed = Vec<Vec<(f64, Option<f64>, Option<f64>)>>;
+fn lpips_sets(
+    sets: &[(&str, Vec<(&Path, &Path)>)],
     how: LpipsUse,
     scene: &Scene,
-) -> Result<(Option<String>, Option<String>)> {
-    if test.is_empty() && novel.is_empty() {
-        return Ok((None, None));
-    }
-    let (net, mut scores) = match score_sets(&[pairs(test), pairs(novel)], how) {
+) -> Result<std::result::Result<(String, Lpipsed), String>> {
+    let pairs: Vec<Vec<(&Path, &Path)>> = sets.iter().map(|(_, p)| p.clone()).collect();
+    let (net, scores) = match score_sets(&pairs, how) {
         Ok(found) => found,
-        Err(why) => return Ok((None, Some(why))),
+        Err(why) => return Ok(Err(why)),
     };
-    let novel_scores = scores.pop().unwrap_or_default();
-    for (f, d) in test.iter_mut().zip(scores.concat()) {
-        f.lpips = Some(d.distance);
+    let ids = crate::masked::moving_ids(&scene.root)?;
+    let mut out = Vec::with_capacity(sets.len());
+    for ((split, _), set) in sets.iter().zip(scores) {
+        let mut figures = Vec::with_capacity(set.len());
+        for (k, d) in set.into_iter().enumerate() {
+            let masks = crate::masked::ViewMasks::read(&scene.root, split, k, &ids)?;
+            let masked = |m: Option<Vec<bool>>| m.map(|m| d.masked_mean(&m)).transpose();
+            figures.push((
+                d.distance,
+                masked(masks.moving)?.flatten(),
+                masked(masks.covisible)?.flatten(),
+            ));
+        }
+        out.push(figures);
     }
-    let ids = crate::masked::moving_ids(&scene.root);
-    for (k, (f, d)) in novel.iter_mut().zip(novel_scores).enumerate() {
-        f.lpips = Some(d.distance);
-        let masks = crate::masked::NovelMasks::read(&scene.root, k, ids.as_deref())?;
-        let masked = |m: Option<Vec<bool>>| m.map(|m| d.masked_mean(&m)).transpose();
-        f.masks.moving_lpips = masked(masks.moving)?.flatten();
-        f.masks.covisible_lpips = masked(masks.covisible)?.flatten();
-    }
-    Ok((Some(net), None))
+    Ok(Ok((net, out)))
 }
 
-/// The 2D baselines: the model's report's when it has them (the deform stage writes
-/// them), else computed from the scene; else None and why.
+/// The 2D baselines computed from the scene, their images under `dir/baselines/`; else
+/// None and why. (The deform stage's report holds its own figures of them, at its
+/// contrast threshold; the evaluation scores them itself, so that each comes with its
+/// images, LPIPS and the moving pixels' figures.)
 fn model_baselines(
-    model: Option<&Path>,
     scene: &Scene,
-) -> (Option<BaselineFigures>, Option<String>) {
-    let reported = model
-        .and_then(|e| std::fs::read(e.join("report.json")).ok())
-        .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
-        .and_then(|v| baselines::from_report(&v));
-    let found = match reported {
-        Some(b) => Ok(Some(b)),
-        None => baselines::compute(scene),
-    };
-    match found {
-        Ok(Some(b)) => (Some(b.capped(PSNR_CAP)), None),
-        Ok(None) => (None, Some("the scene has no test frames".into())),
-        Err(e) => (None, Some(format!("{e:#}"))),
+    dir: &Path,
+) -> (Option<BaselineFigures>, Option<String>, BaselineImages) {
+    match baselines::compute(scene, dir) {
+        Ok(Some((b, images))) => (Some(b.capped(PSNR_CAP)), None, images),
+        Ok(None) => (
+            None,
+            Some("the scene has no test frames".into()),
+            Vec::new(),
+        ),
+        Err(e) => (None, Some(format!("{e:#}")), Vec::new()),
     }
 }
 

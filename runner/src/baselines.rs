@@ -7,8 +7,9 @@
 
 use scene::evaluation::{BaselineFigures, Score};
 
-/// Mean PSNR/SSIM of a model's renders on one split.
-pub type Figures = Option<(f64, f64)>;
+/// A model's mean figures on one split (PSNR, SSIM, LPIPS and the two over the moving
+/// objects' pixels, those it has).
+pub type Figures = Option<Score>;
 
 /// The block `degs eval` prints under its table: the model's test-frame figures beside
 /// the baselines', then its novel-view figures (with no baselines). `model` names the
@@ -19,12 +20,27 @@ pub(crate) fn format_block(
     novel: Figures,
     baselines: Result<&BaselineFigures, &str>,
 ) -> String {
+    let opt = |v: Option<f64>, w: usize, p: usize| {
+        v.map_or(format!("{:>w$}", "-"), |v| format!("{v:>w$.p$}"))
+    };
     let row = |label: &str, f: Figures| match f {
-        Some((p, s)) => format!("  {label:<32} {p:>8.2} {s:>7.4}\n"),
+        Some(s) => format!(
+            "  {label:<32} {:>8.2} {:>7.4} {} {} {}\n",
+            s.psnr_mean,
+            s.ssim_mean,
+            opt(s.lpips_mean, 7, 4),
+            opt(s.moving_psnr_mean, 9, 2),
+            opt(s.moving_lpips_mean, 10, 4)
+        ),
         None => format!("  {label:<32} {:>8} {:>7}\n", "-", "-"),
     };
-    let of = |s: &Score| Some((s.psnr_mean, s.ssim_mean));
-    let head = |title: &str| format!("{title:<34} {:>8} {:>7}\n", "PSNR dB", "SSIM");
+    let of = |s: &Score| Some(*s);
+    let head = |title: &str| {
+        format!(
+            "{title:<34} {:>8} {:>7} {:>7} {:>9} {:>10}\n",
+            "PSNR dB", "SSIM", "LPIPS", "moving dB", "mov. LPIPS"
+        )
+    };
     let model = format!("model ({model} renders)");
     let mut out = head("test frames");
     out += &row(&model, test);
@@ -59,28 +75,42 @@ mod tests {
             nearest: Score {
                 psnr_mean: 20.5,
                 ssim_mean: 0.6,
+                lpips_mean: Some(0.25),
+                moving_psnr_mean: Some(15.125),
+                ..Score::default()
             },
             blend: Score {
                 psnr_mean: f64::INFINITY,
                 ssim_mean: 1.0,
+                ..Score::default()
             },
             events: None,
             source: COMPUTED.into(),
         }
         .capped(100.0);
-        let text = format_block("deform", Some((24.0, 0.8)), Some((19.5, 0.7)), Ok(&b));
+        let fig = |psnr_mean, ssim_mean| Score {
+            psnr_mean,
+            ssim_mean,
+            ..Score::default()
+        };
+        let text = format_block("deform", Some(fig(24.0, 0.8)), Some(fig(19.5, 0.7)), Ok(&b));
         let lines: Vec<&str> = text.lines().collect();
         let cols = |l: &str| l.split_whitespace().map(str::to_string).collect::<Vec<_>>();
         assert_eq!(
             cols(lines[1]),
-            ["model", "(deform", "renders)", "24.00", "0.8000"]
+            [
+                "model", "(deform", "renders)", "24.00", "0.8000", "-", "-", "-"
+            ]
         );
-        assert_eq!(cols(lines[2])[3..], ["20.50", "0.6000"]);
-        assert_eq!(cols(lines[3])[2..], ["100.00", "1.0000"]);
+        assert_eq!(
+            cols(lines[2])[3..],
+            ["20.50", "0.6000", "0.2500", "15.12", "-"]
+        );
+        assert_eq!(cols(lines[3])[2..], ["100.00", "1.0000", "-", "-", "-"]);
         assert!(lines[4].contains("no events"), "{text}");
         assert_eq!(lines[5], "  2D baselines: computed from the scene");
         assert!(lines[6].starts_with("novel views"), "{text}");
-        assert_eq!(cols(lines[7])[3..], ["19.50", "0.7000"]);
+        assert_eq!(cols(lines[7])[3..], ["19.50", "0.7000", "-", "-", "-"]);
         assert!(lines[8].contains("cannot render a new viewpoint"), "{text}");
         let none = format_block("gaussians", None, None, Err("no test frames"));
         assert_eq!(

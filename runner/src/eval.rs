@@ -13,7 +13,7 @@ use crate::progress::Progress;
 use crate::record::RunRecord;
 use crate::stages;
 use anyhow::{Context as _, Result, bail};
-pub use scene::evaluation::{FrameMetrics, Metrics, PSNR_CAP};
+pub use scene::evaluation::{FrameMetrics, Metrics, PSNR_CAP, Score};
 use std::path::{Path, PathBuf};
 use toml::{Table, Value};
 
@@ -115,28 +115,76 @@ pub fn eval_run_with(
         .map(|s| (s.stage.clone(), s.built_wall_s.unwrap_or(s.wall_s)))
         .collect();
     metrics.total_stage_s = metrics.stage_s.iter().map(|(_, t)| t).sum();
-    if let Some(sheet) = &metrics.novel_sheet {
-        let to = run_dir.join("novel_sheet.png");
-        std::fs::copy(entry.join(sheet), &to)
-            .with_context(|| format!("{}: cannot write", to.display()))?;
-        metrics.novel_sheet = Some(to);
+    for sheet in [&mut metrics.novel_sheet, &mut metrics.test_sheet] {
+        if let Some(name) = sheet.as_ref() {
+            let to = run_dir.join(name);
+            std::fs::copy(entry.join(name), &to)
+                .with_context(|| format!("{}: cannot write", to.display()))?;
+            *sheet = Some(to);
+        }
     }
+    copy_baselines(&entry.join("baselines"), &run_dir.join("baselines"))?;
     scene::atomic::write_json_atomic(&run_dir.join("metrics.json"), &metrics)?;
     Ok(metrics)
+}
+
+/// The 2D baselines' images of the evaluation (`baselines/NAME/NNNN.png`) into the run
+/// directory, replacing an earlier evaluation's; nothing when it wrote none.
+fn copy_baselines(from: &Path, to: &Path) -> Result<()> {
+    if to.is_dir() {
+        std::fs::remove_dir_all(to).with_context(|| format!("{}: cannot replace", to.display()))?;
+    }
+    if !from.is_dir() {
+        return Ok(());
+    }
+    for dir in std::fs::read_dir(from).with_context(|| format!("{}", from.display()))? {
+        let dir = dir?.path();
+        let out = to.join(dir.file_name().unwrap_or_default());
+        std::fs::create_dir_all(&out)
+            .with_context(|| format!("{}: cannot write", out.display()))?;
+        for f in std::fs::read_dir(&dir).with_context(|| format!("{}", dir.display()))? {
+            let f = f?.path();
+            let dest = out.join(f.file_name().unwrap_or_default());
+            std::fs::copy(&f, &dest)
+                .with_context(|| format!("{}: cannot write", dest.display()))?;
+        }
+    }
+    Ok(())
 }
 
 /// What `degs eval` prints under its table: the model's figures on the test frames
 /// beside the 2D baselines', and on the novel views.
 pub fn baseline_block(m: &Metrics) -> String {
-    let both = |p: Option<f64>, s: Option<f64>| p.zip(s);
+    let both =
+        |p: Option<f64>, s: Option<f64>, l: Option<f64>, mp: Option<f64>, ml: Option<f64>| {
+            p.zip(s).map(|(psnr_mean, ssim_mean)| Score {
+                psnr_mean,
+                ssim_mean,
+                lpips_mean: l,
+                moving_psnr_mean: mp,
+                moving_lpips_mean: ml,
+            })
+        };
     let baselines = m
         .baselines
         .as_ref()
         .ok_or(m.baselines_note.as_deref().unwrap_or("unknown"));
     baselines::format_block(
         m.render_stage.as_deref().unwrap_or("no"),
-        both(m.psnr_mean, m.ssim_mean),
-        both(m.novel_psnr_mean, m.novel_ssim_mean),
+        both(
+            m.psnr_mean,
+            m.ssim_mean,
+            m.lpips_mean,
+            m.moving_psnr_mean,
+            m.moving_lpips_mean,
+        ),
+        both(
+            m.novel_psnr_mean,
+            m.novel_ssim_mean,
+            m.novel_lpips_mean,
+            m.novel_moving_psnr_mean,
+            m.novel_moving_lpips_mean,
+        ),
         baselines,
     )
 }

@@ -62,6 +62,16 @@ pub struct Metrics {
     pub lpips_mean: Option<f64>,
     #[serde(default)]
     pub novel_lpips_mean: Option<f64>,
+    /// The test frames' PSNR and LPIPS over the pixels a moving object covers
+    /// (`gt/test/object_NNNN.png`), when the scene has those masks.
+    #[serde(default)]
+    pub moving_psnr_mean: Option<f64>,
+    #[serde(default)]
+    pub moving_lpips_mean: Option<f64>,
+    /// The test frames beside the model's renders and the 2D baselines
+    /// (`test_sheet.png`), when written.
+    #[serde(default)]
+    pub test_sheet: Option<PathBuf>,
     #[serde(default)]
     pub lpips_net: Option<String>,
     #[serde(default)]
@@ -159,10 +169,20 @@ pub struct Trajectory {
 }
 
 /// Mean PSNR (dB) and SSIM of one baseline over the test frames.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Score {
     pub psnr_mean: f64,
     pub ssim_mean: f64,
+    /// LPIPS (the evaluation's network), when it was computed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lpips_mean: Option<f64>,
+    /// PSNR over the pixels a moving object covers (`gt/test/object_NNNN.png`), when
+    /// the scene has those masks.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub moving_psnr_mean: Option<f64>,
+    /// LPIPS over the same pixels.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub moving_lpips_mean: Option<f64>,
 }
 
 /// The three 2D baselines (nearest train frame, linear blend, two-sided event pseudo
@@ -173,7 +193,8 @@ pub struct BaselineFigures {
     pub blend: Score,
     /// The two-sided event pseudo image; None when the recording has no events.
     pub events: Option<Score>,
-    /// [`FROM_REPORT`] or [`COMPUTED`].
+    /// [`COMPUTED`] ([`FROM_REPORT`] in evaluations made before the evaluation scored
+    /// the baselines itself).
     pub source: String,
 }
 

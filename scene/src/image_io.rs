@@ -20,6 +20,16 @@ use exr::prelude as x;
 use std::io;
 use std::path::Path;
 
+/// An sRGB-encoded value in `[0, 1]` → linear intensity (IEC 61966-2-1): what an 8-bit
+/// frame's code means unless its manifest says `frame_encoding: linear`.
+pub fn srgb_to_linear(c: f32) -> f32 {
+    if c <= 0.040_45 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
 /// An `f32` image, row-major with interleaved channels.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Image {

@@ -5,6 +5,7 @@
 use crate::sim::{SimConfig, Simulator, luminance};
 use scene::error::{Error, IoContext, Result};
 use scene::events::EventStream;
+use scene::manifest::FrameEncoding;
 use serde::{Deserialize, Serialize};
 use stagekit::Settings;
 use std::path::{Path, PathBuf};
@@ -71,13 +72,15 @@ pub fn read_timestamps(path: &Path) -> Result<Vec<f64>> {
 }
 
 /// Simulate the events of a directory of frames: the images of `frames_dir` (sorted by
-/// file name; linear RGB, see `scene::image_io`) at the times of
-/// `frames_dir/timestamps.txt`, written to `out_path` as `.evs`.
+/// file name; 8- or 16-bit, their codes decoded by `encoding`: the event model works on
+/// linear intensity) at the times of `frames_dir/timestamps.txt`, written to `out_path`
+/// as `.evs`.
 pub fn simulate_frames(
     frames_dir: &Path,
     out_path: &Path,
     cfg: &SimConfig,
     seed: u64,
+    encoding: FrameEncoding,
 ) -> Result<SimSummary> {
     let start = Instant::now();
     cfg.validate()
@@ -100,7 +103,12 @@ pub fn simulate_frames(
     let mut sim: Option<Simulator> = None;
     let mut events = EventStream::default();
     for (file, &t) in files.iter().zip(&times) {
-        let img = scene::image_io::read_image(file)?;
+        let mut img = scene::image_io::read_image(file)?;
+        if encoding.is_srgb() {
+            img.data
+                .iter_mut()
+                .for_each(|v| *v = scene::image_io::srgb_to_linear(*v));
+        }
         let lum = match img.channels {
             1 => img.data.clone(),
             3 => luminance(&img.data),

@@ -61,6 +61,9 @@ pub struct SimConfig {
     pub hot_pixel_hz: f64,
 }
 
+/// Log-intensity slack of a threshold crossing: exact ties fire (see `push_frame_flagged`).
+const TIE: f64 = 1e-9;
+
 impl Default for SimConfig {
     fn default() -> Self {
         SimConfig {
@@ -292,10 +295,13 @@ impl Simulator {
                     let dl = l1 - l0;
                     let mut r = refs[x];
                     loop {
-                        let p = if l1 - r >= cp[x] {
+                        // A crossing that lands exactly on the level (a pixel back at
+                        // an earlier value) fires: the reference, a sum of thresholds,
+                        // misses it by rounding otherwise (TIE, far below any C).
+                        let p = if l1 - r >= cp[x] - TIE {
                             r += cp[x];
                             1
-                        } else if r - l1 >= cn[x] {
+                        } else if r - l1 >= cn[x] - TIE {
                             r -= cn[x];
                             -1
                         } else {

@@ -1,6 +1,7 @@
 //! Event simulator: exact crossings on ramps, determinism, noise, refractory period.
 
 use scene::EventStream;
+use scene::manifest::FrameEncoding;
 use stagekit::Settings;
 use synth::frames::{read_timestamps, simulate_frames};
 use synth::sim::{SimConfig, Simulator, luminance};
@@ -316,7 +317,7 @@ fn simulate_frames_matches_the_library_on_png_input() {
     std::fs::write(dir.path().join("timestamps.txt"), times).unwrap();
     let out_path = dir.path().join("out.evs");
     let cfg = clean(0.1);
-    let summary = simulate_frames(dir.path(), &out_path, &cfg, 3).unwrap();
+    let summary = simulate_frames(dir.path(), &out_path, &cfg, 3, FrameEncoding::Linear).unwrap();
     let read = scene::formats::read_events(&out_path, &Default::default()).unwrap();
     assert_eq!(summary.frames, 6);
     assert_eq!(summary.events, read.len());
@@ -339,16 +340,16 @@ fn simulate_frames_rejects_bad_directories() {
     let out = dir.path().join("out.evs");
     let cfg = clean(0.1);
     // No timestamps file.
-    let e = simulate_frames(dir.path(), &out, &cfg, 0).unwrap_err();
+    let e = simulate_frames(dir.path(), &out, &cfg, 0, FrameEncoding::Linear).unwrap_err();
     assert!(e.to_string().contains("timestamps.txt"), "{e}");
     let frames = random_frames(4, 4, 3);
     write_frames(dir.path(), &frames, 4, 4);
     let ts = dir.path().join("timestamps.txt");
     std::fs::write(&ts, "0\n0.1\n").unwrap();
-    let e = simulate_frames(dir.path(), &out, &cfg, 0).unwrap_err();
+    let e = simulate_frames(dir.path(), &out, &cfg, 0, FrameEncoding::Linear).unwrap_err();
     assert!(e.to_string().contains("2 timestamps for 3 images"), "{e}");
     std::fs::write(&ts, "0\n0.1\nabc\n").unwrap();
-    let e = simulate_frames(dir.path(), &out, &cfg, 0).unwrap_err();
+    let e = simulate_frames(dir.path(), &out, &cfg, 0, FrameEncoding::Linear).unwrap_err();
     assert!(e.to_string().contains("line 3"), "{e}");
     std::fs::write(&ts, "0\n0.1\n0.1\n").unwrap();
     assert!(read_timestamps(&ts).is_err());
@@ -364,7 +365,7 @@ fn simulate_frames_rejects_bad_directories() {
     .unwrap();
     write_frames(dir.path(), &random_frames(4, 4, 2), 4, 4);
     std::fs::write(&ts, "0\n0.1\n0.2\n").unwrap();
-    let e = simulate_frames(dir.path(), &out, &cfg, 0).unwrap_err();
+    let e = simulate_frames(dir.path(), &out, &cfg, 0, FrameEncoding::Linear).unwrap_err();
     assert!(
         e.to_string().contains("frame_0002.png") && e.to_string().contains("5x4"),
         "{e}"
@@ -372,13 +373,63 @@ fn simulate_frames_rejects_bad_directories() {
     // A corrupt image names the file.
     std::fs::write(&ts, "0\n0.1\n0.2\n").unwrap();
     std::fs::write(dir.path().join("frame_0001.png"), b"not a png").unwrap();
-    let e = simulate_frames(dir.path(), &out, &cfg, 0).unwrap_err();
+    let e = simulate_frames(dir.path(), &out, &cfg, 0, FrameEncoding::Linear).unwrap_err();
     assert!(e.to_string().contains("frame_0001.png"), "{e}");
     assert!(!out.exists());
     // A directory without images.
     let empty = tempfile::tempdir().unwrap();
     std::fs::write(empty.path().join("timestamps.txt"), "").unwrap();
-    let e = simulate_frames(empty.path(), &out, &cfg, 0).unwrap_err();
+    let e = simulate_frames(empty.path(), &out, &cfg, 0, FrameEncoding::Linear).unwrap_err();
     assert!(e.to_string().contains("no .png"), "{e}");
     assert!(!out.exists());
+}
+
+#[test]
+fn simulate_frames_decodes_srgb_codes_before_the_log() {
+    // One pixel from code 128 to code 255. sRGB 128/255 is linear 0.2158605 (IEC
+    // 61966-2-1 table value), so log(ε + Y) rises by ln(1.001 / 0.2168605) = 1.5295:
+    // 15 events at C = 0.1. Read as linear codes it would rise by ln(1.001 / 0.50296)
+    // = 0.6879: 6 events.
+    let dir = tempfile::tempdir().unwrap();
+    for (k, v) in [128.0f32 / 255.0, 1.0].into_iter().enumerate() {
+        let img = scene::image_io::Image {
+            width: 1,
+            height: 1,
+            channels: 3,
+            data: vec![v; 3],
+        };
+        scene::image_io::write_png(dir.path().join(format!("f_{k}.png")), &img).unwrap();
+    }
+    std::fs::write(dir.path().join("timestamps.txt"), "0.0\n0.01\n").unwrap();
+    let out = dir.path().join("out.evs");
+    for (encoding, want) in [(FrameEncoding::Srgb, 15), (FrameEncoding::Linear, 6)] {
+        simulate_frames(dir.path(), &out, &clean(0.1), 0, encoding).unwrap();
+        let ev = scene::formats::read_events(&out, &Default::default()).unwrap();
+        assert_eq!(ev.len(), want, "{encoding:?}");
+        assert!(ev.p.iter().all(|&p| p > 0), "{encoding:?}: all positive");
+    }
+}
+
+#[test]
+fn a_pixel_that_returns_to_its_value_gives_as_many_off_as_on_events() {
+    // log L: l0 → l0 + 1.1 → l0 at C = 0.2: five ON events up, and on the way back the
+    // reference falls by five thresholds to exactly l0, so the fifth OFF crossing is an
+    // exact tie that must fire (v2e does; a reference accumulated in floating point
+    // would miss it for most l0).
+    let mut lost = Vec::new();
+    for k in 0..40 {
+        let l0 = -4.0 + 0.1 * k as f64;
+        let mut sim = Simulator::new(1, 1, &clean(0.2), 0);
+        let mut out = EventStream::new(1, 1);
+        for (t, l) in [(0.0, l0), (0.01, l0 + 1.1), (0.02, l0)] {
+            sim.push_frame(t, &[lum_of_log(l)], &mut out).unwrap();
+        }
+        let on = out.p.iter().filter(|&&p| p > 0).count();
+        let off = out.p.iter().filter(|&&p| p < 0).count();
+        assert_eq!(on, 5, "l0 = {l0}");
+        if off != on {
+            lost.push(l0);
+        }
+    }
+    assert!(lost.is_empty(), "OFF events lost at l0 = {lost:?}");
 }

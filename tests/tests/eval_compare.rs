@@ -123,20 +123,70 @@ fn eval_and_compare_report_known_errors() {
             .to_string()
     };
     let figures = |s: &figures::Score| format!("{:.2} {:.4}", s.psnr_mean, s.ssim_mean);
-    let tail = |l: String| {
-        l.split_whitespace()
-            .rev()
-            .take(2)
-            .collect::<Vec<_>>()
-            .join(" ")
+    // PSNR and SSIM: the first two numbers after the label.
+    let first_two = |l: String| {
+        let words: Vec<&str> = l.split_whitespace().collect();
+        let at = words.iter().position(|w| w.parse::<f64>().is_ok()).unwrap();
+        words[at..at + 2].join(" ")
     };
-    let flip = |s: String| s.split(' ').rev().collect::<Vec<_>>().join(" ");
     assert_eq!(
-        flip(tail(line("nearest train frame"))),
+        first_two(line("nearest train frame")),
         figures(&want.nearest)
     );
-    assert_eq!(flip(tail(line("linear blend"))), figures(&want.blend));
-    assert_eq!(flip(tail(line("event pseudo image"))), figures(&events));
+    assert_eq!(first_two(line("linear blend")), figures(&want.blend));
+    assert_eq!(first_two(line("event pseudo image")), figures(&events));
+    // The baselines' images beside the run: the blend's score the blend's PSNR against
+    // the test frames, and on the moving objects' pixels (ids from synth.json, masks
+    // gt/test/object_NNNN.png) the PSNR written out here.
+    let run_dir = root.join("runs/a");
+    let cfg: synth::SynthConfig =
+        serde_json::from_str(&fs::read_to_string(scene_dir.join("synth.json")).unwrap()).unwrap();
+    let moving: Vec<u16> = (0..cfg.objects.len())
+        .filter(|&k| cfg.objects[k].moves())
+        .map(|k| k as u16 + 1)
+        .collect();
+    let level = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as f64;
+    let (mut whole, mut on_moving) = (0.0, 0.0);
+    for (k, f) in scene.test.frames.iter().enumerate() {
+        let img = read_image(run_dir.join(format!("baselines/blend/{k:04}.png"))).unwrap();
+        let target = read_image(scene.image_path(f)).unwrap();
+        let (_, _, ids) =
+            synth::gt::read_object_png(scene_dir.join(format!("gt/test/object_{k:04}.png")))
+                .unwrap();
+        let (mut all, mut mv, mut n) = (0.0, 0.0, 0usize);
+        for (i, (&a, &b)) in img.data.iter().zip(&target.data).enumerate() {
+            let e = (level(a) - level(b)).powi(2);
+            all += e;
+            if moving.contains(&ids[i / 3]) {
+                mv += e;
+                n += 1;
+            }
+        }
+        assert!(n > 0, "frame {k}: no moving pixels");
+        let psnr = |mse: f64| 10.0 * (255.0f64.powi(2) / mse).log10();
+        whole += psnr(all / img.data.len() as f64);
+        on_moving += psnr(mv / n as f64);
+    }
+    let frames = scene.test.frames.len() as f64;
+    assert!(
+        (whole / frames - blend_ref).abs() < 1e-9,
+        "{whole} vs {blend_ref}"
+    );
+    let got = b["blend"]["moving_psnr_mean"].as_f64().unwrap();
+    assert!(
+        (got - on_moving / frames).abs() < 1e-9,
+        "{got} vs {on_moving}"
+    );
+    // The model's exact frame (frame 0) scores the cap on its moving pixels too.
+    assert_eq!(m["frames"][0]["moving_psnr"].as_f64(), Some(100.0));
+    // The sheet: the frame, then model, event image and blend each with its difference.
+    let sheet = read_image(run_dir.join("test_sheet.png")).unwrap();
+    let first = read_image(scene.image_path(&scene.test.frames[0])).unwrap();
+    let z = 128u32.div_ceil(first.width);
+    assert_eq!(
+        (sheet.width, sheet.height),
+        (7 * z * first.width + 6 * 2, 2 * z * first.height + 2)
+    );
     assert!(
         line("model (gaussians renders)").contains(&format!("{:.2}", mean)),
         "{out}"
@@ -328,15 +378,26 @@ fn reference_event_pseudo_image(dir: &Path) -> f64 {
     total / scene.test.frames.len() as f64
 }
 
+/// An image as the LPIPS crate takes it (3 channels, as `read_image` gives).
+fn lpips_rgb(i: &scene::image_io::Image) -> lpips::Rgb<'_> {
+    lpips::Rgb {
+        data: &i.data,
+        width: i.width as usize,
+        height: i.height as usize,
+    }
+}
+
 /// The 2D baselines of the scene's test frames, computed as the deform stage does.
 fn scene_baselines(dir: &Path) -> figures::BaselineFigures {
-    baselines::compute(&Scene::open(dir).unwrap())
+    let out = tempfile::tempdir().unwrap();
+    baselines::compute(&Scene::open(dir).unwrap(), out.path())
         .unwrap()
         .unwrap()
+        .0
 }
 
 #[test]
-fn eval_prints_the_baselines_of_the_deform_report() {
+fn eval_scores_the_baselines_itself_not_from_the_deform_report() {
     let Exact {
         dir: d,
         root,
@@ -372,16 +433,28 @@ fn eval_prints_the_baselines_of_the_deform_report() {
         "{out}"
     );
     assert_eq!(cols(block[1])[3], mean, "{out}");
-    assert_eq!(cols(block[2])[3..], ["21.12", "0.6250"], "{out}");
-    assert_eq!(cols(block[3])[2..], ["23.50", "0.7500"], "{out}");
-    assert_eq!(cols(block[4])[4..], ["24.88", "0.8125"], "{out}");
-    assert_eq!(block[5], "  2D baselines: the deform report", "{out}");
+    // The baselines are the scene's own, scored with their images, not the report's
+    // (whose figures here are made up).
+    let want = scene_baselines(&scene_dir);
+    let two = |s: &figures::Score| [format!("{:.2}", s.psnr_mean), format!("{:.4}", s.ssim_mean)];
+    assert_eq!(cols(block[2])[3..5], two(&want.nearest), "{out}");
+    assert_eq!(cols(block[3])[2..4], two(&want.blend), "{out}");
+    assert_eq!(
+        cols(block[4])[4..6],
+        two(want.events.as_ref().unwrap()),
+        "{out}"
+    );
+    assert_eq!(block[5], "  2D baselines: computed from the scene", "{out}");
     // the deform entry rendered no novel views: no novel block
     assert_eq!(block.len(), 6, "{out}");
     let m: serde_json::Value =
         serde_json::from_slice(&fs::read(run.join("metrics.json")).unwrap()).unwrap();
     assert_eq!(m["render_stage"], "deform");
-    assert_eq!(m["baselines"]["blend"]["psnr_mean"], 23.5);
+    assert!(
+        (m["baselines"]["blend"]["psnr_mean"].as_f64().unwrap() - want.blend.psnr_mean).abs()
+            < 1e-9
+    );
+    assert!(m["baselines_note"].is_null());
     assert!(m["novel_psnr_mean"].is_null());
 }
 
@@ -414,6 +487,33 @@ fn eval_reports_lpips_beside_psnr_when_the_weights_are_there() {
     assert!((mean - (l0 + l1) / 2.0).abs() < 1e-12);
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(out.contains("LPIPS (vgg"), "{out}");
+    // The blend's LPIPS, whole and over the moving objects' pixels, as the metric gives
+    // them on its images beside the run.
+    let net = lpips::Lpips::load_cached(lpips::Variant::Vgg).unwrap();
+    let scene = Scene::open(&scene_dir).unwrap();
+    let cfg: synth::SynthConfig =
+        serde_json::from_str(&fs::read_to_string(scene_dir.join("synth.json")).unwrap()).unwrap();
+    let (mut whole, mut moving) = (0.0, 0.0);
+    for (k, f) in scene.test.frames.iter().enumerate() {
+        let a = read_image(scene.image_path(f)).unwrap();
+        let b = read_image(run.join(format!("baselines/blend/{k:04}.png"))).unwrap();
+        let d = net.distance_and_map(lpips_rgb(&a), lpips_rgb(&b)).unwrap();
+        let (_, _, ids) =
+            synth::gt::read_object_png(scene_dir.join(format!("gt/test/object_{k:04}.png")))
+                .unwrap();
+        let mask: Vec<bool> = ids
+            .iter()
+            .map(|&o| o > 0 && cfg.objects[o as usize - 1].moves())
+            .collect();
+        whole += d.distance;
+        moving += d.masked_mean(&mask).unwrap().unwrap();
+    }
+    let n = scene.test.frames.len() as f64;
+    let blend = &m["baselines"]["blend"];
+    let got = blend["lpips_mean"].as_f64().unwrap();
+    assert!((got - whole / n).abs() < 1e-9, "{got} vs {}", whole / n);
+    let got = blend["moving_lpips_mean"].as_f64().unwrap();
+    assert!((got - moving / n).abs() < 1e-9, "{got} vs {}", moving / n);
     // Off: no LPIPS, and the note says so.
     let o = degs(&["eval", run.to_str().unwrap()]);
     assert!(o.status.success());
