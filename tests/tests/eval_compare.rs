@@ -139,12 +139,7 @@ fn eval_and_compare_report_known_errors() {
     // the test frames, and on the moving objects' pixels (ids from synth.json, masks
     // gt/test/object_NNNN.png) the PSNR written out here.
     let run_dir = root.join("runs/a");
-    let cfg: synth::SynthConfig =
-        serde_json::from_str(&fs::read_to_string(scene_dir.join("synth.json")).unwrap()).unwrap();
-    let moving: Vec<u16> = (0..cfg.objects.len())
-        .filter(|&k| cfg.objects[k].moves())
-        .map(|k| k as u16 + 1)
-        .collect();
+    let moving = moving_ids(&scene_dir);
     let level = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as f64;
     let (mut whole, mut on_moving) = (0.0, 0.0);
     for (k, f) in scene.test.frames.iter().enumerate() {
@@ -491,8 +486,7 @@ fn eval_reports_lpips_beside_psnr_when_the_weights_are_there() {
     // them on its images beside the run.
     let net = lpips::Lpips::load_cached(lpips::Variant::Vgg).unwrap();
     let scene = Scene::open(&scene_dir).unwrap();
-    let cfg: synth::SynthConfig =
-        serde_json::from_str(&fs::read_to_string(scene_dir.join("synth.json")).unwrap()).unwrap();
+    let moving_objects = moving_ids(&scene_dir);
     let (mut whole, mut moving) = (0.0, 0.0);
     for (k, f) in scene.test.frames.iter().enumerate() {
         let a = read_image(scene.image_path(f)).unwrap();
@@ -501,10 +495,7 @@ fn eval_reports_lpips_beside_psnr_when_the_weights_are_there() {
         let (_, _, ids) =
             synth::gt::read_object_png(scene_dir.join(format!("gt/test/object_{k:04}.png")))
                 .unwrap();
-        let mask: Vec<bool> = ids
-            .iter()
-            .map(|&o| o > 0 && cfg.objects[o as usize - 1].moves())
-            .collect();
+        let mask: Vec<bool> = ids.iter().map(|o| moving_objects.contains(o)).collect();
         whole += d.distance;
         moving += d.masked_mean(&mask).unwrap().unwrap();
     }

@@ -57,12 +57,7 @@ fn eval_scores_the_novel_views_on_the_pixels_of_moving_objects() {
         scene,
         g,
     } = exact_renders(true);
-    let cfg: synth::SynthConfig =
-        serde_json::from_str(&fs::read_to_string(scene_dir.join("synth.json")).unwrap()).unwrap();
-    let moving: Vec<u16> = (0..cfg.objects.len())
-        .filter(|&k| cfg.objects[k].moves())
-        .map(|k| k as u16 + 1)
-        .collect();
+    let moving = moving_ids(&scene_dir);
     assert!(!moving.is_empty());
     let delta = 40.0f32;
     let mut want = Vec::new();
@@ -224,9 +219,8 @@ fn eval_scores_lpips_on_the_masks() {
             .unwrap()
             .2
     };
-    let cfg: synth::SynthConfig =
-        serde_json::from_str(&fs::read_to_string(scene_dir.join("synth.json")).unwrap()).unwrap();
-    let moves = |o: u16| o > 0 && cfg.objects[o as usize - 1].moves();
+    let moving = moving_ids(&scene_dir);
+    let moves = |o: u16| moving.contains(&o);
     let p = g.join("renders/novel/0000.png");
     let mut img = read_image(&p).unwrap();
     for (i, _) in ids(0).iter().enumerate().filter(|(_, o)| moves(**o)) {

@@ -172,3 +172,13 @@ pub fn eval_with_lpips(run: &Path) -> Option<(Output, serde_json::Value)> {
     }
     Some((o, m))
 }
+
+/// The object ids (`k + 1`) of the scene's objects that move by its `synth.json`.
+pub fn moving_ids(scene_dir: &Path) -> Vec<u16> {
+    let cfg: synth::SynthConfig =
+        serde_json::from_str(&fs::read_to_string(scene_dir.join("synth.json")).unwrap()).unwrap();
+    (0..cfg.objects.len())
+        .filter(|&k| cfg.objects[k].moves())
+        .map(|k| k as u16 + 1)
+        .collect()
+}
