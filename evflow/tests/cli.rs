@@ -237,18 +237,44 @@ fn simulate_a_brightening_ramp_through_the_binary() {
     )
     .unwrap();
     let out = tmp.path().join("ev.evs");
-    let run = evflow()
-        .args(["simulate", "--frames"])
-        .arg(&frames)
-        .arg("--out")
-        .arg(&out)
-        .arg("--config")
-        .arg(&cfg)
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&run.stderr);
-    assert!(run.status.success(), "{stderr}");
-    assert!(stderr.contains("5 frames"), "{stderr}");
+    let simulate = |encoding: Option<&str>| {
+        let mut cmd = evflow();
+        cmd.args(["simulate", "--frames"])
+            .arg(&frames)
+            .arg("--out")
+            .arg(&out)
+            .arg("--config")
+            .arg(&cfg);
+        if let Some(e) = encoding {
+            cmd.args(["--frame-encoding", e]);
+        }
+        let run = cmd.output().unwrap();
+        let stderr = String::from_utf8_lossy(&run.stderr).to_string();
+        assert!(run.status.success(), "{stderr}");
+        assert!(stderr.contains("5 frames"), "{stderr}");
+    };
+    // By default the codes are sRGB: each pixel's count is floor(ΔL / C) with the
+    // codes decoded by the IEC 61966-2-1 curve (written out here).
+    simulate(None);
+    let srgb = |v: u8| {
+        let c = v as f64 / 255.0;
+        if c <= 0.04045 {
+            c / 12.92
+        } else {
+            ((c + 0.055) / 1.055).powf(2.4)
+        }
+    };
+    let mut want = 0;
+    for y in 0..h {
+        for x in 0..w {
+            let l = |k: usize| (1e-3 + srgb(code(x, y, k))).ln();
+            want += ((l(4) - l(0)) / c).floor() as usize;
+        }
+    }
+    let decoded = scene::formats::read_events(&out, &Default::default()).unwrap();
+    assert_eq!(decoded.len(), want);
+    // The rest of the test reads the codes as linear intensity.
+    simulate(Some("linear"));
 
     // Read back with scene's reader (the sensor size comes from the .evs header).
     let ev = scene::formats::read_events(&out, &Default::default()).unwrap();
