@@ -379,6 +379,11 @@ def main():
     sc.camera = cam
 
     out = os.path.abspath(args.out)
+    if args.masks_only:
+        if not os.path.isfile(os.path.join(out, "cameras.json")):
+            sys.exit(f"{out}: not an earlier render of this script (no cameras.json)")
+    elif os.path.exists(out) and os.listdir(out):
+        sys.exit(f"{out}: exists and is not empty; give a new folder")
     for d in ("hr", "images", "gt/novel", "gt/test"):
         os.makedirs(os.path.join(out, d), exist_ok=True)
     n = int(round(args.rate * args.seconds))
