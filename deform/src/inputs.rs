@@ -53,6 +53,8 @@ pub struct Inputs {
     pub srgb: bool,
     pub model: Model,
     pub warmup: TrainSettings,
+    /// The warm-up's moving tracks (`gaussians::tracks::file`; empty without).
+    pub tracks: gaussians::tracks::loss::Table,
     /// Bindings per train frame, from `assoc.bin`.
     pub bindings: Vec<assoc::Bindings>,
     /// Half-width δt of the association window.
@@ -169,7 +171,17 @@ impl Inputs {
         };
         let (flow_u, flow_v, flows_out_of_range) =
             read_flows(flows, events.len(), s.motion.flow_range_px)?;
-        let model = Model::load(model_dir)?;
+        let mut model = Model::load(model_dir)?;
+        // The warm-up's moving tracks, when it trained with `L_track`.
+        let tracks_file = model_dir.join(gaussians::tracks::file::TRACKS_FILE);
+        let tracks = if tracks_file.exists() {
+            let n = model.splats.len();
+            let (ids, table) = gaussians::tracks::file::read(&tracks_file, n, views.len())?;
+            model.splats.track = ids;
+            table
+        } else {
+            Vec::new()
+        };
         // The warm-up's resolved settings, validated like the warm-up's own input.
         let warmup: TrainSettings =
             stagekit::settings::read_file(&model_dir.join("settings.toml"))?;
@@ -196,6 +208,7 @@ impl Inputs {
             contrast_estimate,
             srgb,
             model,
+            tracks,
             warmup,
             bindings: frames.into_iter().map(|f| f.bindings).collect(),
             assoc_delta_t,

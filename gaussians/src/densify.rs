@@ -158,6 +158,31 @@ impl Plan {
     pub fn gather<T: Clone>(&self, old: &[T]) -> Vec<T> {
         self.source.iter().map(|&s| old[s].clone()).collect()
     }
+
+    /// The new Gaussians: `sp`'s gathered, with the plan's centres and scales (flags,
+    /// trajectories and tracks follow their sources; a track only its first copy).
+    pub fn apply(&self, sp: &crate::splats::Splats) -> crate::splats::Splats {
+        crate::splats::Splats {
+            means: self.means.clone(),
+            log_scales: self.log_scales.clone(),
+            rotations: self.gather(&sp.rotations),
+            opacity_logits: self.gather(&sp.opacity_logits),
+            sh_dc: self.gather(&sp.sh_dc),
+            sh_rest: self.gather(&sp.sh_rest),
+            dynamic: self.gather_rows(&sp.dynamic, sp.len()),
+            motion: self.gather_rows(&sp.motion, sp.len()),
+            track: crate::splats::first_copies(self.gather_rows(&sp.track, sp.len())),
+        }
+    }
+
+    /// [`Self::gather`] of an optional attribute (empty unless one row per Gaussian).
+    fn gather_rows<T: Clone>(&self, old: &[T], n: usize) -> Vec<T> {
+        if old.len() == n {
+            self.gather(old)
+        } else {
+            Vec::new()
+        }
+    }
     /// For `optim::Adam::remap`: old index for kept Gaussians, `None` for fresh ones.
     pub fn moment_sources(&self) -> Vec<Option<usize>> {
         self.source

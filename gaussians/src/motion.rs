@@ -101,3 +101,18 @@ pub(crate) fn with_trajectories<'s>(
     advance(s, t, &mut out.means);
     Cow::Owned(out)
 }
+
+/// Add a gradient `d` on the rendered centres at time `t` to the canonical centres' and
+/// the trajectories' gradients in `g` only (not through the field).
+pub fn add_centre_gradient(s: &Splats, t: f32, d: &[[f32; 3]], g: &mut crate::splats::SplatGrads) {
+    let (p1, p2) = powers(t);
+    for (i, d) in d.iter().enumerate() {
+        (0..3).for_each(|k| g.means[i][k] += d[k]);
+        if let Some(m) = g.motion.get_mut(i).filter(|_| !s.motion.is_empty()) {
+            (0..3).for_each(|k| {
+                m[k] += d[k] * p1;
+                m[3 + k] += d[k] * p2;
+            });
+        }
+    }
+}

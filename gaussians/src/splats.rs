@@ -22,6 +22,24 @@ pub struct Splats {
     /// Per Gaussian: its own trajectory `[v; a]` (`motion.rs`). Empty when the
     /// Gaussians have none (every centre still unless the field moves it).
     pub motion: Vec<[f32; 6]>,
+    /// Per Gaussian: the index of the track that pulls it (`tracks::loss`, the warm-up's
+    /// `L_track`), [`NO_TRACK`] for none. Empty when no Gaussian has a track.
+    pub track: Vec<u32>,
+}
+
+/// No track (a Gaussian's entry in [`Splats::track`]).
+pub const NO_TRACK: u32 = u32::MAX;
+
+/// A track pulls one Gaussian: after densification has copied Gaussians (each copy with
+/// its source's entry), the first copy of each keeps the track, the others none.
+pub fn first_copies(mut ids: Vec<u32>) -> Vec<u32> {
+    let mut seen = std::collections::HashSet::new();
+    for id in ids.iter_mut() {
+        if *id != NO_TRACK && !seen.insert(*id) {
+            *id = NO_TRACK;
+        }
+    }
+    ids
 }
 
 impl Clone for Splats {
@@ -39,6 +57,7 @@ impl Clone for Splats {
         self.sh_rest.clone_from(&src.sh_rest);
         self.dynamic.clone_from(&src.dynamic);
         self.motion.clone_from(&src.motion);
+        self.track.clone_from(&src.track);
     }
 }
 
@@ -83,6 +102,7 @@ impl Splats {
             sh_rest: Vec::with_capacity(n),
             dynamic: Vec::with_capacity(n),
             motion: Vec::new(),
+            track: Vec::new(),
         }
     }
 
@@ -99,6 +119,9 @@ impl Splats {
     pub fn push(&mut self, g: Gaussian) {
         if !self.motion.is_empty() {
             self.motion.push([0.0; 6]);
+        }
+        if !self.track.is_empty() {
+            self.track.push(NO_TRACK);
         }
         self.means.push(g.mean);
         self.log_scales.push(g.log_scale);

@@ -328,11 +328,13 @@ pub fn write_depths(model: &Model, views: &[View], dir: &Path) -> Result<()> {
 
 /// Initial Gaussians: the PLY if given (all flagged dynamic), else as `settings.init`
 /// says; with the number of them placed on surfaces (PLY points or stereo points) and
-/// the number of fully transparent PLY Gaussians dropped.
+/// the number of fully transparent PLY Gaussians dropped; the moving tracks' term into
+/// `tracks` (`init = "tracks"`).
 fn initial_splats(
     settings: &TrainSettings,
     views: &[View],
     ply: Option<&Path>,
+    tracks: &mut crate::tracks::loss::TrackTerm,
 ) -> Result<(Splats, usize, usize)> {
     match ply {
         Some(p) => {
@@ -363,7 +365,9 @@ fn initial_splats(
                             rgb: &v.rgb,
                         })
                         .collect();
-                    let moving = crate::tracks::add_moving(&mut s, &images, 1, &settings.tracks);
+                    let table = crate::tracks::add_moving(&mut s, &images, 1, &settings.tracks);
+                    let moving = table.len();
+                    *tracks = crate::tracks::loss::TrackTerm::new(table);
                     (s, found + moving)
                 }
                 Init::Frustum => (init::frustum_splats(&cams, n, near, far, settings.seed), 0),
@@ -422,8 +426,9 @@ pub fn train(
         [args.init_ply.as_deref(), args.init_motion.as_deref()],
     )?;
     phases.start("init");
+    let mut tracks = crate::tracks::loss::TrackTerm::default();
     let (mut splats, init_surface_points, init_ply_dropped_transparent) =
-        initial_splats(&settings, &views, args.init_ply.as_deref())?;
+        initial_splats(&settings, &views, args.init_ply.as_deref(), &mut tracks)?;
     if let (Some(m), Some(p)) = (&args.init_motion, &args.init_ply) {
         if init_ply_dropped_transparent > 0 {
             return Err(Error::invalid(
@@ -443,6 +448,7 @@ pub fn train(
 
     phases.start("train");
     let mut trainer = Trainer::new(settings, splats, extent);
+    trainer.tracks = tracks;
     let summary = crate::train::run(&mut trainer, &TileRasterizer, &views, stop, on_step);
 
     phases.start("save");
@@ -452,8 +458,14 @@ pub fn train(
     let split = trainer.split;
     let sizing = trainer.sizing.take();
     let field_probe = trainer.field_probe.take();
+    let tracks = std::mem::take(&mut trainer.tracks.table);
     drop(trainer);
     model.save(out.path())?;
+    let ids = &model.splats.track;
+    if !tracks.is_empty() && ids.len() == model.splats.len() {
+        let path = out.path().join(crate::tracks::file::TRACKS_FILE);
+        crate::tracks::file::write(&path, ids, &tracks)?;
+    }
     let model_size = crate::model::size::ModelSize::of(&model, out.path())?;
     write_resolved(out.path(), &settings)?;
     phases.start("depth");

@@ -404,3 +404,71 @@ fn static_split_flags_and_freezes_the_gaussians_the_field_barely_moves() {
     assert_eq!(d.means, t.splats.means);
     assert_eq!(d.rotations, t.splats.rotations);
 }
+
+/// `L_track` through the training step: a faint Gaussian (no photometric pull to speak
+/// of) whose track moves across the views ends up where its track saw it in each view,
+/// its trajectory learning the motion its canonical centre cannot give.
+#[test]
+fn a_tracked_gaussian_is_pulled_to_its_track_in_every_view() {
+    use gaussians::tracks::loss::TrackTerm;
+    let cams = cameras(5);
+    let times: Vec<f32> = (0..5).map(|k| k as f32 / 4.0).collect();
+    // The track: a point moving on a line, seen through the view cameras.
+    let path = |t: f32| DVec3::new(0.3, -0.1, 0.2) + DVec3::new(0.4, 0.2, -0.1) * (t as f64 - 0.5);
+    let seen: Vec<_> = (cams.iter().zip(&times))
+        .map(|(c, &t)| Some(c.project_world(path(t)).unwrap().0))
+        .collect();
+    let views: Vec<View> = (cams.iter().zip(&times))
+        .map(|(c, &t)| View {
+            camera: *c,
+            time: t,
+            rgb: vec![0.0; 3 * W * H],
+        })
+        .collect();
+    for into_field in [true, false] {
+        let mut s = random_splats(1, DVec3::ZERO, 0.1, 3);
+        s.opacity_logits[0] = -12.0;
+        s.motion = vec![[0.0; 6]];
+        s.track = vec![0];
+        let mut settings = TrainSettings {
+            iterations: 600,
+            deform: false,
+            size: gaussians::train::sizing::SizeSettings {
+                tolerance_db: 0.0,
+                ..Default::default()
+            },
+            position_lr_init: 0.01,
+            position_lr_final: 0.001,
+            ..Default::default()
+        };
+        settings.densify.until_iter = 0;
+        settings.tracks.weight = 1.0;
+        settings.tracks.into_field = into_field;
+        let error = |t: &Trainer| {
+            (views.iter().zip(&seen))
+                .map(|(v, p)| {
+                    let (d, _) = t.deformed(v.time);
+                    let x = DVec3::from(d.means[0].map(f64::from));
+                    (v.camera.project_world(x).unwrap().0 - p.unwrap()).length()
+                })
+                .fold(0.0, f64::max)
+        };
+        let mut t = Trainer::new(settings, s, 1.0);
+        t.tracks = TrackTerm::new(vec![seen.clone()]);
+        let before = error(&t);
+        for _ in 0..600 {
+            t.step(&Additive, &views);
+        }
+        let after = error(&t);
+        assert!(before > 3.0, "the start is {before} px off: not a test");
+        assert!(
+            after < 0.1,
+            "{after} px off its track after training (from {before})"
+        );
+        assert!(
+            t.tracks.last.1 == 1 && t.tracks.last.0 < 1e-2,
+            "{:?}",
+            t.tracks.last
+        );
+    }
+}

@@ -49,6 +49,8 @@ pub struct JointStep {
     pub l_rgb: f64,
     pub l_event: f64,
     pub l_motion: f64,
+    /// The warm-up's track term at the train frame (0 without tracks; weighted).
+    pub l_track: f64,
     pub total: f64,
     /// PSNR of the train frame's render (dB, at most `gaussians::stage::PSNR_CAP`).
     pub psnr: f64,
@@ -71,6 +73,10 @@ pub struct JointTrainer {
     pub posenet: Option<PoseNet<f32>>,
     posenet_adam: Adam,
     posenet_grad: Vec<f32>,
+    /// `L_motion`'s and `L_track`'s gradients on the rendered centres, summed.
+    d_means: Vec<[f32; 3]>,
+    /// `L_track`'s gradient when it skips the field (`tracks.into_field = false`).
+    own_means: Vec<[f32; 3]>,
     /// Bindings per train frame (for the current Gaussians).
     pub bindings: Vec<assoc::Bindings>,
     pub iteration: u32,
@@ -142,6 +148,7 @@ impl JointTrainer {
             None => inner.settings.deform = false,
         }
         inner.iteration = done;
+        inner.tracks = gaussians::tracks::loss::TrackTerm::new(d.tracks.clone());
         let posenet = settings
             .posenet
             .then(|| PoseNet::<f32>::new(settings.posenet_net));
@@ -158,6 +165,8 @@ impl JointTrainer {
             posenet,
             posenet_adam,
             posenet_grad: vec![0.0; np],
+            d_means: Vec::new(),
+            own_means: Vec::new(),
             bindings: d.bindings.clone(),
             iteration: 0,
             timings: Timings::default(),
@@ -268,13 +277,14 @@ impl JointTrainer {
         let (loss, _, _) = self.motion_term(d, i, &rv, 1.0, &mut m);
         let zero = vec![0.0f32; rv.image.rgb.len()];
         self.posenet_grad.fill(0.0);
-        let g = self.backward_with_motion(r, d, &rv, &zero, &m);
+        let g = self.backward_with_motion(r, d, &rv, &zero, &m, None);
         (loss, g, self.posenet_grad.clone())
     }
 
     /// The view's gradients from `d_rgb` with the motion term's joined in: its part on the
     /// rendered centres goes back through the view's pass, its canonical and field parts
-    /// are added, and its camera part accumulates into the PoseNet's gradient.
+    /// are added, and its camera part accumulates into the PoseNet's gradient. At train
+    /// view `view`, the warm-up's `L_track` joins too (when the model has tracks).
     fn backward_with_motion(
         &mut self,
         r: &TileRasterizer,
@@ -282,9 +292,44 @@ impl JointTrainer {
         rv: &ViewRender<<TileRasterizer as Rasterizer>::State>,
         d_rgb: &[f32],
         m: &MotionGrads,
+        view: Option<usize>,
     ) -> ModelGrads {
-        let d_means = (!m.at_view.is_empty()).then_some(m.at_view.as_slice());
+        let inner = &mut self.inner;
+        let (ids, st) = (&inner.splats.track, &inner.settings.tracks);
+        let track = view.and_then(|k| {
+            inner
+                .tracks
+                .gradient(&rv.deformed.means, ids, k, &rv.camera, st)
+        });
+        // `tracks.into_field = false`: the track term's gradient skips the field.
+        let (track, own) = if st.into_field {
+            (track, None)
+        } else {
+            (None, track)
+        };
+        let own = own.map(|t| {
+            self.own_means.clear();
+            self.own_means.extend_from_slice(t);
+        });
+        let d_means = match (track, m.at_view.is_empty()) {
+            (None, true) => None,
+            (None, false) => Some(m.at_view.as_slice()),
+            (Some(t), motion_empty) => {
+                self.d_means.clear();
+                self.d_means.extend_from_slice(t);
+                if !motion_empty {
+                    for (a, b) in self.d_means.iter_mut().zip(&m.at_view) {
+                        (0..3).for_each(|c| a[c] += b[c]);
+                    }
+                }
+                Some(self.d_means.as_slice())
+            }
+        };
         let mut g = self.inner.view_backward(r, rv, d_rgb, None, d_means);
+        if own.is_some() {
+            let (s, d) = (&self.inner.splats, &self.own_means);
+            gaussians::motion::add_centre_gradient(s, rv.time, d, &mut g.splats);
+        }
         m.add_to(&mut g);
         for &(t, xi, g_eps) in &m.camera {
             self.posenet_backward(d, t, xi, g_eps);
@@ -334,7 +379,8 @@ impl JointTrainer {
 
         let clock = Instant::now();
         self.posenet_grad.fill(0.0);
-        let mut grads = self.backward_with_motion(r, d, &rv, &grad, &motion);
+        let mut grads = self.backward_with_motion(r, d, &rv, &grad, &motion, Some(i));
+        let l_track = self.inner.tracks.last.0;
         self.fallbacks.drop_bindings(&dropped);
         self.inner.recycle_view(rv);
         self.timings.rgb += clock.elapsed().as_secs_f64();
@@ -368,7 +414,8 @@ impl JointTrainer {
             l_rgb,
             l_event,
             l_motion,
-            total: l_rgb + g1 * l_event + g2 * l_motion,
+            l_track,
+            total: l_rgb + g1 * l_event + g2 * l_motion + l_track,
             psnr,
             bound,
             gaussians: self.inner.splats.len(),

@@ -14,8 +14,10 @@
 //! far apart for Lucas–Kanade: −4.5 dB on `fast`, BENCHMARKS.md "Tracks lifted to
 //! trajectories") and adds the moving tracks' Gaussians.
 
+pub mod file;
 pub mod lift;
 pub mod lk;
+pub mod loss;
 
 use crate::splats::{Gaussian, Splats};
 use glam::{DVec2, Vec2};
@@ -42,6 +44,16 @@ pub struct TrackSettings {
     pub moving_pixels: f64,
     /// Penalty on a trajectory's acceleration, relative to the angular residuals.
     pub ridge: f64,
+    /// Weight of the track term `L_track` in the warm-up ([`loss`]): each moving track's
+    /// Gaussian is pulled to where its track saw it in every train frame (0 = the tracks
+    /// only start the trajectories).
+    pub weight: f64,
+    /// Residual (pixels) above which `L_track` grows linearly (Huber): a track that
+    /// drifted pulls no harder than this.
+    pub huber_px: f64,
+    /// `L_track`'s gradient also trains the deformation field (else only the tracked
+    /// Gaussians' own centres and trajectories).
+    pub into_field: bool,
 }
 
 impl Default for TrackSettings {
@@ -54,6 +66,9 @@ impl Default for TrackSettings {
             still_pixels: 1.0,
             moving_pixels: 2.0,
             ridge: 10.0,
+            weight: 0.0,
+            huber_px: 1.0,
+            into_field: true,
         }
     }
 }
@@ -70,8 +85,14 @@ impl TrackSettings {
         ];
         if positive.iter().any(|v| !(v.is_finite() && *v > 0.0))
             || !(self.ridge >= 0.0 && self.min_texture >= 0.0)
+            || !(self.weight.is_finite() && self.weight >= 0.0)
+            || !(self.huber_px.is_finite() && self.huber_px > 0.0)
         {
-            return Err("tracks: thresholds must be positive, ridge and min_texture ≥ 0".into());
+            return Err(
+                "tracks: thresholds and huber_px must be positive, ridge, min_texture and \
+                 weight finite and ≥ 0"
+                    .into(),
+            );
         }
         Ok(())
     }
@@ -118,22 +139,31 @@ pub fn track_from(frames: &[Frame], r: usize, p: Vec2, st: &TrackSettings) -> Ve
     out
 }
 
-/// A lifted track: where it starts (frame, pixel) and what it lifted to.
+/// A lifted track: where it starts (frame, Lucas–Kanade pixel), what it lifted to, and
+/// where it was seen in each frame (camera pixels, [`camera_pixel`]; `None` where lost).
 pub struct LiftedTrack {
     pub frame: usize,
     pub pixel: Vec2,
     pub point: Lifted,
+    pub seen: Vec<Option<DVec2>>,
 }
 
-/// Lift one track: still if its rays meet, else a trajectory when it was seen in at
-/// least 5 frames (9 unknowns) and it fits; `None` otherwise.
+/// A Lucas–Kanade position (pixel `x` covers `[x, x + 1)`, its centre at `x + ½`) in the
+/// cameras' pixel coordinates (pixel `x` centred on `x`, as the rasterizer and
+/// `Camera::project_world` have it).
+pub fn camera_pixel(p: Vec2) -> DVec2 {
+    DVec2::new(p.x as f64 - 0.5, p.y as f64 - 0.5)
+}
+
+/// Lift one track (Lucas–Kanade positions): still if its rays meet, else a trajectory
+/// when it was seen in at least 5 frames (9 unknowns) and it fits; `None` otherwise.
 pub fn lift_track(frames: &[Frame], track: &[Option<Vec2>], st: &TrackSettings) -> Option<Lifted> {
     let t0 = crate::motion::T0 as f64;
     let obs: Vec<Observation> = (frames.iter().zip(track))
         .filter_map(|(f, p)| {
             p.map(|p| Observation {
                 camera: f.camera,
-                pixel: DVec2::new(p.x as f64, p.y as f64),
+                pixel: camera_pixel(p),
                 tau: f.time - t0,
             })
         })
@@ -200,10 +230,11 @@ pub fn lift_frames(
             let tr = track_from(frames, r, p, st);
             let point = lift_track(frames, &tr, st)?;
             let keep = matches!(point, Lifted::Still(_)) || r == middle;
-            keep.then_some(LiftedTrack {
+            keep.then(|| LiftedTrack {
                 frame: r,
                 pixel: p,
                 point,
+                seen: tr.iter().map(|q| q.map(camera_pixel)).collect(),
             })
         })
         .collect()
@@ -220,15 +251,17 @@ pub struct Image<'a> {
 /// Appends a Gaussian for each moving track of the train frame nearest the middle of
 /// the recording (every `stride`-th pixel) to `s`, with its trajectory; the Gaussians
 /// already in `s` stay still. Colour of the start pixel, opacity ½, a footprint of
-/// `stride` pixels at its depth. Returns how many were added.
+/// `stride` pixels at its depth. Returns the added Gaussians' tracks (camera pixels
+/// per view), the table `s.track` indexes (`loss::NONE` for the Gaussians already in
+/// `s`).
 pub(crate) fn add_moving(
     s: &mut Splats,
     views: &[Image],
     stride: usize,
     st: &TrackSettings,
-) -> usize {
+) -> loss::Table {
     let Some(first) = views.first() else {
-        return 0;
+        return Vec::new();
     };
     let k = &first.camera.intrinsics;
     let (w, h) = (k.width as usize, k.height as usize);
@@ -244,7 +277,9 @@ pub(crate) fn add_moving(
     let t0 = crate::motion::T0 as f64;
     let before = s.len();
     s.motion.resize(before, [0.0; 6]);
-    for l in &lifted {
+    s.track.resize(before, loss::NONE);
+    let mut table = Vec::new();
+    for l in lifted {
         let Lifted::Moving { mu, v, a } = l.point else {
             continue;
         };
@@ -263,6 +298,8 @@ pub(crate) fn add_moving(
         });
         *s.motion.last_mut().expect("just pushed") =
             [v.x, v.y, v.z, a.x, a.y, a.z].map(|c| c as f32);
+        *s.track.last_mut().expect("just pushed") = table.len() as u32;
+        table.push(l.seen);
     }
-    s.len() - before
+    table
 }

@@ -53,6 +53,8 @@ pub struct Trainer {
     pub field_probe: Option<FieldProbeSummary>,
     /// Canonical neighbours of the isometry term ([`rigidity`]), while it is on.
     pub neighbours: Option<rigidity::Neighbours>,
+    /// The track term `L_track` (`init = "tracks"`; [`crate::tracks::loss`]).
+    pub tracks: crate::tracks::loss::TrackTerm,
     order: Vec<usize>,
     rng: rand_chacha::ChaCha8Rng,
     /// Buffers given back by [`Self::recycle_view`] / [`Self::recycle_grads`].
@@ -108,6 +110,7 @@ impl Trainer {
             sizing: None,
             field_probe: None,
             neighbours: None,
+            tracks: Default::default(),
             order: Vec::new(),
             spare: spare::Pool::default(),
         }
@@ -336,12 +339,24 @@ impl Trainer {
     {
         self.resolve_cap(views[0].rgb.len() / 3);
         self.probe_field_if_due(r, views);
-        let view = &views[self.next_view(views.len())];
-        let field_on = self.field_on();
+        let k = self.next_view(views.len());
+        let (view, field_on) = (&views[k], self.field_on());
         let rendered = self.render_view(r, &view.camera, view.time);
         let (loss, grad) = self.rgb_loss(&rendered.image, &view.rgb);
         let psnr = metrics::psnr_u8(&rendered.image.rgb, &view.rgb);
-        let g = self.view_backward(r, &rendered, &grad, None, None);
+        let mut tracks = std::mem::take(&mut self.tracks);
+        let (ids, st) = (&self.splats.track, &self.settings.tracks);
+        let d_means = tracks.gradient(&rendered.deformed.means, ids, k, &view.camera, st);
+        let (d_field, d_own) = if st.into_field {
+            (d_means, None)
+        } else {
+            (None, d_means)
+        };
+        let mut g = self.view_backward(r, &rendered, &grad, None, d_field);
+        if let Some(d) = d_own {
+            crate::motion::add_centre_gradient(&self.splats, view.time, d, &mut g.splats);
+        }
+        self.tracks = tracks;
         self.recycle_view(rendered);
         self.apply_gradients(&g);
         self.recycle_grads(g);
@@ -493,7 +508,7 @@ impl Trainer {
         t.adam = self.adam.clone();
         t.stats = self.stats.clone();
         t.iteration = self.iteration;
-        t.split = self.split;
+        (t.split, t.tracks) = (self.split, self.tracks.clone());
         t
     }
 
@@ -563,24 +578,7 @@ impl Trainer {
                 size_prune,
                 self.settings.seed ^ it as u64,
             );
-            let new = Splats {
-                means: plan.means.clone(),
-                log_scales: plan.log_scales.clone(),
-                rotations: plan.gather(&sp.rotations),
-                opacity_logits: plan.gather(&sp.opacity_logits),
-                sh_dc: plan.gather(&sp.sh_dc),
-                sh_rest: plan.gather(&sp.sh_rest),
-                dynamic: if sp.dynamic.len() == sp.len() {
-                    plan.gather(&sp.dynamic)
-                } else {
-                    Vec::new()
-                },
-                motion: if sp.motion.len() == sp.len() {
-                    plan.gather(&sp.motion)
-                } else {
-                    Vec::new()
-                },
-            };
+            let new = plan.apply(sp);
             let src = plan.moment_sources();
             for k in 0..GROUPS.len() {
                 self.adam.remap(k, &src);

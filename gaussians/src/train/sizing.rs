@@ -270,6 +270,11 @@ pub fn gather(s: &Splats, keep: &[usize]) -> Splats {
         } else {
             Vec::new()
         },
+        track: if s.track.len() == s.len() {
+            keep.iter().map(|&i| s.track[i]).collect()
+        } else {
+            Vec::new()
+        },
     }
 }
 
