@@ -29,8 +29,9 @@ pub use crate::splats::{NO_TRACK as NONE, first_copies};
 /// `L_track` at view `view` (camera `camera`) of the rendered centres `means` (one per
 /// Gaussian; `ids` their tracks, indices into `table`, whose rows give each view's
 /// position), with weight `weight` and Huber threshold `huber_px`. Its gradient with
-/// respect to `means` is written into `d_means` (resized, zero for untracked
-/// Gaussians). Returns the loss and `N`, the Gaussians it counted.
+/// respect to `means` is written into `d_means` (one row per Gaussian, zero for untracked
+/// ones; left empty when the term is off). Returns the loss and `N`, the Gaussians it
+/// counted.
 #[allow(clippy::too_many_arguments)]
 pub fn at_view(
     means: &[[f32; 3]],
@@ -43,10 +44,10 @@ pub fn at_view(
     d_means: &mut Vec<[f32; 3]>,
 ) -> (f64, usize) {
     d_means.clear();
-    d_means.resize(means.len(), [0.0; 3]);
     if ids.len() != means.len() || weight <= 0.0 {
         return (0.0, 0);
     }
+    d_means.resize(means.len(), [0.0; 3]);
     let k = &camera.intrinsics;
     let rot = DMat3::from_quat(camera.cam_to_world.rotation);
     // Pass 1: the residuals of the Gaussians seen here (the mean needs their count).
