@@ -167,7 +167,7 @@ def world_and_light(strength=3.5, ambient=0.25):
     bpy.context.scene.collection.objects.link(o)
 
 
-def room(floor_scale=6.0):
+def room():
     floor = add(
         "plane",
         "floor",

@@ -296,37 +296,38 @@ impl JointTrainer {
     ) -> ModelGrads {
         let inner = &mut self.inner;
         let (ids, st) = (&inner.splats.track, &inner.settings.tracks);
+        let into_field = st.into_field;
         let track = view.and_then(|k| {
             inner
                 .tracks
                 .gradient(&rv.deformed.means, ids, k, &rv.camera, st)
         });
-        // `tracks.into_field = false`: the track term's gradient skips the field.
-        let (track, own) = if st.into_field {
-            (track, None)
-        } else {
-            (None, track)
-        };
-        let own = own.map(|t| {
-            self.own_means.clear();
-            self.own_means.extend_from_slice(t);
-        });
-        let d_means = match (track, m.at_view.is_empty()) {
-            (None, true) => None,
-            (None, false) => Some(m.at_view.as_slice()),
-            (Some(t), motion_empty) => {
+        // The track term's gradient joins the motion term's on the rendered centres (back
+        // through the field), or with `tracks.into_field = false` goes to the tracked
+        // Gaussians' own centres and trajectories only.
+        let (summed, own) = match track {
+            Some(t) if into_field => {
                 self.d_means.clear();
                 self.d_means.extend_from_slice(t);
-                if !motion_empty {
-                    for (a, b) in self.d_means.iter_mut().zip(&m.at_view) {
-                        (0..3).for_each(|c| a[c] += b[c]);
-                    }
+                for (a, b) in self.d_means.iter_mut().zip(&m.at_view) {
+                    (0..3).for_each(|c| a[c] += b[c]);
                 }
-                Some(self.d_means.as_slice())
+                (true, false)
             }
+            Some(t) => {
+                self.own_means.clear();
+                self.own_means.extend_from_slice(t);
+                (false, true)
+            }
+            None => (false, false),
+        };
+        let d_means = if summed {
+            Some(self.d_means.as_slice())
+        } else {
+            (!m.at_view.is_empty()).then_some(m.at_view.as_slice())
         };
         let mut g = self.inner.view_backward(r, rv, d_rgb, None, d_means);
-        if own.is_some() {
+        if own {
             let (s, d) = (&self.inner.splats, &self.own_means);
             gaussians::motion::add_centre_gradient(s, rv.time, d, &mut g.splats);
         }
