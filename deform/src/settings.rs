@@ -83,6 +83,10 @@ pub struct DeformSettings {
     pub pseudo_mode: PseudoMode,
     /// What `L_event` compares: `luminance` (what events measure) or `rgb`.
     pub event_channels: EventChannels,
+    /// `L_event` on one of `k × k` equal tiles of the image, picked at random each step
+    /// (`crate::crop`; 1 = the whole image): every pixel is compared as often as any
+    /// other, and the event render costs `1/k²` of the pixels.
+    pub event_tiles: u32,
     pub motion: MotionSettings,
     /// Bound Gaussians whose events' flow disagrees with their neighbours' are left
     /// out of `L_motion` (`radius_px = 0`: never).
@@ -130,6 +134,7 @@ impl Default for DeformSettings {
             rate_outliers: RateOutlierSettings::default(),
             pseudo_mode: PseudoMode::Nearest,
             event_channels: EventChannels::Luminance,
+            event_tiles: 1,
             motion: MotionSettings::default(),
             motion_neighbours: NeighbourSettings::default(),
             flow_form: FlowForm::Paper,
@@ -175,6 +180,12 @@ impl DeformSettings {
         }
         if self.log_every == 0 {
             return Err("log_every must be at least 1".into());
+        }
+        if !(1..=16).contains(&self.event_tiles) {
+            return Err(format!(
+                "event_tiles must lie in 1..=16 (got {}; 1 = the whole image)",
+                self.event_tiles
+            ));
         }
         stagekit::Settings::validate(&self.assoc).map_err(|e| format!("assoc: {e}"))
     }

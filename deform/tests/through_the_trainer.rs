@@ -123,6 +123,17 @@ fn the_ablation_switches_reach_the_trainer() {
     assert!(!o.out.join("posenet.safetensors").exists());
     assert_eq!(r["settings"]["posenet"], false);
     assert!(steps.iter().any(|s| s.l_event > 0.0));
+
+    // The event term on a quarter of the image: it still trains, and not as the whole.
+    let tiles = format!("event_tiles = 2\n{settings}");
+    let (o, steps, r) = train_with(&fx, "tiles", &tiles, TrainArgs::default());
+    assert_eq!(r["settings"]["event_tiles"], 2);
+    assert!(
+        steps.iter().any(|s| s.l_event > 0.0),
+        "no event loss on tiles"
+    );
+    let gap = centre_gap(&full.out, &o.out);
+    assert!(gap > 1e-6, "tiles trained as the whole image ({gap:.2e})");
 }
 
 #[test]

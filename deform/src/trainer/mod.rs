@@ -12,6 +12,7 @@
 
 use crate::camera_check::{CameraCheck, pose_error};
 use crate::contrast::LearnedContrast;
+use crate::crop::Crop;
 use crate::event_image::{PseudoImage, PseudoInputs, pseudo_image, render_event_loss};
 use crate::fallbacks::{DroppedBindings, EventSkip, Fallbacks, interval_skip};
 use crate::inputs::Inputs;
@@ -89,6 +90,8 @@ pub struct JointTrainer {
     learned_contrast: Option<LearnedContrast>,
     rng: rand_chacha::ChaCha8Rng,
     pseudo: PseudoImage<f32>,
+    /// The window of `pseudo` the event term compares (`event_tiles > 1`).
+    pseudo_crop: PseudoImage<f32>,
     span: f64,
 }
 
@@ -187,6 +190,7 @@ impl JointTrainer {
                 .then(|| LearnedContrast::new(d.contrast, settings.contrast_lr)),
             rng: rand_chacha::ChaCha8Rng::seed_from_u64(settings.seed),
             pseudo: PseudoImage::default(),
+            pseudo_crop: PseudoImage::default(),
             span,
             settings,
         }
@@ -466,13 +470,24 @@ impl JointTrainer {
             &mut self.pseudo,
         );
         let (camera, xi) = self.camera_at(d, t_e);
+        // One of k × k tiles of the image, or all of it.
+        let k = self.settings.event_tiles as usize;
+        let (camera, pseudo) = if k > 1 {
+            let (w, h) = (camera.intrinsics.width, camera.intrinsics.height);
+            let tile = self.rng.random_range(0..k * k);
+            let crop = Crop::tile(w as usize, h as usize, k, tile);
+            crop.pseudo(&self.pseudo, &mut self.pseudo_crop);
+            (crop.camera(&camera), &self.pseudo_crop)
+        } else {
+            (camera, &self.pseudo)
+        };
         let rv = self.inner.render_view(r, &camera, field_time(d, t_e));
         let mut g = vec![0.0f32; rv.image.rgb.len()];
         let el = render_event_loss(
             &rv.image.rgb,
             d.srgb,
             self.settings.event_channels,
-            &self.pseudo,
+            pseudo,
             &mut g,
         );
         if el.valid == 0 {

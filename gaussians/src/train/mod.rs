@@ -56,6 +56,8 @@ pub struct Trainer {
     /// The track term `L_track` (`init = "tracks"`; [`crate::tracks::loss`]).
     pub tracks: crate::tracks::loss::TrackTerm,
     order: Vec<usize>,
+    /// The train views at half resolution while `coarse_until` says so.
+    coarse: Vec<View>,
     rng: rand_chacha::ChaCha8Rng,
     /// Buffers given back by [`Self::recycle_view`] / [`Self::recycle_grads`].
     spare: spare::Pool,
@@ -112,6 +114,7 @@ impl Trainer {
             neighbours: None,
             tracks: Default::default(),
             order: Vec::new(),
+            coarse: Vec::new(),
             spare: spare::Pool::default(),
         }
     }
@@ -341,9 +344,13 @@ impl Trainer {
         self.probe_field_if_due(r, views);
         let k = self.next_view(views.len());
         let (view, field_on) = (&views[k], self.field_on());
-        let rendered = self.render_view(r, &view.camera, view.time);
-        let (loss, grad) = self.rgb_loss(&rendered.image, &view.rgb);
-        let psnr = metrics::psnr_u8(&rendered.image.rgb, &view.rgb);
+        let target = match self.coarse_views(views) {
+            true => &self.coarse[k],
+            false => view,
+        };
+        let rendered = self.render_view(r, &target.camera, target.time);
+        let (loss, grad) = self.rgb_loss(&rendered.image, &target.rgb);
+        let psnr = metrics::psnr_u8(&rendered.image.rgb, &target.rgb);
         let mut tracks = std::mem::take(&mut self.tracks);
         let (ids, st) = (&self.splats.track, &self.settings.tracks);
         let d_means = tracks.gradient(&rendered.deformed.means, ids, k, &view.camera, st);
@@ -369,28 +376,6 @@ impl Trainer {
             gaussians: self.splats.len(),
             field_on,
         }
-    }
-
-    /// The iteration of the static/dynamic split (`None`: no split in this run).
-    pub fn static_split_iteration(&self) -> Option<u32> {
-        let s = &self.settings;
-        if !s.deform || s.dynamic_only || s.static_tolerance_px <= 0.0 {
-            return None;
-        }
-        let field_its = s.iterations.saturating_sub(s.static_iterations) as f32;
-        Some(s.static_iterations + (s.static_split_at.clamp(0.0, 1.0) * field_its) as u32)
-    }
-
-    /// The iteration of the sizing (`None`: no sizing in this run).
-    pub fn sizing_iteration(&self) -> Option<u32> {
-        let s = &self.settings;
-        sizing::iteration(&s.size, s.densify.until_iter, s.iterations)
-    }
-
-    /// The length of the field's width probe (`None`: no probe in this run).
-    pub fn field_probe_iterations(&self) -> Option<u32> {
-        let (split, sizing) = (self.static_split_iteration(), self.sizing_iteration());
-        field_probe::iterations(&self.settings, split, sizing)
     }
 
     /// The model as it renders now: its field while on, at the SH degree in use.

@@ -1,7 +1,8 @@
 //! The training run: the trainer's steps until the iteration budget or a stop request,
-//! with the time per phase.
+//! with the time per phase; when in the run the split, the sizing and the field's width
+//! probe fall.
 
-use super::{StepInfo, Trainer, View};
+use super::{StepInfo, Trainer, View, field_probe, sizing};
 use crate::raster::Rasterizer;
 
 /// Steps and wall time per phase and how the run ended (for `report.json`).
@@ -57,4 +58,28 @@ where
     sum.iterations = tr.iteration;
     sum.gaussians = tr.splats.len();
     sum
+}
+
+impl Trainer {
+    /// The iteration of the static/dynamic split (`None`: no split in this run).
+    pub fn static_split_iteration(&self) -> Option<u32> {
+        let s = &self.settings;
+        if !s.deform || s.dynamic_only || s.static_tolerance_px <= 0.0 {
+            return None;
+        }
+        let field_its = s.iterations.saturating_sub(s.static_iterations) as f32;
+        Some(s.static_iterations + (s.static_split_at.clamp(0.0, 1.0) * field_its) as u32)
+    }
+
+    /// The iteration of the sizing (`None`: no sizing in this run).
+    pub fn sizing_iteration(&self) -> Option<u32> {
+        let s = &self.settings;
+        sizing::iteration(&s.size, s.densify.until_iter, s.iterations)
+    }
+
+    /// The length of the field's width probe (`None`: no probe in this run).
+    pub fn field_probe_iterations(&self) -> Option<u32> {
+        let (split, sizing) = (self.static_split_iteration(), self.sizing_iteration());
+        field_probe::iterations(&self.settings, split, sizing)
+    }
 }

@@ -33,6 +33,9 @@ pub struct TrainSettings {
     /// here 1000 of 3500 so the field gets most of the warm-up once the canonical
     /// geometry has settled and the first densification rounds are done).
     pub static_iterations: u32,
+    /// Coarse-to-fine: iterations before this one train on the views at half resolution
+    /// (`View::half`; a quarter of the pixels), the rest at full (0 = never).
+    pub coarse_until: u32,
     /// Use a deformation field at all (off: a static 3DGS model).
     pub deform: bool,
     /// Deform only Gaussians flagged `dynamic` (missing flags count as dynamic).
@@ -99,6 +102,7 @@ impl Default for TrainSettings {
         TrainSettings {
             iterations: 3500,
             static_iterations: 1000,
+            coarse_until: 0,
             deform: true,
             dynamic_only: false,
             static_tolerance_px: 0.0,

@@ -15,6 +15,53 @@ pub struct View {
     pub rgb: Vec<f32>,
 }
 
+impl super::Trainer {
+    /// Whether this step trains at half resolution (`coarse_until`); the half views are
+    /// built at the first such step and dropped after the last.
+    pub(super) fn coarse_views(&mut self, views: &[View]) -> bool {
+        let on = self.iteration < self.settings.coarse_until;
+        if on && self.coarse.len() != views.len() {
+            self.coarse = views.iter().map(View::half).collect();
+        } else if !on && !self.coarse.is_empty() {
+            self.coarse = Vec::new();
+        }
+        on
+    }
+}
+
+impl View {
+    /// The view at half resolution (coarse-to-fine): each pixel the mean of a 2 × 2
+    /// block (an odd last row or column dropped), the camera's focal lengths halved and
+    /// its principal point moved so that each pixel's ray passes through its block's
+    /// centre (pixel centres at whole coordinates: `x' = (x − ½) / 2`).
+    pub fn half(&self) -> View {
+        let k = &self.camera.intrinsics;
+        let (w, h) = (k.width as usize, k.height as usize);
+        let (w2, h2) = (w / 2, h / 2);
+        let mut rgb = Vec::with_capacity(3 * w2 * h2);
+        for c in 0..3 {
+            let plane = &self.rgb[c * w * h..(c + 1) * w * h];
+            for y in 0..h2 {
+                let (a, b) = (&plane[2 * y * w..], &plane[(2 * y + 1) * w..]);
+                for x in 0..w2 {
+                    let s = a[2 * x] + a[2 * x + 1] + b[2 * x] + b[2 * x + 1];
+                    rgb.push(0.25 * s);
+                }
+            }
+        }
+        let mut camera = self.camera;
+        let i = &mut camera.intrinsics;
+        (i.width, i.height) = (w2 as u32, h2 as u32);
+        (i.fx, i.fy) = (0.5 * k.fx, 0.5 * k.fy);
+        (i.cx, i.cy) = (0.5 * (k.cx - 0.5), 0.5 * (k.cy - 0.5));
+        View {
+            camera,
+            time: self.time,
+            rgb,
+        }
+    }
+}
+
 /// A view rendered by the current model, with what its backward needs.
 pub struct ViewRender<S> {
     pub image: RenderedImage,
