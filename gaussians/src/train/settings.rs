@@ -192,6 +192,17 @@ impl stagekit::Settings for TrainSettings {
         self.stereo.validate()?;
         self.tracks.validate()?;
         self.size.validate()?;
+        if let Some(at) =
+            super::sizing::iteration(&self.size, self.densify.until_iter, self.iterations)
+            && self.coarse_until > at
+        {
+            return Err(format!(
+                "coarse_until = {} comes after the sizing (iteration {at}): the sizing would \
+                 judge on the full views a model trained at half resolution; set \
+                 coarse_until ≤ {at} or move the sizing (size.at)",
+                self.coarse_until
+            ));
+        }
         if !(self.max_gaussians_per_pixel > 0.0 && self.max_gaussians_per_pixel.is_finite()) {
             return Err("max_gaussians_per_pixel must be positive".into());
         }
@@ -263,5 +274,17 @@ mod tests {
             ..Default::default()
         };
         assert!(bad.validate().unwrap_err().contains("planes"));
+        // Coarse-to-fine must end by the sizing (iteration 2500 by default).
+        let coarse = |until| TrainSettings {
+            coarse_until: until,
+            ..Default::default()
+        };
+        assert!(coarse(2500).validate().is_ok());
+        assert!(
+            coarse(2501)
+                .validate()
+                .unwrap_err()
+                .contains("coarse_until")
+        );
     }
 }
