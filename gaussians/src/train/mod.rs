@@ -344,9 +344,10 @@ impl Trainer {
         self.probe_field_if_due(r, views);
         let k = self.next_view(views.len());
         let (view, field_on) = (&views[k], self.field_on());
-        let target = match self.coarse_views(views) {
-            true => &self.coarse[k],
-            false => view,
+        let target = if self.coarse_views(views) {
+            &self.coarse[k]
+        } else {
+            view
         };
         let rendered = self.render_view(r, &target.camera, target.time);
         let (loss, grad) = self.rgb_loss(&rendered.image, &target.rgb);
