@@ -318,11 +318,10 @@ mod imp16 {
                 F16(_mm512_castsi512_ps(bits))
             }
         }
+        /// A tree of shuffles and adds (four levels), not sixteen dependent scalar adds.
         #[inline(always)]
         fn sum(self) -> f32 {
-            let mut a = [0.0; 16];
-            self.store(&mut a);
-            a.iter().sum()
+            unsafe { _mm512_reduce_add_ps(self.0) }
         }
         #[inline(always)]
         fn mul_add(self, b: F16, c: F16) -> F16 {
@@ -537,6 +536,31 @@ mod tests {
         let (e, r) = unsafe { worst() };
         assert!(e < 6e-7, "exp: relative error {e:e}");
         assert!(r < 3e-7, "recip: relative error {r:e}");
+    }
+
+    /// The 16-lane horizontal sum (a shuffle tree) against the f64 sum of its lanes.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn wide_sum_matches_f64() {
+        if !wide_available() {
+            eprintln!("no AVX-512F here: the 16-lane sum is not tested");
+            return;
+        }
+        #[target_feature(enable = "avx512f")]
+        fn check() {
+            for seed in 0..200u32 {
+                let a: [f32; 16] = std::array::from_fn(|k| {
+                    let h = (seed * 16 + k as u32).wrapping_mul(2_654_435_761);
+                    (h >> 8) as f32 / (1 << 24) as f32 * 2.0 - 1.0
+                });
+                let want: f64 = a.iter().map(|&v| v as f64).sum();
+                let got = F16::load(&a).sum() as f64;
+                assert!((got - want).abs() < 4e-6, "{got} against {want}");
+            }
+            assert_eq!(F16::iota(1.0).sum(), 136.0);
+        }
+        // SAFETY: AVX-512F was detected above.
+        unsafe { check() }
     }
 
     #[test]
