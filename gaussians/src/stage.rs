@@ -126,6 +126,8 @@ pub struct TrainReport {
     pub iterations: u32,
     pub interrupted: bool,
     pub seconds_per_iteration: f64,
+    /// Steps trained on the views at half resolution (`coarse_end`; 0: none).
+    pub coarse_steps: u32,
     pub static_seconds: f64,
     pub deform_seconds: f64,
     pub final_loss: f64,
@@ -491,6 +493,8 @@ pub fn train(
         interrupted: summary.interrupted,
         seconds_per_iteration: (summary.static_seconds + summary.deform_seconds)
             / summary.iterations.max(1) as f64,
+        coarse_steps: (settings.coarse_end(views.first().map_or(0, |v| v.rgb.len() / 3)))
+            .min(summary.iterations),
         static_seconds: summary.static_seconds,
         deform_seconds: summary.deform_seconds,
         final_loss: summary.final_loss,

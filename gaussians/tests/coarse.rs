@@ -91,6 +91,7 @@ fn the_half_camera_looks_through_the_block_centres() {
     // whole one: its step's loss is the loss of the render of the one or the other.
     let settings = TrainSettings {
         coarse_until: 1,
+        coarse_min_pixels: 0,
         iterations: 2,
         deform: false,
         ..Default::default()

@@ -2,6 +2,7 @@
 //! A stage's own progress lines ([`crate::stage_progress`]) show as its phase, position
 //! and time left: on the spinner, or as a plain line at each tenth of the work.
 
+use crate::stage_progress::StageProgress;
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 use std::collections::HashMap;
 use std::io::IsTerminal;
@@ -67,9 +68,11 @@ impl Progress {
 
     /// A line of the stage's own output: on a terminal the spinner shows it (a progress
     /// line as phase, position and time left); otherwise a progress line is printed at
-    /// each new tenth of a phase's work, other lines only go to the stage's log.
-    pub fn output(&self, stage: &str, line: &str) {
-        let read = crate::stage_progress::parse(line);
+    /// each new tenth of a phase's work, other lines only go to the stage's log. `read`
+    /// is the line read as progress, its time left at the recent rate ([`RecentRate`]).
+    ///
+    /// [`RecentRate`]: crate::stage_progress::RecentRate
+    pub fn output(&self, stage: &str, line: &str, read: Option<&StageProgress>) {
         if let Some(bar) = self
             .bars
             .lock()

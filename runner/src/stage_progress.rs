@@ -42,6 +42,41 @@ pub fn parse(line: &str) -> Option<StageProgress> {
     })
 }
 
+/// Lines of a phase its rate is measured over: at a line every twentieth of the work,
+/// the last fifth of it.
+const RECENT_LINES: usize = 4;
+
+/// One running stage's recent progress lines, so its time left follows the speed it
+/// runs at now. A phase's speed changes: the warm-up's first thousand steps (no field,
+/// half resolution) run 4–6 times faster than the field's steps after them, so the rate
+/// since the start promised a third of the real time left there.
+#[derive(Default)]
+pub struct RecentRate {
+    seen: std::collections::VecDeque<(u64, f64)>,
+    label: String,
+}
+
+impl RecentRate {
+    /// `p` with its time left at the rate of its phase's last [`RECENT_LINES`] lines (at
+    /// the rate since the phase began until there are two lines).
+    pub fn update(&mut self, mut p: StageProgress) -> StageProgress {
+        if p.label != self.label {
+            self.label = p.label.clone();
+            self.seen.clear();
+        }
+        self.seen.push_back((p.done, p.elapsed_s));
+        if self.seen.len() > RECENT_LINES + 1 {
+            self.seen.pop_front();
+        }
+        let (d0, e0) = self.seen[0];
+        if p.done > d0 && p.elapsed_s >= e0 {
+            let rate = (p.elapsed_s - e0) / (p.done - d0) as f64;
+            p.eta_s = Some(rate * (p.total - p.done) as f64);
+        }
+        p
+    }
+}
+
 /// `2 min 05 s`, `45 s`, `1 h 03 min`.
 pub fn fmt_duration(s: f64) -> String {
     let s = s.max(0.0).round() as u64;
@@ -108,6 +143,35 @@ mod tests {
         ] {
             assert_eq!(parse(not), None, "{not}");
         }
+    }
+
+    /// A phase that slows down: 100 steps in 10 s, then 10 s per 100. The time left
+    /// follows the recent rate, not the average since the start.
+    #[test]
+    fn time_left_follows_the_recent_rate() {
+        let mut r = RecentRate::default();
+        let line =
+            |done: u64, t: f64| parse(&format!("[{t:7.1} s] iteration {done}/1000")).unwrap();
+        // The first line: the rate since the start (10 s per 100).
+        assert!((r.update(line(100, 10.0)).eta_s.unwrap() - 90.0).abs() < 1e-9);
+        // Then 50 s per 100 steps: after four slow lines the window holds only them.
+        let mut t = 10.0;
+        let mut last = None;
+        for k in 2..=6u64 {
+            t += 50.0;
+            last = r.update(line(100 * k, t)).eta_s;
+        }
+        // 400 steps left at 0.5 s each (the average since the start would say 173 s).
+        assert!((last.unwrap() - 200.0).abs() < 1e-9, "{last:?}");
+        // A new phase starts its own window.
+        let p = r.update(StageProgress {
+            label: "predict".into(),
+            done: 1,
+            total: 10,
+            elapsed_s: 2.0,
+            eta_s: Some(18.0),
+        });
+        assert_eq!(p.eta_s, Some(18.0));
     }
 
     #[test]

@@ -19,7 +19,8 @@ impl super::Trainer {
     /// Whether this step trains at half resolution (`coarse_until`); the half views are
     /// built at the first such step and dropped after the last.
     pub(super) fn coarse_views(&mut self, views: &[View]) -> bool {
-        let on = self.iteration < self.settings.coarse_until;
+        let pixels = views.first().map_or(0, |v| v.rgb.len() / 3);
+        let on = self.iteration < self.settings.coarse_end(pixels);
         if on && self.coarse.len() != views.len() {
             self.coarse = views.iter().map(View::half).collect();
         } else if !on && !self.coarse.is_empty() {

@@ -9,7 +9,7 @@ use crate::graph::Node;
 use crate::lock::EntryLock;
 use crate::progress::Progress;
 use crate::record::{Action, RunRecord, StageRecord};
-use crate::stage_progress::{StageProgress, parse};
+use crate::stage_progress::{RecentRate, StageProgress, parse};
 use anyhow::Result;
 use std::sync::mpsc;
 use std::time::Instant;
@@ -70,9 +70,12 @@ pub(crate) fn run_waiting(
                 let threads = crate::process::thread_share(s.experiments_at_once);
                 let (tx, progress, nodes, ctx) = (tx.clone(), s.progress, s.nodes, s.ctx);
                 scope.spawn(move || {
+                    let rate = std::sync::Mutex::new(RecentRate::default());
                     let on_line = |line: &str| {
-                        progress.output(&label, line);
-                        if let Some(p) = parse(line) {
+                        let read = parse(line)
+                            .map(|p| rate.lock().unwrap_or_else(|e| e.into_inner()).update(p));
+                        progress.output(&label, line, read.as_ref());
+                        if let Some(p) = read {
                             let _ = tx.send((i, Message::Progress(p)));
                         }
                     };
