@@ -542,7 +542,7 @@ mod tests {
         assert!(r < 3e-7, "recip: relative error {r:e}");
     }
 
-    /// The 16-lane horizontal sum (a shuffle tree) against the f64 sum of its lanes.
+    /// The 16-lane horizontal sum against the f64 sum of its lanes.
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn wide_sum_matches_f64() {
