@@ -58,8 +58,11 @@ pub struct DeformSettings {
     /// First joint iterations in which `L_event` trains the PoseNet only (the scene is
     /// not moved to make up for a camera error between frames); 0 = from the start.
     pub posenet_warmup: u32,
-    /// Adam learning rate of the PoseNet.
+    /// Adam learning rate of the PoseNet at the first joint iteration …
     pub posenet_lr: f64,
+    /// … and at the last: log-linear decay between them (a constant rate leaves the
+    /// PoseNet's last iterate a random draw around its optimum; > 0).
+    pub posenet_lr_final: f64,
     /// The given contrast threshold C; 0 takes the manifest's.
     pub contrast_threshold: f64,
     /// Which C the training uses: `given` (the above), `estimate` (from the frames and
@@ -87,6 +90,9 @@ pub struct DeformSettings {
     /// (`crate::crop`; 1 = the whole image): every pixel is compared as often as any
     /// other, and the event render costs `1/k²` of the pixels.
     pub event_tiles: u32,
+    /// `L_event` at `1/k` of the resolution (`crate::coarse`; 1 = full): the pseudo image
+    /// averaged over `k × k` blocks, the render at the blocks; applied before the tiles.
+    pub event_downsample: u32,
     pub motion: MotionSettings,
     /// Bound Gaussians whose events' flow disagrees with their neighbours' are left
     /// out of `L_motion` (`radius_px = 0`: never).
@@ -124,6 +130,7 @@ impl Default for DeformSettings {
             posenet_anchor: true,
             posenet_warmup: 300,
             posenet_lr: 1e-3,
+            posenet_lr_final: 1e-4,
             contrast_threshold: 0.0,
             contrast: ContrastMode::default(),
             contrast_estimate: EstimateSettings::default(),
@@ -135,6 +142,7 @@ impl Default for DeformSettings {
             pseudo_mode: PseudoMode::Nearest,
             event_channels: EventChannels::Luminance,
             event_tiles: 1,
+            event_downsample: 1,
             motion: MotionSettings::default(),
             motion_neighbours: NeighbourSettings::default(),
             flow_form: FlowForm::Paper,
@@ -161,6 +169,14 @@ impl DeformSettings {
         finite_nonneg("schedule.gamma1", self.schedule.gamma1)?;
         finite_nonneg("schedule.gamma2_max", self.schedule.gamma2_max)?;
         finite_nonneg("posenet_lr", self.posenet_lr)?;
+        if self.posenet_lr > 0.0
+            && !(self.posenet_lr_final.is_finite() && self.posenet_lr_final > 0.0)
+        {
+            return Err(format!(
+                "posenet_lr_final must be finite and > 0 (got {}): the rate decays log-linearly to it",
+                self.posenet_lr_final
+            ));
+        }
         finite_nonneg("contrast_threshold", self.contrast_threshold)?;
         finite_nonneg("contrast_lr", self.contrast_lr)?;
         let e = &self.contrast_estimate;
@@ -185,6 +201,12 @@ impl DeformSettings {
             return Err(format!(
                 "event_tiles must lie in 1..=16 (got {}; 1 = the whole image)",
                 self.event_tiles
+            ));
+        }
+        if !(1..=8).contains(&self.event_downsample) {
+            return Err(format!(
+                "event_downsample must lie in 1..=8 (got {}; 1 = full resolution)",
+                self.event_downsample
             ));
         }
         stagekit::Settings::validate(&self.assoc).map_err(|e| format!("assoc: {e}"))

@@ -202,7 +202,7 @@ pub fn train(
         on_step(&s);
     }
     let train_seconds = train_clock.elapsed().as_secs_f64();
-    let camera = tr.camera_check(&d);
+    let camera = tr.camera_check(&r, &d);
     phases.start("save");
     let model = Model::from(&tr.inner);
     model.save(out.path())?;
