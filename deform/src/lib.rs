@@ -14,6 +14,7 @@
 //! | [`flow`] | `F_ego` (Eq. 9) from camera velocity and inverse depth, `F_gs` (Eq. 10) in the paper's and the exact form; backward |
 //! | [`event_counts`] | per-interval cumulative signed event counts at fine time bins: the count of any pixel over any sub-interval in two lookups |
 //! | [`crop`] | the event term on one of `k × k` tiles of the image: the cropped camera and the same window of the pseudo image |
+//! | [`coarse`] | the event term at `1/k` of the resolution: the camera of `k × k` blocks and the pseudo image averaged over them in linear intensity |
 //! | [`event_image`] | pseudo images (Eq. 11, nearest frame; two-sided baseline), `L_event` with gradients w.r.t. the render and `C`; sRGB ↔ linear |
 //! | [`contrast`] | the contrast threshold `C` estimated from frames and events (robust fit of counts on log changes, bootstrap spread); the modes given / estimate / learn |
 //! | [`motion_loss`] | `L_motion` (Eq. 12) over CSR bindings with a robust norm; gradients w.r.t. `F_ego` and `F_gs` |
@@ -43,6 +44,7 @@
 pub mod baselines;
 pub mod camera_check;
 pub mod camera_path;
+pub mod coarse;
 pub mod contrast;
 pub mod crop;
 pub mod event_counts;

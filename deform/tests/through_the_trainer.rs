@@ -134,6 +134,17 @@ fn the_ablation_switches_reach_the_trainer() {
     );
     let gap = centre_gap(&full.out, &o.out);
     assert!(gap > 1e-6, "tiles trained as the whole image ({gap:.2e})");
+
+    // At half resolution: it trains, and not as at full resolution.
+    let half = format!("event_downsample = 2\n{settings}");
+    let (o, steps, r) = train_with(&fx, "half", &half, TrainArgs::default());
+    assert_eq!(r["settings"]["event_downsample"], 2);
+    assert!(
+        steps.iter().any(|s| s.l_event > 0.0),
+        "no event loss at half resolution"
+    );
+    let gap = centre_gap(&full.out, &o.out);
+    assert!(gap > 1e-6, "half resolution trained as full ({gap:.2e})");
 }
 
 #[test]

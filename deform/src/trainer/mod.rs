@@ -10,7 +10,7 @@
 //! only). The PoseNet learns from `L_event` (the camera of the render at `t_e`) and from
 //! `L_motion` (the corrected camera's velocity in `F_ego`).
 
-use crate::camera_check::{CameraCheck, pose_error};
+use crate::camera_check::{CameraCheck, image_error_px, pose_error};
 use crate::contrast::LearnedContrast;
 use crate::crop::Crop;
 use crate::event_image::{PseudoImage, PseudoInputs, pseudo_image, render_event_loss};
@@ -24,7 +24,7 @@ use gaussians::{Rasterizer, TileRasterizer};
 use rand::{RngExt, SeedableRng};
 use scene::Camera;
 use scene::metrics::psnr_u8;
-use stagekit::optim::Adam;
+use stagekit::optim::{Adam, ExpSchedule};
 use std::time::Instant;
 
 mod motion;
@@ -92,6 +92,8 @@ pub struct JointTrainer {
     pseudo: PseudoImage<f32>,
     /// The window of `pseudo` the event term compares (`event_tiles > 1`).
     pseudo_crop: PseudoImage<f32>,
+    /// [`crate::coarse`]'s pseudo image (`event_downsample > 1`).
+    pseudo_coarse: PseudoImage<f32>,
     span: f64,
 }
 
@@ -191,6 +193,7 @@ impl JointTrainer {
             rng: rand_chacha::ChaCha8Rng::seed_from_u64(settings.seed),
             pseudo: PseudoImage::default(),
             pseudo_crop: PseudoImage::default(),
+            pseudo_coarse: PseudoImage::default(),
             span,
             settings,
         }
@@ -223,8 +226,9 @@ impl JointTrainer {
     }
 
     /// The camera's error at the held-out frames' times against their recorded poses
-    /// (interpolated path, and with the PoseNet correction).
-    pub(crate) fn camera_check(&self, d: &Inputs) -> CameraCheck {
+    /// (interpolated path, and with the PoseNet correction); the image errors through the
+    /// model's depth rendered at each recorded camera.
+    pub(crate) fn camera_check(&self, r: &TileRasterizer, d: &Inputs) -> CameraCheck {
         let times: Vec<f64> = d.scene.test.frames.iter().map(|f| f.timestamp).collect();
         let recorded: Vec<_> = d.test.iter().map(|v| v.camera.cam_to_world).collect();
         let interp: Vec<_> = times.iter().map(|&t| d.path.pose_at(t)).collect();
@@ -232,10 +236,29 @@ impl JointTrainer {
             .iter()
             .map(|&t| self.camera_at(d, t).0.cam_to_world)
             .collect();
+        let depths: Vec<Vec<f32>> = d
+            .test
+            .iter()
+            .zip(&times)
+            .map(|(v, &t)| {
+                let (splats, _) = self.inner.deformed(field_time(d, t));
+                let bg = self.inner.settings.background;
+                let (image, _) = r.render(&splats, &v.camera, self.inner.sh_degree(), bg);
+                image.normalised_depth()
+            })
+            .collect();
+        let image_px = |poses: &[scene::Pose]| -> Vec<Option<f64>> {
+            d.test
+                .iter()
+                .zip(poses)
+                .zip(&depths)
+                .map(|((v, p), z)| image_error_px(&v.camera, p, z))
+                .collect()
+        };
         CameraCheck {
             frames: recorded.len().min(times.len()),
-            interpolated: pose_error(&interp, &recorded),
-            corrected: pose_error(&corrected, &recorded),
+            interpolated: pose_error(&interp, &recorded, &image_px(&interp)),
+            corrected: pose_error(&corrected, &recorded, &image_px(&corrected)),
         }
     }
 
@@ -404,6 +427,13 @@ impl JointTrainer {
         self.inner.apply_gradients(&grads);
         self.inner.recycle_grads(grads);
         if let Some(p) = &mut self.posenet {
+            let lr = &self.settings;
+            self.posenet_adam.groups[0].lr = if lr.posenet_lr > 0.0 {
+                ExpSchedule::new(lr.posenet_lr, lr.posenet_lr_final, u64::from(lr.iterations))
+                    .at(u64::from(self.iteration))
+            } else {
+                0.0
+            };
             self.posenet_adam
                 .step(0, p.params_mut(), &self.posenet_grad);
         }
@@ -470,16 +500,24 @@ impl JointTrainer {
             &mut self.pseudo,
         );
         let (camera, xi) = self.camera_at(d, t_e);
+        // At 1/s of the resolution, or full.
+        let s = self.settings.event_downsample as usize;
+        let (camera, pseudo) = if s > 1 {
+            crate::coarse::pseudo(&self.pseudo, s, &mut self.pseudo_coarse);
+            (crate::coarse::camera(&camera, s), &self.pseudo_coarse)
+        } else {
+            (camera, &self.pseudo)
+        };
         // One of k × k tiles of the image, or all of it.
         let k = self.settings.event_tiles as usize;
         let (camera, pseudo) = if k > 1 {
             let (w, h) = (camera.intrinsics.width, camera.intrinsics.height);
             let tile = self.rng.random_range(0..k * k);
             let crop = Crop::tile(w as usize, h as usize, k, tile);
-            crop.pseudo(&self.pseudo, &mut self.pseudo_crop);
+            crop.pseudo(pseudo, &mut self.pseudo_crop);
             (crop.camera(&camera), &self.pseudo_crop)
         } else {
-            (camera, &self.pseudo)
+            (camera, pseudo)
         };
         let rv = self.inner.render_view(r, &camera, field_time(d, t_e));
         let mut g = vec![0.0f32; rv.image.rgb.len()];
