@@ -31,13 +31,7 @@ pub fn camera(camera: &Camera, k: usize) -> Camera {
 pub fn pseudo<R: Real>(full: &PseudoImage<R>, k: usize, out: &mut PseudoImage<R>) {
     let (w, h) = (full.width, full.height);
     let (w2, h2) = (w / k, h / k);
-    let n = w2 * h2 * full.channels;
-    out.data.clear();
-    out.valid.clear();
-    out.n_eff.clear();
-    out.data.reserve(n);
-    out.valid.reserve(n);
-    out.n_eff.reserve(n);
+    out.begin_like(full, w2, h2);
     for c in 0..full.channels {
         let plane = c * w * h;
         for y in 0..h2 {
@@ -63,8 +57,6 @@ pub fn pseudo<R: Real>(full: &PseudoImage<R>, k: usize, out: &mut PseudoImage<R>
             }
         }
     }
-    (out.width, out.height, out.channels) = (w2, h2, full.channels);
-    (out.log_eps, out.band_per_c, out.band) = (full.log_eps, full.band_per_c, full.band);
 }
 
 #[cfg(test)]

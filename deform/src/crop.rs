@@ -50,13 +50,7 @@ impl Crop {
             self.x0 + self.width <= w && self.y0 + self.height <= full.height,
             "crop outside the pseudo image"
         );
-        let n = self.width * self.height * full.channels;
-        out.data.clear();
-        out.valid.clear();
-        out.n_eff.clear();
-        out.data.reserve(n);
-        out.valid.reserve(n);
-        out.n_eff.reserve(n);
+        out.begin_like(full, self.width, self.height);
         for c in 0..full.channels {
             for y in self.y0..self.y0 + self.height {
                 let a = c * plane + y * w + self.x0;
@@ -66,7 +60,5 @@ impl Crop {
                 out.n_eff.extend_from_slice(&full.n_eff[a..b]);
             }
         }
-        (out.width, out.height, out.channels) = (self.width, self.height, full.channels);
-        (out.log_eps, out.band_per_c, out.band) = (full.log_eps, full.band_per_c, full.band);
     }
 }

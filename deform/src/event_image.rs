@@ -141,6 +141,20 @@ impl<R: Real> PseudoImage<R> {
     pub fn valid_count(&self) -> usize {
         self.valid.iter().filter(|&&v| v).count()
     }
+
+    /// Empty this image (its buffers kept) to be filled as a `width × height` image of
+    /// `like`'s channels and settings (a window or a coarser copy of `like`).
+    pub(crate) fn begin_like(&mut self, like: &PseudoImage<R>, width: usize, height: usize) {
+        let n = width * height * like.channels;
+        for v in [&mut self.data, &mut self.n_eff] {
+            v.clear();
+            v.reserve(n);
+        }
+        self.valid.clear();
+        self.valid.reserve(n);
+        (self.width, self.height, self.channels) = (width, height, like.channels);
+        (self.log_eps, self.band_per_c, self.band) = (like.log_eps, like.band_per_c, like.band);
+    }
 }
 
 /// One side's prediction: `(log(P + ε), n)` or `None` where that side is not usable
