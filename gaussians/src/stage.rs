@@ -493,7 +493,7 @@ pub fn train(
         interrupted: summary.interrupted,
         seconds_per_iteration: (summary.static_seconds + summary.deform_seconds)
             / summary.iterations.max(1) as f64,
-        coarse_steps: (settings.coarse_end(views.first().map_or(0, |v| v.rgb.len() / 3)))
+        coarse_steps: (settings.coarse_end(views.first().map_or(0, View::pixels)))
             .min(summary.iterations),
         static_seconds: summary.static_seconds,
         deform_seconds: summary.deform_seconds,

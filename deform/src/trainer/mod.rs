@@ -73,6 +73,9 @@ pub struct JointTrainer {
     pub settings: DeformSettings,
     pub posenet: Option<PoseNet<f32>>,
     posenet_adam: Adam,
+    /// The PoseNet's learning rate by iteration (log-linear decay; 0 throughout when
+    /// `posenet_lr` is 0).
+    posenet_lr: ExpSchedule,
     posenet_grad: Vec<f32>,
     /// `L_motion`'s and `L_track`'s gradients on the rendered centres, summed.
     d_means: Vec<[f32; 3]>,
@@ -160,6 +163,12 @@ impl JointTrainer {
         let mut posenet_adam = Adam::default();
         let np = posenet.as_ref().map_or(0, |p| p.params().len());
         posenet_adam.add_group("posenet", settings.posenet_lr, 1e-15, 1, np);
+        let posenet_lr = if settings.posenet_lr > 0.0 {
+            let end = u64::from(settings.iterations);
+            ExpSchedule::new(settings.posenet_lr, settings.posenet_lr_final, end)
+        } else {
+            ExpSchedule::constant(0.0)
+        };
         let span = if settings.motion_span > 0.0 {
             settings.motion_span
         } else {
@@ -169,6 +178,7 @@ impl JointTrainer {
             inner,
             posenet,
             posenet_adam,
+            posenet_lr,
             posenet_grad: vec![0.0; np],
             d_means: Vec::new(),
             own_means: Vec::new(),
@@ -427,13 +437,7 @@ impl JointTrainer {
         self.inner.apply_gradients(&grads);
         self.inner.recycle_grads(grads);
         if let Some(p) = &mut self.posenet {
-            let lr = &self.settings;
-            self.posenet_adam.groups[0].lr = if lr.posenet_lr > 0.0 {
-                ExpSchedule::new(lr.posenet_lr, lr.posenet_lr_final, u64::from(lr.iterations))
-                    .at(u64::from(self.iteration))
-            } else {
-                0.0
-            };
+            self.posenet_adam.groups[0].lr = self.posenet_lr.at(u64::from(self.iteration));
             self.posenet_adam
                 .step(0, p.params_mut(), &self.posenet_grad);
         }

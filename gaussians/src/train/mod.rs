@@ -340,7 +340,7 @@ impl Trainer {
     where
         R::State: Send + 'static,
     {
-        self.resolve_cap(views[0].rgb.len() / 3);
+        self.resolve_cap(views[0].pixels());
         self.probe_field_if_due(r, views);
         let k = self.next_view(views.len());
         let (view, field_on) = (&views[k], self.field_on());

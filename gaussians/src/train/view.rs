@@ -19,7 +19,7 @@ impl super::Trainer {
     /// Whether this step trains at half resolution (`coarse_until`); the half views are
     /// built at the first such step and dropped after the last.
     pub(super) fn coarse_views(&mut self, views: &[View]) -> bool {
-        let pixels = views.first().map_or(0, |v| v.rgb.len() / 3);
+        let pixels = views.first().map_or(0, View::pixels);
         let on = self.iteration < self.settings.coarse_end(pixels);
         if on && self.coarse.len() != views.len() {
             self.coarse = views.iter().map(View::half).collect();
@@ -31,6 +31,11 @@ impl super::Trainer {
 }
 
 impl View {
+    /// Pixels of the view's image.
+    pub fn pixels(&self) -> usize {
+        self.rgb.len() / 3
+    }
+
     /// The view at half resolution (coarse-to-fine): each pixel the mean of a 2 × 2
     /// block (an odd last row or column dropped), the camera's focal lengths halved and
     /// its principal point moved so that each pixel's ray passes through its block's
