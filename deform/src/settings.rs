@@ -115,6 +115,11 @@ pub struct DeformSettings {
     /// 1500: +0.46 / +0.22 dB at 8 / 4 fps; BENCHMARKS.md). Only a warm-up that stops
     /// before the end of densification leaves the joint training any to do.
     pub regrow: bool,
+    /// Give the warm-up's deformation field a colour head (`FieldSettings::color`,
+    /// started at zero) for the joint training: each dynamic Gaussian's colour may then
+    /// change with time as the frames and the events show (shading on a turning object).
+    /// Nothing when the warm-up's field already has one or the warm-up kept no field.
+    pub field_color: bool,
     /// Record the losses every this many iterations in the report.
     pub log_every: u32,
 }
@@ -151,6 +156,7 @@ impl Default for DeformSettings {
             assoc: assoc::AssocSettings::default(),
             densify: true,
             regrow: true,
+            field_color: false,
             log_every: 10,
         }
     }

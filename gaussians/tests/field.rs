@@ -13,6 +13,14 @@ fn small(depth: usize, width: usize) -> FieldSettings {
         time_freqs: 2,
         seed: 7,
         zero_head_init: false,
+        color: false,
+    }
+}
+
+fn coloured(depth: usize, width: usize) -> FieldSettings {
+    FieldSettings {
+        color: true,
+        ..small(depth, width)
     }
 }
 
@@ -31,9 +39,11 @@ fn points(n: usize) -> Vec<[f64; 3]> {
 
 /// Loss = Σ w ⊙ out with fixed pseudo-random weights; gradient w.r.t. out is w.
 fn weights(n: usize) -> Vec<f64> {
-    (0..n * field::HEAD_OUT)
-        .map(|i| ((i as f64) * 1.618).sin())
-        .collect()
+    weights_of(n, field::HEAD_OUT)
+}
+
+fn weights_of(n: usize, width: usize) -> Vec<f64> {
+    (0..n * width).map(|i| ((i as f64) * 1.618).sin()).collect()
 }
 
 fn loss(mlp: &Mlp<f64>, x: &[[f64; 3]], t: &[f64], w: &[f64]) -> f64 {
@@ -42,10 +52,15 @@ fn loss(mlp: &Mlp<f64>, x: &[[f64; 3]], t: &[f64], w: &[f64]) -> f64 {
 }
 
 fn fd_check(depth: usize, width: usize) {
-    let mut mlp = Mlp::<f64>::new(small(depth, width), 3);
+    fd_check_settings(small(depth, width));
+}
+
+fn fd_check_settings(settings: FieldSettings) {
+    let depth = settings.depth;
+    let mut mlp = Mlp::<f64>::new(settings, 3);
     let x = points(9);
     let t: Vec<f64> = (0..9).map(|i| i as f64 / 9.0).collect();
-    let w = weights(9);
+    let w = weights_of(9, settings.head_out());
     let (_, cache) = mlp.forward(&x, &t);
     let g = mlp.backward(&cache, &w);
     assert_eq!(g.len(), mlp.params.len());
@@ -75,6 +90,38 @@ fn gradients_match_finite_differences_with_skip() {
 #[test]
 fn gradients_match_finite_differences_shallow() {
     fd_check(2, 10);
+}
+
+/// The colour head's three more outputs, every layer's parameters checked.
+#[test]
+fn gradients_match_finite_differences_with_colour() {
+    fd_check_settings(coloured(6, 12));
+    let s = coloured(3, 8);
+    assert_eq!(s.head_out(), 13);
+    let l = *Mlp::<f64>::layout(&s).last().unwrap();
+    assert_eq!(l.fan_out, 13);
+}
+
+/// The f32 path splits a colour head's rows into δx, δq, δs and δc, and without a colour
+/// head the deltas carry none.
+#[test]
+fn colour_rows_split_into_deltas() {
+    let s = coloured(2, 6);
+    let m64 = Mlp::<f64>::new(s, 4);
+    let m32 = Mlp::<f32>::new(s, 4);
+    let x64 = points(4);
+    let x32: Vec<[f32; 3]> = x64.iter().map(|p| p.map(|v| v as f32)).collect();
+    let (o64, _) = m64.forward(&x64, &[0.7]);
+    let (d, _) = Deformation::forward(&m32, &x32, &[0.7]);
+    assert!(d.has_color());
+    for i in 0..4 {
+        for k in 0..3 {
+            assert!((d.ds[i][k] as f64 - o64[i * 13 + 7 + k]).abs() < 1e-5);
+            assert!((d.dc[i][k] as f64 - o64[i * 13 + 10 + k]).abs() < 1e-5);
+        }
+    }
+    let (plain, _) = Deformation::forward(&Mlp::<f32>::new(small(2, 6), 4), &x32, &[0.7]);
+    assert!(!plain.has_color());
 }
 
 /// Past 4 096 rows the products run by blocks of 2 048 rows (and the weight gradients
@@ -117,6 +164,7 @@ fn layout_matches_deform_gs_sizes() {
         time_freqs: 6,
         seed: 0,
         zero_head_init: true,
+        color: false,
     };
     assert_eq!(Mlp::<f32>::input_dim(&s), 63 + 13);
     let layers = Mlp::<f32>::layout(&s);
@@ -185,7 +233,7 @@ fn delta_application_and_backward_match_finite_differences() {
     // scalar loss L = Σ a·log s' + Σ b·q' ; check dL/d log s and dL/dq and dL/dδs
     let a = [0.3f32, 0.7, -0.4];
     let b = [0.2f32, -0.5, 0.9, 0.1];
-    let g = apply_deltas_backward(&ls, &rot, &d, &[[1.0; 3]], &[a], &[b]);
+    let g = apply_deltas_backward(&ls, &rot, &d, &[[1.0; 3]], &[a], &[b], &[[0.5; 3]]);
     let lossf = |ls: &[[f32; 3]], rot: &[[f32; 4]], d: &Deltas| -> f64 {
         let o = apply_deltas(&means, ls, rot, d);
         (0..3)
@@ -225,6 +273,24 @@ fn delta_application_and_backward_match_finite_differences() {
     }
     assert_eq!(g.deltas.dq[0], b);
     assert_eq!(g.deltas.dx[0], [1.0; 3]);
+    // No colour head: no colour gradient.
+    assert!(!g.deltas.has_color());
+    // With one, δc's gradient is the deformed DC coefficients' (c' = c + δc).
+    let mut dc = d.clone();
+    dc.dc = vec![[0.1, -0.2, 0.3]];
+    let gc = apply_deltas_backward(
+        &ls,
+        &rot,
+        &dc,
+        &[[1.0; 3]],
+        &[a],
+        &[b],
+        &[[0.5, 0.25, -1.0]],
+    );
+    assert_eq!(gc.deltas.dc, vec![[0.5, 0.25, -1.0]]);
+    let mut sh = vec![[1.0f32, 2.0, 3.0]];
+    field::apply_color_deltas(&mut sh, &dc);
+    assert_eq!(sh, vec![[1.1, 1.8, 3.3]]);
 }
 
 #[test]
@@ -294,4 +360,29 @@ fn zero_head_outputs_zero_deltas_and_still_learns() {
         .map(|v| v.abs())
         .sum();
     assert!(head_grad > 1e-3, "head gradient {head_grad}");
+}
+
+/// A colour head added to a trained field deforms exactly as before (bit for bit) with
+/// zero colour, and its colour columns receive gradients.
+#[test]
+fn a_colour_head_added_keeps_the_deformation() {
+    let m = Mlp::<f64>::new(small(5, 8), 2);
+    let c = m.with_color();
+    assert!(c.settings.color && !m.settings.color);
+    assert_eq!(c.params.len(), m.params.len() + 3 * (8 + 1));
+    let x = points(6);
+    let (a, _) = m.forward(&x, &[0.3]);
+    let (b, cache) = c.forward(&x, &[0.3]);
+    for i in 0..6 {
+        assert_eq!(a[i * 10..i * 10 + 10], b[i * 13..i * 13 + 10]);
+        assert_eq!(b[i * 13 + 10..i * 13 + 13], [0.0; 3]);
+    }
+    let g = c.backward(&cache, &weights_of(6, 13));
+    let head = *c.layers.last().unwrap();
+    assert!(
+        g[head.bias + 10..head.bias + 13]
+            .iter()
+            .all(|v| v.abs() > 1e-6)
+    );
+    assert_eq!(c.with_color().params, c.params);
 }

@@ -152,7 +152,8 @@ impl JointTrainer {
         let extent = gaussians::stage::scene_extent(&warm, &cams);
         let mut inner = Trainer::new(warm, d.model.splats.clone(), extent);
         match &d.model.field {
-            Some(f) => inner.field = f.clone(),
+            Some(f) if settings.field_color => inner.set_field(f.with_color()),
+            Some(f) => inner.set_field(f.clone()),
             None => inner.settings.deform = false,
         }
         inner.iteration = done;

@@ -2,13 +2,15 @@
 //! `(δx, δq, δs) = F(γ(x), γ(t))` (DEGS §3.1, the deformation field of Eq. 3).
 //! Layers `D × W` with ReLU, the encoded input concatenated back after layer
 //! `D / 2` when `D ≥ 5` (Deform-GS: after layer 4 of 8), one linear head of 10 outputs
-//! (δx 3, δq 4, δs 3; equal to three separate heads), no output activation.
+//! (δx 3, δq 4, δs 3; equal to three separate heads), 13 with a colour field (δc 3),
+//! no output activation.
 
 use super::linalg::{Real, View, matmul};
 use super::settings::FieldSettings;
 use rand::{RngExt, SeedableRng};
 
-/// Number of head outputs: δx (3), δq (4), δs (3).
+/// Number of geometric head outputs: δx (3), δq (4), δs (3); a colour field adds δc
+/// (3) after them ([`FieldSettings::head_out`]).
 pub const HEAD_OUT: usize = 10;
 
 /// Offsets of one linear layer inside the flat parameter vector. Weights are stored
@@ -96,7 +98,7 @@ impl<T: Real> Mlp<T> {
             push(fan_in, s.width);
         }
         let head_in = if s.depth == 0 { in_dim } else { s.width };
-        push(head_in, HEAD_OUT);
+        push(head_in, s.head_out());
         layers
     }
 
@@ -118,6 +120,37 @@ impl<T: Real> Mlp<T> {
                 *p = T::from_f64(rng.random_range(-bound..bound));
             }
         }
+        Mlp {
+            settings,
+            params,
+            layers,
+        }
+    }
+
+    /// The same network with a colour head ([`FieldSettings::color`]): every weight
+    /// kept, the three colour outputs starting at zero (weights and bias), so it deforms
+    /// exactly as before until trained. Itself when it has one.
+    pub fn with_color(&self) -> Self {
+        if self.settings.color {
+            return self.clone();
+        }
+        let settings = FieldSettings {
+            color: true,
+            ..self.settings
+        };
+        let layers = Self::layout(&settings);
+        let mut params = vec![T::ZERO; Self::param_count(&settings)];
+        let (old, new) = (
+            self.layers.last().expect("head"),
+            layers.last().expect("head"),
+        );
+        params[..old.weight].copy_from_slice(&self.params[..old.weight]);
+        for j in 0..old.fan_in {
+            let (a, b) = (old.weight + j * old.fan_out, new.weight + j * new.fan_out);
+            params[b..b + old.fan_out].copy_from_slice(&self.params[a..a + old.fan_out]);
+        }
+        params[new.bias..new.bias + old.fan_out]
+            .copy_from_slice(&self.params[old.bias..old.bias + old.fan_out]);
         Mlp {
             settings,
             params,
@@ -162,7 +195,8 @@ impl<T: Real> Mlp<T> {
             });
     }
 
-    /// Forward pass: returns `n × 10` head outputs (δx, δq, δs per row) and the cache.
+    /// Forward pass: returns `n × head_out` outputs (δx, δq, δs and δc per row) and the
+    /// cache.
     pub fn forward(&self, x: &[[T; 3]], t: &[T]) -> (Vec<T>, MlpCache<T>) {
         let (mut out, mut cache) = (Vec::new(), MlpCache::default());
         self.forward_into(x, t, &mut cache, &mut MlpScratch::default(), &mut out);
@@ -259,7 +293,7 @@ impl<T: Real> Mlp<T> {
         let s = &self.settings;
         let in_dim = Self::input_dim(s);
         let skip = Self::skip_after(s);
-        assert_eq!(grad_out.len(), n * HEAD_OUT);
+        assert_eq!(grad_out.len(), n * self.settings.head_out());
         grads.clear();
         grads.resize(self.params.len(), T::ZERO);
         let head = *self.layers.last().expect("head layer");

@@ -1,8 +1,7 @@
 //! The deformation field evaluated on [`Splats`]: on every Gaussian, or only on those
 //! flagged dynamic (`dynamic_only`; the others keep their canonical parameters).
 
-use super::deltas::{Deformation, Deltas, apply_deltas, apply_deltas_in_place};
-use super::mlp::HEAD_OUT;
+use super::deltas::{Deformation, Deltas, apply_color_deltas, apply_deltas, apply_deltas_in_place};
 use super::mlp::{Mlp, MlpCache, MlpScratch};
 use crate::splats::Splats;
 
@@ -29,11 +28,10 @@ pub fn splat_deltas(
         Some(idx) => {
             let sub: Vec<[f32; 3]> = idx.iter().map(|&i| splats.means[i]).collect();
             let (ds, cache) = Deformation::forward(mlp, &sub, &[t]);
-            let mut d = Deltas::zeros(splats.len());
+            let mut d = Deltas::default();
+            d.set_zeros_with(splats.len(), ds.has_color());
             for (k, &i) in idx.iter().enumerate() {
-                d.dx[i] = ds.dx[k];
-                d.dq[i] = ds.dq[k];
-                d.ds[i] = ds.ds[k];
+                d.copy_one(i, &ds, k);
             }
             (d, cache)
         }
@@ -53,11 +51,10 @@ pub fn splat_deltas_backward(
     match evaluated_indices(splats, dynamic_only) {
         None => Deformation::backward(mlp, cache, g),
         Some(idx) => {
-            let sub = Deltas {
-                dx: idx.iter().map(|&i| g.dx[i]).collect(),
-                dq: idx.iter().map(|&i| g.dq[i]).collect(),
-                ds: idx.iter().map(|&i| g.ds[i]).collect(),
-            };
+            let mut sub = Deltas::default();
+            for &i in &idx {
+                sub.push_one(g, i);
+            }
             Deformation::backward(mlp, cache, &sub)
         }
     }
@@ -67,12 +64,14 @@ pub fn splat_deltas_backward(
 // Eq. 3: the deformation field applied to the canonical Gaussians.
 pub fn deform_splats(splats: &Splats, deltas: &Deltas) -> Splats {
     let g = apply_deltas(&splats.means, &splats.log_scales, &splats.rotations, deltas);
-    Splats {
+    let mut out = Splats {
         means: g.means,
         log_scales: g.log_scales,
         rotations: g.rotations,
         ..splats.clone()
-    }
+    };
+    apply_color_deltas(&mut out.sh_dc, deltas);
+    out
 }
 
 /// Reusable buffers of the field evaluated on [`Splats`] ([`splat_deltas_into`],
@@ -99,9 +98,10 @@ pub fn splat_deltas_into(
     let FieldWork {
         scratch, rows, sub, ..
     } = work;
+    let width = mlp.settings.head_out();
     if !dynamic_only {
         mlp.forward_into(&splats.means, &[t], cache, scratch, rows);
-        deltas.set_rows(rows);
+        deltas.set_rows(rows, width);
         return;
     }
     sub.clear();
@@ -111,12 +111,10 @@ pub fn splat_deltas_into(
             .map(|i| splats.means[i]),
     );
     mlp.forward_into(sub, &[t], cache, scratch, rows);
-    deltas.set_zeros(splats.len());
+    deltas.set_zeros_with(splats.len(), mlp.settings.color);
     let dynamic = (0..splats.len()).filter(|&i| splats.is_dynamic(i));
-    for (r, i) in rows.chunks(HEAD_OUT).zip(dynamic) {
-        deltas.dx[i] = [r[0], r[1], r[2]];
-        deltas.dq[i] = [r[3], r[4], r[5], r[6]];
-        deltas.ds[i] = [r[7], r[8], r[9]];
+    for (r, i) in rows.chunks(width).zip(dynamic) {
+        deltas.set_row(i, r);
     }
 }
 
@@ -136,16 +134,15 @@ pub fn splat_deltas_backward_into(
         sub_deltas,
         ..
     } = work;
+    let width = mlp.settings.head_out();
     if dynamic_only {
         sub_deltas.set_zeros(0);
         for i in (0..splats.len()).filter(|&i| splats.is_dynamic(i)) {
-            sub_deltas.dx.push(g.dx[i]);
-            sub_deltas.dq.push(g.dq[i]);
-            sub_deltas.ds.push(g.ds[i]);
+            sub_deltas.push_one(g, i);
         }
-        sub_deltas.rows_into(rows);
+        sub_deltas.rows_into(rows, width);
     } else {
-        g.rows_into(rows);
+        g.rows_into(rows, width);
     }
     mlp.backward_into(cache, rows, scratch, grads);
 }
@@ -159,4 +156,5 @@ pub fn deform_splats_into(splats: &Splats, deltas: &Deltas, out: &mut Splats) {
         &mut out.rotations,
         deltas,
     );
+    apply_color_deltas(&mut out.sh_dc, deltas);
 }

@@ -21,6 +21,17 @@ pub struct FieldSettings {
     /// PyTorch/Deform-GS default init, whose random head moves every Gaussian by
     /// ~0.1–0.3 units and perturbs its scale and rotation at the switch.
     pub zero_head_init: bool,
+    /// A colour that changes with time: three more outputs `δc` added to each
+    /// Gaussian's SH DC coefficients (the view-independent colour), so that shading on
+    /// a turning object and what the events record of it can be drawn without motion.
+    pub color: bool,
+}
+
+impl FieldSettings {
+    /// Outputs of the head: δx (3), δq (4), δs (3), and δc (3) with [`Self::color`].
+    pub fn head_out(&self) -> usize {
+        super::mlp::HEAD_OUT + if self.color { 3 } else { 0 }
+    }
 }
 
 impl Default for FieldSettings {
@@ -32,6 +43,7 @@ impl Default for FieldSettings {
             time_freqs: 6,
             seed: 0,
             zero_head_init: true,
+            color: false,
         }
     }
 }

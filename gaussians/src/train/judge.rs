@@ -39,10 +39,12 @@ pub fn posed_deltas(c: &Candidate, views: &[View]) -> Option<Vec<Deltas>> {
 pub fn gather_deltas(per_view: &[Deltas], keep: &[usize]) -> Vec<Deltas> {
     per_view
         .iter()
-        .map(|d| Deltas {
-            dx: keep.iter().map(|&i| d.dx[i]).collect(),
-            dq: keep.iter().map(|&i| d.dq[i]).collect(),
-            ds: keep.iter().map(|&i| d.ds[i]).collect(),
+        .map(|d| {
+            let mut out = Deltas::default();
+            for &i in keep {
+                out.push_one(d, i);
+            }
+            out
         })
         .collect()
 }

@@ -119,6 +119,21 @@ impl Trainer {
         }
     }
 
+    /// Replace the deformation field (a loaded or extended one), its Adam state
+    /// started afresh at the field's current learning rate.
+    pub fn set_field(&mut self, field: Mlp<f32>) {
+        let mut adam = Adam::default();
+        adam.add_group(
+            "field",
+            self.settings.field_lr_init,
+            1e-15,
+            1,
+            field.params.len(),
+        );
+        self.field = field;
+        self.field_adam = adam;
+    }
+
     /// Give back a view after [`Self::view_backward`]: a later [`Self::render_view`]
     /// with the same rasterizer reuses its buffers. Optional (else simply dropped).
     pub fn recycle_view<S: Send + 'static>(&self, v: ViewRender<S>) {
@@ -249,6 +264,7 @@ impl Trainer {
                 &self.splats.rotations,
                 d,
                 &g.means,
+                &g.sh_dc,
                 &mut g.log_scales,
                 &mut g.rotations,
                 delta_grads,

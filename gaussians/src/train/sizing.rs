@@ -372,6 +372,15 @@ pub fn decide<R: Rasterizer>(
         let motion = static_split::centre_motion_px(mlp, splats, dynamic_only, &cams, &times, mid);
         sum.field_motion_px_quantiles =
             Some(static_split::quantiles(&motion, [0.5, 0.99, 0.999, 1.0]));
+        let mut motion = motion;
+        static_split::keep_colour_changes_dynamic(
+            mlp,
+            splats,
+            dynamic_only,
+            &times,
+            mid,
+            &mut motion,
+        );
         if size.still_px > 0.0 {
             let moving = motion.iter().filter(|&&m| m > size.still_px).count();
             let worse = judge.worse_fraction(&c, &frozen_c, size.still_visible);

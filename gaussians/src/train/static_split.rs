@@ -64,6 +64,37 @@ pub(crate) fn centre_motion_px(
     to_pixels(splats, cams, &world)
 }
 
+/// A colour change the split counts as none (two 8-bit steps).
+pub(crate) const COLOR_STILL: f32 = 2.0 / 255.0;
+
+/// With a colour field, `motion[i]` set to infinity for each Gaussian whose colour
+/// changes over `times` by more than [`COLOR_STILL`] in some channel away from its colour at
+/// `reference` (it cannot be baked at one time however little it moves); unchanged
+/// without one.
+pub(crate) fn keep_colour_changes_dynamic(
+    mlp: &Mlp<f32>,
+    splats: &Splats,
+    dynamic_only: bool,
+    times: &[f32],
+    reference: f32,
+    motion: &mut [f32],
+) {
+    if !mlp.settings.color {
+        return;
+    }
+    let (at_ref, _) = field::splat_deltas(mlp, splats, reference, dynamic_only);
+    for &t in times {
+        let (d, _) = field::splat_deltas(mlp, splats, t, dynamic_only);
+        for (i, m) in motion.iter_mut().enumerate() {
+            let (a, b) = (d.dc[i], at_ref.dc[i]);
+            let change = (0..3).map(|k| (a[k] - b[k]).abs()).fold(0.0f32, f32::max);
+            if crate::raster::sh::C0 as f32 * change > COLOR_STILL {
+                *m = f32::INFINITY;
+            }
+        }
+    }
+}
+
 /// World distances `world[i]` at Gaussian i's centre, in pixels at its smallest depth
 /// over `cams` (0 for a Gaussian behind every camera).
 fn to_pixels(splats: &Splats, cams: &[Camera], world: &[f32]) -> Vec<f32> {
