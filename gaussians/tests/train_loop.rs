@@ -405,6 +405,58 @@ fn static_split_flags_and_freezes_the_gaussians_the_field_barely_moves() {
     assert_eq!(d.rotations, t.splats.rotations);
 }
 
+/// The split measures motion from where the field puts each Gaussian at the middle of
+/// the recording: a shift the field applies at every time alike is no motion, and the
+/// Gaussians it calls static are baked where the field put them (not sent back to their
+/// canonical places); one the field moves over time stays dynamic and canonical.
+#[test]
+fn the_split_bakes_a_constant_shift_and_keeps_moving_gaussians_dynamic() {
+    use gaussians::field::{FieldSettings, Mlp};
+    use gaussians::train::static_split;
+    let cams = cameras(2);
+    let views: Vec<View> = cams
+        .iter()
+        .enumerate()
+        .map(|(k, c)| View {
+            camera: *c,
+            time: k as f32,
+            rgb: vec![0.5; 3 * W * H],
+        })
+        .collect();
+    let settings = FieldSettings {
+        width: 8,
+        depth: 2,
+        ..FieldSettings::default()
+    };
+    let mut mlp = Mlp::<f32>::new(settings, 1);
+    mlp.zero_head();
+    let head = *mlp.layers.last().unwrap();
+    mlp.params[head.bias] = 0.05; // δx = (0.05, 0, 0) at every time
+    let splats = random_splats(10, DVec3::ZERO, 0.5, 4);
+    let (m, sum) = static_split::decide(&mlp, &splats, &views, 0.01, 7);
+    assert_eq!((sum.iteration, sum.dynamic, sum.static_), (7, 0, 10));
+    for (a, b) in m.means.iter().zip(&splats.means) {
+        assert!((a[0] - (b[0] + 0.05)).abs() < 1e-6 && a[1] == b[1] && a[2] == b[2]);
+    }
+    // The raw time (the encoding's first input after the 3 + 3·2·pos_freqs position
+    // columns) drives δy: every Gaussian moves 0.1 over the recording, well over 0.01 px.
+    let t_col = 3 * (1 + 2 * settings.pos_freqs);
+    // Hidden unit 0 of each layer passes the time alone: h = relu(relu(t)) = t.
+    for l in [mlp.layers[0], mlp.layers[1]] {
+        for i in 0..l.fan_in {
+            mlp.params[l.weight + i * l.fan_out] = 0.0;
+        }
+        mlp.params[l.bias] = 0.0;
+    }
+    let (l0, l1) = (mlp.layers[0], mlp.layers[1]);
+    mlp.params[l0.weight + t_col * l0.fan_out] = 1.0;
+    mlp.params[l1.weight] = 1.0;
+    mlp.params[head.weight + 1] = 0.1;
+    let (m, sum) = static_split::decide(&mlp, &splats, &views, 0.01, 7);
+    assert_eq!((sum.dynamic, sum.static_), (10, 0), "{sum:?}");
+    assert_eq!(m.means, splats.means);
+}
+
 /// `L_track` through the training step: a faint Gaussian (no photometric pull to speak
 /// of) whose track moves across the views ends up where its track saw it in each view,
 /// its trajectory learning the motion its canonical centre cannot give.

@@ -412,9 +412,9 @@ impl Trainer {
             return;
         }
         let tol = self.settings.static_tolerance_px;
-        let (flags, summary) =
+        let (model, summary) =
             static_split::decide(&self.field, &self.splats, views, tol, self.iteration);
-        self.splats.dynamic = flags;
+        self.splats = model;
         self.settings.dynamic_only = true;
         // The isometry term's lists hold the Gaussians the field moved until now.
         self.neighbours = None;

@@ -195,6 +195,7 @@ pub fn split(canonical: &Splats, frozen: &Splats, motion: &[f32], tolerance_px: 
             out.means[i] = frozen.means[i];
             out.log_scales[i] = frozen.log_scales[i];
             out.rotations[i] = frozen.rotations[i];
+            out.sh_dc[i] = frozen.sh_dc[i];
         }
     }
     out

@@ -1,5 +1,6 @@
 //! Static/dynamic split: Gaussians that the deformation field barely moves over the
-//! recording are flagged static and keep their canonical parameters from then on.
+//! recording are flagged static, baked at the middle of the recording, and keep those
+//! parameters from then on.
 //!
 //! A static Gaussian cannot be moved by the field, so the background cannot deform to
 //! make up for an error of the camera (the joint training's PoseNet is pinned by it),
@@ -9,7 +10,7 @@
 //! trainer takes the flags on.
 
 use super::View;
-use crate::field::{self, Deltas, Mlp};
+use crate::field::{self, Mlp};
 use crate::splats::Splats;
 use scene::Camera;
 
@@ -20,18 +21,32 @@ pub(crate) const SAMPLES: usize = 33;
 /// the largest of `|δμ| + s_max·(θ + |Δs|/s)` (centre displacement plus the motion of
 /// the Gaussian's outline from rotation by θ and relative scale change), divided by the
 /// Gaussian's smallest depth over `cams` and multiplied by the focal length. A Gaussian
-/// behind every camera scores 0 (no view sees it move).
+/// behind every camera scores 0 (no view sees it move). Measured from the canonical
+/// Gaussian (`reference` None) or from where the field puts it at time `reference`
+/// (a shift the field applies at every time alike is then no motion).
 pub(crate) fn field_motion_px(
     mlp: &Mlp<f32>,
     splats: &Splats,
     cams: &[Camera],
     times: &[f32],
+    reference: Option<f32>,
 ) -> Vec<f32> {
     let n = splats.len();
     let mut world = vec![0.0f32; n];
-    for &t in times {
+    let deformed = |t: f32| {
         let (d, _) = field::Deformation::forward(mlp, &splats.means, &[t]);
-        accumulate_motion(splats, &d, &mut world);
+        field::apply_deltas(&splats.means, &splats.log_scales, &splats.rotations, &d)
+    };
+    let from = match reference {
+        Some(t) => deformed(t),
+        None => field::Deformed {
+            means: splats.means.clone(),
+            log_scales: splats.log_scales.clone(),
+            rotations: splats.rotations.clone(),
+        },
+    };
+    for &t in times {
+        accumulate_motion(&from, &deformed(t), &mut world);
     }
     to_pixels(splats, cams, &world)
 }
@@ -119,19 +134,18 @@ fn to_pixels(splats: &Splats, cams: &[Camera], world: &[f32]) -> Vec<f32> {
         .collect()
 }
 
-/// `out[i] = max(out[i], motion of Gaussian i under d)` in world units.
-fn accumulate_motion(splats: &Splats, d: &Deltas, out: &mut [f32]) {
-    let moved = field::apply_deltas(&splats.means, &splats.log_scales, &splats.rotations, d);
+/// `out[i] = max(out[i], motion of Gaussian i from `from` to `to`)` in world units.
+fn accumulate_motion(from: &field::Deformed, to: &field::Deformed, out: &mut [f32]) {
     for (i, out_i) in out.iter_mut().enumerate() {
-        let dx = d.dx[i];
-        let shift = (dx[0] * dx[0] + dx[1] * dx[1] + dx[2] * dx[2]).sqrt();
-        let s0 = splats.log_scales[i].map(f32::exp);
-        let s1 = moved.log_scales[i].map(f32::exp);
+        let (a, b) = (from.means[i], to.means[i]);
+        let shift = (0..3).map(|k| (b[k] - a[k]).powi(2)).sum::<f32>().sqrt();
+        let s0 = from.log_scales[i].map(f32::exp);
+        let s1 = to.log_scales[i].map(f32::exp);
         let s_max = s0.iter().fold(0.0f32, |a, &b| a.max(b));
         let rel_scale = (0..3)
             .map(|k| (s1[k] - s0[k]).abs() / s0[k].max(1e-12))
             .fold(0.0f32, f32::max);
-        let angle = quat_angle(splats.rotations[i], moved.rotations[i]);
+        let angle = quat_angle(from.rotations[i], to.rotations[i]);
         let m = shift + s_max * (angle + rel_scale);
         if m > *out_i {
             *out_i = m;
@@ -181,29 +195,38 @@ pub struct SplitSummary {
 }
 
 /// The split of `splats` by how far `field` moves each of them over the times of `views`
-/// in their pixels ([`field_motion_px`]): each Gaussian's dynamic flag (moved by more
-/// than `tolerance_px`) and the summary of a split at `iteration`.
+/// in their pixels, away from where it puts them at the views' middle time
+/// ([`field_motion_px`]: centre and outline; a shift the field applies at every time
+/// alike is no motion, and a Gaussian whose colour changes stays dynamic): the model with the Gaussians moved
+/// by at most `tolerance_px` flagged static and baked at that middle time (the field's
+/// deformation there applied to them once, as the sizing's split does), and the summary
+/// of a split at `iteration`.
 pub fn decide(
     field: &Mlp<f32>,
     splats: &Splats,
     views: &[View],
     tolerance_px: f32,
     iteration: u32,
-) -> (Vec<bool>, SplitSummary) {
+) -> (Splats, SplitSummary) {
     let cams: Vec<Camera> = views.iter().map(|v| v.camera).collect();
     let times: Vec<f32> = views.iter().map(|v| v.time).collect();
     let times = sample_times(&times);
-    let motion = field_motion_px(field, splats, &cams, &times);
-    let flags = dynamic_flags(&motion, tolerance_px);
-    let dynamic = flags.iter().filter(|&&d| d).count();
+    let mid = super::judge::middle_time(views);
+    let mut motion = field_motion_px(field, splats, &cams, &times, Some(mid));
+    let motion_px_quantiles = quantiles(&motion, [0.5, 0.9, 0.99]);
+    keep_colour_changes_dynamic(field, splats, false, &times, mid, &mut motion);
+    let (d, _) = field::splat_deltas(field, splats, mid, false);
+    let frozen = field::deform_splats(splats, &d);
+    let model = super::sizing::split(splats, &frozen, &motion, tolerance_px);
+    let dynamic = model.dynamic.iter().filter(|&&d| d).count();
     let summary = SplitSummary {
         iteration,
         tolerance_px,
         dynamic,
         static_: splats.len() - dynamic,
-        motion_px_quantiles: quantiles(&motion, [0.5, 0.9, 0.99]),
+        motion_px_quantiles,
     };
-    (flags, summary)
+    (model, summary)
 }
 
 /// Quantiles `qs` (in [0, 1]) of `v` (nearest rank; 0 for an empty `v`).
@@ -257,18 +280,22 @@ mod tests {
         let cams = [camera()];
         let times = sample_times(&[0.0, 0.5, 1.0]);
         assert_eq!(times.len(), SAMPLES);
-        let m = field_motion_px(&mlp, &splats, &cams, &times);
+        let m = field_motion_px(&mlp, &splats, &cams, &times, None);
         assert_eq!(m, vec![0.0, 0.0]);
 
         // Head bias δμ = (0.01, 0, 0) with a zero head weight: a constant shift, seen
         // as 0.01·f/z pixels from the camera at distance z (3 and 6 here).
         let head = *mlp.layers.last().unwrap();
         mlp.params[head.bias] = 0.01;
-        let m = field_motion_px(&mlp, &splats, &cams, &times);
+        let m = field_motion_px(&mlp, &splats, &cams, &times, None);
         let f = cams[0].intrinsics.fx as f32;
         // A shift at every time alike is no motion from the middle of the recording.
         assert_eq!(
             centre_motion_px(&mlp, &splats, false, &cams, &times, 0.5),
+            vec![0.0, 0.0]
+        );
+        assert_eq!(
+            field_motion_px(&mlp, &splats, &cams, &times, Some(0.5)),
             vec![0.0, 0.0]
         );
         assert!((m[0] - 0.01 * f / 3.0).abs() < 1e-4, "{m:?}");
@@ -280,7 +307,7 @@ mod tests {
             0.0,
             [0.5; 3],
         ));
-        assert_eq!(field_motion_px(&mlp, &splats, &cams, &times)[2], 0.0);
+        assert_eq!(field_motion_px(&mlp, &splats, &cams, &times, None)[2], 0.0);
         assert_eq!(
             quantiles(&[3.0, 1.0, 2.0, 4.0, 5.0], [0.0, 0.5, 1.0]),
             [1.0, 3.0, 5.0]
@@ -289,6 +316,22 @@ mod tests {
             dynamic_flags(&[0.2, 0.6, 0.5], 0.5),
             vec![false, true, false]
         );
+    }
+
+    use crate::field::Deltas;
+
+    /// The motion of the Gaussians of `splats` under deltas `d`, from canonical.
+    fn motion_under(splats: &Splats, d: &Deltas) -> f32 {
+        let canon = field::apply_deltas(
+            &splats.means,
+            &splats.log_scales,
+            &splats.rotations,
+            &Deltas::zeros(splats.len()),
+        );
+        let moved = field::apply_deltas(&splats.means, &splats.log_scales, &splats.rotations, d);
+        let mut w = vec![0.0];
+        accumulate_motion(&canon, &moved, &mut w);
+        w[0]
     }
 
     #[test]
@@ -303,16 +346,14 @@ mod tests {
         let mut d = Deltas::zeros(1);
         // δs = +0.01 on a scale of 0.1: 10 % larger → 0.1 · 0.1 = 0.01 world units.
         d.ds = vec![[0.01, 0.0, 0.0]];
-        let mut w = vec![0.0];
-        accumulate_motion(&splats, &d, &mut w);
-        assert!((w[0] - 0.01).abs() < 1e-5, "{}", w[0]);
+        let w = motion_under(&splats, &d);
+        assert!((w - 0.01).abs() < 1e-5, "{w}");
         // δq turning the identity by θ about z: q = (cos θ/2, 0, 0, sin θ/2).
         let th = 0.2f32;
         let mut d = Deltas::zeros(1);
         let q0 = splats.rotations[0];
         d.dq = vec![[(th / 2.0).cos() - q0[0], 0.0, 0.0, (th / 2.0).sin() - q0[3]]];
-        let mut w = vec![0.0];
-        accumulate_motion(&splats, &d, &mut w);
-        assert!((w[0] - 0.1 * th).abs() < 1e-5, "{}", w[0]);
+        let w = motion_under(&splats, &d);
+        assert!((w - 0.1 * th).abs() < 1e-5, "{w}");
     }
 }
