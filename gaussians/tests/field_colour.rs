@@ -9,19 +9,12 @@ use gaussians::field::{FieldSettings, Mlp};
 use gaussians::raster::TileRasterizer;
 use gaussians::raster::reference::{self, Gaussians64};
 use gaussians::train::{TrainSettings, Trainer};
-use raster_common::{Rng, SceneKind};
+use raster_common::Rng;
 
 #[test]
 fn the_colour_fields_gradient_matches_finite_differences() {
     let mut rng = Rng(91);
-    let kind = SceneKind {
-        n: 8,
-        spread: 1.2,
-        log_scale: (-2.6, -1.4),
-        logit: (-0.5, 1.2),
-        sh_rest: 0.0,
-    };
-    let splats = raster_common::random_splats(&mut rng, kind);
+    let splats = raster_common::random_splats(&mut rng, raster_common::SMOOTH);
     let field = FieldSettings {
         depth: 2,
         width: 8,
@@ -53,8 +46,8 @@ fn the_colour_fields_gradient_matches_finite_differences() {
         tr.field.params[head.bias + k] = 0.0;
     }
     assert!(tr.field_on());
-    let (w, h) = (37u32, 29u32);
-    let cam = raster_common::camera(w, h, 34.0, glam::DVec3::new(0.1, 0.3, 4.0));
+    let cam = raster_common::smooth_camera();
+    let (w, h) = (cam.intrinsics.width, cam.intrinsics.height);
     let t = 0.35f32;
     let weights: Vec<f64> = (0..3 * w * h).map(|_| rng.uni(-1.0, 1.0)).collect();
     let w32: Vec<f32> = weights.iter().map(|&x| x as f32).collect();

@@ -49,16 +49,9 @@ fn a_centre_follows_its_quadratic_path() {
 #[test]
 fn the_trainer_gradient_of_the_trajectories_matches_finite_differences() {
     use gaussians::raster::reference::{self, Gaussians64};
-    use raster_common::{Rng, SceneKind};
+    use raster_common::Rng;
     let mut rng = Rng(77);
-    let kind = SceneKind {
-        n: 8,
-        spread: 1.2,
-        log_scale: (-2.6, -1.4),
-        logit: (-0.5, 1.2),
-        sh_rest: 0.0,
-    };
-    let mut splats = raster_common::random_splats(&mut rng, kind);
+    let mut splats = raster_common::random_splats(&mut rng, raster_common::SMOOTH);
     let n = splats.len();
     splats.motion = random_motion(n, 4, 0.3);
     let s = TrainSettings {
@@ -66,8 +59,8 @@ fn the_trainer_gradient_of_the_trajectories_matches_finite_differences() {
         ..TrainSettings::default()
     };
     let tr = Trainer::new(s, splats, 1.0);
-    let (w, h) = (37u32, 29u32);
-    let cam = raster_common::camera(w, h, 34.0, glam::DVec3::new(0.1, 0.3, 4.0));
+    let cam = raster_common::smooth_camera();
+    let (w, h) = (cam.intrinsics.width, cam.intrinsics.height);
     let t = 0.9f32;
     let weights: Vec<f64> = (0..3 * w * h).map(|_| rng.uni(-1.0, 1.0)).collect();
     let w32: Vec<f32> = weights.iter().map(|&x| x as f32).collect();

@@ -348,21 +348,24 @@ fn default_field_starts_as_the_identity() {
     }
 }
 
-/// The static/dynamic split happens once, at its iteration, flags the Gaussians the field
-/// moves by at most the tolerance, and freezes them at their canonical parameters; when
-/// it finds every Gaussian static, the model drops its field.
-#[test]
-fn static_split_flags_and_freezes_the_gaussians_the_field_barely_moves() {
-    let cams = cameras(2);
-    let views: Vec<View> = cams
-        .iter()
+/// Grey views from `cams` at times 0, 1, 2, ….
+fn grey_views(cams: &[Camera]) -> Vec<View> {
+    cams.iter()
         .enumerate()
         .map(|(k, c)| View {
             camera: *c,
             time: k as f32,
             rgb: vec![0.5; 3 * W * H],
         })
-        .collect();
+        .collect()
+}
+
+/// The static/dynamic split happens once, at its iteration, flags the Gaussians the field
+/// moves by at most the tolerance, and freezes them at their canonical parameters; when
+/// it finds every Gaussian static, the model drops its field.
+#[test]
+fn static_split_flags_and_freezes_the_gaussians_the_field_barely_moves() {
+    let views = grey_views(&cameras(2));
     let run = |tolerance_px: f32| {
         let s = TrainSettings {
             iterations: 8,
@@ -413,16 +416,7 @@ fn static_split_flags_and_freezes_the_gaussians_the_field_barely_moves() {
 fn the_split_bakes_a_constant_shift_and_keeps_moving_gaussians_dynamic() {
     use gaussians::field::{FieldSettings, Mlp};
     use gaussians::train::static_split;
-    let cams = cameras(2);
-    let views: Vec<View> = cams
-        .iter()
-        .enumerate()
-        .map(|(k, c)| View {
-            camera: *c,
-            time: k as f32,
-            rgb: vec![0.5; 3 * W * H],
-        })
-        .collect();
+    let views = grey_views(&cameras(2));
     let settings = FieldSettings {
         width: 8,
         depth: 2,

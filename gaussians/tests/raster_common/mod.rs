@@ -56,6 +56,23 @@ pub struct SceneKind {
     pub sh_rest: f64,
 }
 
+/// Eight Gaussians a few pixels to ten wide in front of [`smooth_camera`], SH degree 0:
+/// a rendered loss is smooth in every parameter (the gradient checks of a trainer).
+#[allow(dead_code)]
+pub const SMOOTH: SceneKind = SceneKind {
+    n: 8,
+    spread: 1.2,
+    log_scale: (-2.6, -1.4),
+    logit: (-0.5, 1.2),
+    sh_rest: 0.0,
+};
+
+/// The 37 × 29 camera the gradient checks render [`SMOOTH`] scenes with.
+#[allow(dead_code)]
+pub fn smooth_camera() -> Camera {
+    camera(37, 29, 34.0, DVec3::new(0.1, 0.3, 4.0))
+}
+
 /// Random Gaussians around the origin (camera at distance ≈ 4 on +Z).
 pub fn random_splats(rng: &mut Rng, k: SceneKind) -> Splats {
     (0..k.n)
