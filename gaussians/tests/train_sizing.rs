@@ -326,7 +326,7 @@ fn a_split_bakes_the_still_gaussians() {
         l[1] -= 0.5;
     }
     let motion: Vec<f32> = (0..60).map(|i| i as f32 * 0.1).collect();
-    let s = gaussians::train::sizing::split(&canonical, &frozen, &motion, 2.0);
+    let s = gaussians::train::static_split::split(&canonical, &frozen, &motion, 2.0);
     for i in 0..60 {
         let (src, dynamic) = if i <= 20 {
             (&frozen, false)

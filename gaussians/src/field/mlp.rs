@@ -9,9 +9,7 @@ use super::linalg::{Real, View, matmul};
 use super::settings::FieldSettings;
 use rand::{RngExt, SeedableRng};
 
-/// Number of geometric head outputs: δx (3), δq (4), δs (3); a colour field adds δc
-/// (3) after them ([`FieldSettings::head_out`]).
-pub const HEAD_OUT: usize = 10;
+pub use super::settings::HEAD_OUT;
 
 /// Offsets of one linear layer inside the flat parameter vector. Weights are stored
 /// `[in × out]` row-major (so `y = a · W + b`).

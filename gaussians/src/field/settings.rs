@@ -2,6 +2,10 @@
 
 use serde::{Deserialize, Serialize};
 
+/// Number of geometric head outputs: δx (3), δq (4), δs (3); a colour field adds δc
+/// (3) after them ([`FieldSettings::head_out`]).
+pub const HEAD_OUT: usize = 10;
+
 /// Field hyper-parameters (saved as `field.json`).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -30,7 +34,7 @@ pub struct FieldSettings {
 impl FieldSettings {
     /// Outputs of the head: δx (3), δq (4), δs (3), and δc (3) with [`Self::color`].
     pub fn head_out(&self) -> usize {
-        super::mlp::HEAD_OUT + if self.color { 3 } else { 0 }
+        HEAD_OUT + if self.color { 3 } else { 0 }
     }
 }
 

@@ -185,22 +185,6 @@ pub struct SplitChoice {
 /// Tolerances tried for the split: `split_max_px`, its half, quarter, eighth.
 const SPLIT_STEPS: u32 = 4;
 
-/// `canonical` with the Gaussians that move by at most `tolerance_px` (`motion`) taken
-/// from `frozen` and flagged static, the others flagged dynamic.
-pub fn split(canonical: &Splats, frozen: &Splats, motion: &[f32], tolerance_px: f32) -> Splats {
-    let mut out = canonical.clone();
-    out.dynamic = motion.iter().map(|&m| m > tolerance_px).collect();
-    for (i, &dynamic) in out.dynamic.iter().enumerate() {
-        if !dynamic {
-            out.means[i] = frozen.means[i];
-            out.log_scales[i] = frozen.log_scales[i];
-            out.rotations[i] = frozen.rotations[i];
-            out.sh_dc[i] = frozen.sh_dc[i];
-        }
-    }
-    out
-}
-
 /// The lowest SH degree below `current` whose PSNR reaches `target` (`current` when
 /// none does), with the PSNR of each degree tested.
 pub(crate) fn choose_sh_degree(
@@ -398,7 +382,7 @@ pub fn decide<R: Rasterizer>(
             // The largest tolerance whose split stays within the budget.
             for k in 0..SPLIT_STEPS {
                 let tolerance_px = size.split_max_px / (1 << k) as f32;
-                let model = split(splats, f, &motion, tolerance_px);
+                let model = static_split::split(splats, f, &motion, tolerance_px);
                 let p = judge.psnr(&Candidate {
                     splats: &model,
                     dynamic_only: true,

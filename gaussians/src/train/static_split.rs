@@ -217,7 +217,7 @@ pub fn decide(
     keep_colour_changes_dynamic(field, splats, false, &times, mid, &mut motion);
     let (d, _) = field::splat_deltas(field, splats, mid, false);
     let frozen = field::deform_splats(splats, &d);
-    let model = super::sizing::split(splats, &frozen, &motion, tolerance_px);
+    let model = split(splats, &frozen, &motion, tolerance_px);
     let dynamic = model.dynamic.iter().filter(|&&d| d).count();
     let summary = SplitSummary {
         iteration,
@@ -227,6 +227,22 @@ pub fn decide(
         motion_px_quantiles,
     };
     (model, summary)
+}
+
+/// `canonical` with the Gaussians that move by at most `tolerance_px` (`motion`) taken
+/// from `frozen` and flagged static, the others flagged dynamic.
+pub fn split(canonical: &Splats, frozen: &Splats, motion: &[f32], tolerance_px: f32) -> Splats {
+    let mut out = canonical.clone();
+    out.dynamic = motion.iter().map(|&m| m > tolerance_px).collect();
+    for (i, &dynamic) in out.dynamic.iter().enumerate() {
+        if !dynamic {
+            out.means[i] = frozen.means[i];
+            out.log_scales[i] = frozen.log_scales[i];
+            out.rotations[i] = frozen.rotations[i];
+            out.sh_dc[i] = frozen.sh_dc[i];
+        }
+    }
+    out
 }
 
 /// Quantiles `qs` (in [0, 1]) of `v` (nearest rank; 0 for an empty `v`).
