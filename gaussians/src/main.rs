@@ -82,8 +82,8 @@ fn run(verb: Verb) -> scene::Result<ExitCode> {
     match verb {
         Verb::Settings(a) => stagekit::verb::run::<TrainSettings>(&a, stagekit::verb::no_files),
         Verb::Train(args) => {
-            let total = stage::resolve_settings(&args)?.iterations;
-            let progress = TrainProgress::new(total);
+            let (iterations, schedule) = stage::work_schedule(&args)?;
+            let progress = TrainProgress::new(iterations, schedule);
             let result = stage::train(&args, sigint_flag(), |s| progress.step(s));
             progress.finish();
             let o = result?;

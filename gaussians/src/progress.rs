@@ -9,8 +9,9 @@ use stagekit::Progress;
 pub struct TrainProgress(Progress);
 
 impl TrainProgress {
-    pub fn new(iterations: u32) -> Self {
-        TrainProgress(Progress::new("iteration", iterations as u64))
+    /// `schedule`: the steps' expected relative costs (`train::work_schedule`).
+    pub fn new(iterations: u32, schedule: stagekit::Schedule) -> Self {
+        TrainProgress(Progress::new("iteration", iterations as u64).with_schedule(schedule))
     }
 
     pub fn step(&self, s: &StepInfo) {

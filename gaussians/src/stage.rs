@@ -11,7 +11,6 @@
 
 use crate::model::Model;
 use crate::raster::TileRasterizer;
-use crate::splats::Splats;
 use crate::train::settings::Init;
 use crate::train::{StepInfo, TrainSettings, Trainer, View, init};
 use scene::atomic::{AtomicDir, OutputRule, write_json_atomic};
@@ -328,59 +327,14 @@ pub fn write_depths(model: &Model, views: &[View], dir: &Path) -> Result<()> {
     Ok(())
 }
 
-/// Initial Gaussians: the PLY if given (all flagged dynamic), else as `settings.init`
-/// says; with the number of them placed on surfaces (PLY points or stereo points) and
-/// the number of fully transparent PLY Gaussians dropped; the moving tracks' term into
-/// `tracks` (`init = "tracks"`).
-fn initial_splats(
-    settings: &TrainSettings,
-    views: &[View],
-    ply: Option<&Path>,
-    tracks: &mut crate::tracks::loss::TrackTerm,
-) -> Result<(Splats, usize, usize)> {
-    match ply {
-        Some(p) => {
-            let r = crate::ply::read_counted(p)?;
-            let mut s = r.splats;
-            if s.is_empty() {
-                return Err(Error::invalid(p, "the point cloud has no Gaussians"));
-            }
-            s.dynamic = vec![true; s.len()];
-            let n = s.len();
-            Ok((s, n, r.dropped_transparent))
-        }
-        None => {
-            let cams: Vec<_> = views.iter().map(|v| v.camera).collect();
-            let n = settings.init_points;
-            let (near, far) = (settings.init_near, settings.init_far);
-            let (splats, surface) = match settings.init {
-                Init::Stereo => {
-                    init::stereo_splats(views, n, near, far, &settings.stereo, settings.seed)
-                }
-                Init::Tracks => {
-                    let (mut s, found) =
-                        init::stereo_splats(views, n, near, far, &settings.stereo, settings.seed);
-                    let images: Vec<_> = (views.iter())
-                        .map(|v| crate::tracks::Image {
-                            camera: &v.camera,
-                            time: v.time as f64,
-                            rgb: &v.rgb,
-                        })
-                        .collect();
-                    let table = crate::tracks::add_moving(&mut s, &images, 1, &settings.tracks);
-                    let moving = table.len();
-                    *tracks = crate::tracks::loss::TrackTerm::new(table);
-                    (s, found + moving)
-                }
-                Init::Frustum => (init::frustum_splats(&cams, n, near, far, settings.seed), 0),
-                Init::Box => {
-                    let (centre, half) = init::camera_bounds(&cams);
-                    (init::random_splats(n, centre, half, settings.seed), 0)
-                }
-            };
-            Ok((splats, surface, 0))
-        }
-    }
+/// The run's iterations and their expected relative costs for the progress display's
+/// time left (`train::work_schedule`, at the scene's frame size).
+pub fn work_schedule(args: &TrainArgs) -> Result<(u32, stagekit::Schedule)> {
+    let settings = resolve_settings(args)?;
+    let camera = Scene::open(&args.stage.scene)?.train.camera;
+    let pixels = camera.width as usize * camera.height as usize;
+    let schedule = crate::train::work_schedule(&settings, pixels);
+    Ok((settings.iterations, schedule))
 }
 
 /// The extent that scales learning rates and densification: the setting, or the larger
@@ -429,8 +383,13 @@ pub fn train(
     )?;
     phases.start("init");
     let mut tracks = crate::tracks::loss::TrackTerm::default();
-    let (mut splats, init_surface_points, init_ply_dropped_transparent) =
-        initial_splats(&settings, &views, args.init_ply.as_deref(), &mut tracks)?;
+    let (mut splats, init_surface_points, init_ply_dropped_transparent) = init::initial_splats(
+        &settings,
+        &views,
+        args.init_ply.as_deref(),
+        &mut tracks,
+        &scene,
+    )?;
     if let (Some(m), Some(p)) = (&args.init_motion, &args.init_ply) {
         if init_ply_dropped_transparent > 0 {
             return Err(Error::invalid(

@@ -25,7 +25,7 @@ fn train_help_shows_the_settings_defaults() {
         let line = flag_help(&help, flag);
         assert!(line.contains(&format!("[default: {default}]")), "{line}");
     }
-    assert!(flag_help(&help, "--init").contains("[default: stereo]"));
+    assert!(flag_help(&help, "--init").contains("[default: auto]"));
 }
 
 #[test]

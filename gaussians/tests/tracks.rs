@@ -119,6 +119,7 @@ fn observe<'a>(
             camera: c,
             pixel: c.project_world(path(t - 0.5)).expect("in front").0,
             tau: t - 0.5,
+            depth: None,
         })
         .collect()
 }
@@ -138,7 +139,7 @@ fn the_lift_recovers_still_points_and_quadratic_trajectories_exactly() {
         DVec3::new(-0.5, 0.8, 0.3),
     );
     let obs = observe(&cams, &times, |t| mu + v * t + a * t * t);
-    let moving = lift::moving(&obs, lift::still(&obs).unwrap(), 0.0).unwrap();
+    let moving = lift::moving(&obs, lift::still(&obs).unwrap(), 0.0, 0.0).unwrap();
     let Lifted::Moving {
         mu: m,
         v: vv,
@@ -177,12 +178,64 @@ fn the_ridge_picks_the_still_acceleration_when_the_camera_path_is_quadratic() {
     let (mu, v) = (DVec3::new(0.2, 0.1, 0.0), DVec3::new(-0.6, 0.3, 0.5));
     let obs = observe(&cams, &times, |t| mu + v * t);
     let guess = lift::still(&obs).unwrap();
-    let Lifted::Moving { mu: m, v: vv, a } = lift::moving(&obs, guess, 10.0).unwrap() else {
+    let Lifted::Moving { mu: m, v: vv, a } = lift::moving(&obs, guess, 10.0, 0.0).unwrap() else {
         panic!("moving")
     };
     assert!(
         a.length() < 1e-3 && m.distance(mu) < 1e-3 && vv.distance(v) < 1e-3,
         "{m} {vv} {a}"
+    );
+}
+
+/// The camera on a parabola and the point accelerating: every member of the family
+/// `C(τ) + s (X(τ) − C(τ))` is a quadratic, so the rays alone cannot tell `s` and the
+/// ridge picks a wrong one; the true depths (what an aligned prior gives) pin it.
+#[test]
+fn depth_rows_fix_the_distance_the_rays_leave_free() {
+    let k = Intrinsics::from_fov_x(96, 96, 60f64.to_radians());
+    let times: Vec<f64> = (0..9).map(|i| i as f64 / 8.0).collect();
+    let cams: Vec<Camera> = times
+        .iter()
+        .map(|&t| {
+            let tau = t - 0.5;
+            let eye = DVec3::new(1.5 * tau, 0.3 + 2.0 * tau * tau, 4.0);
+            Camera {
+                intrinsics: k,
+                cam_to_world: Pose::new(DQuat::IDENTITY, eye),
+            }
+        })
+        .collect();
+    let (mu, v, a) = (
+        DVec3::new(0.2, 0.1, 0.0),
+        DVec3::new(-0.6, 0.3, 0.5),
+        DVec3::new(0.4, -0.3, 0.2),
+    );
+    let path = |t: f64| mu + v * t + a * t * t;
+    let mut obs = observe(&cams, &times, path);
+    let guess = lift::still(&obs).unwrap();
+    let err = |l: Lifted| {
+        (0..9)
+            .map(|i| {
+                l.at(i as f64 / 8.0 - 0.5)
+                    .distance(path(i as f64 / 8.0 - 0.5))
+            })
+            .fold(0.0, f64::max)
+    };
+    let rays_only = lift::moving(&obs, guess, 10.0, 0.05).unwrap();
+    assert!(err(rays_only) > 0.05, "rays alone: {}", err(rays_only));
+    for o in &mut obs {
+        o.depth = Some(o.camera.project_world(path(o.tau)).unwrap().1);
+    }
+    let with_depth = lift::moving(&obs, guess, 0.0, 0.05).unwrap();
+    assert!(err(with_depth) < 1e-6, "with depths: {}", err(with_depth));
+    // The small ridge kept with depths (`depth_ridge`) barely pulls; the rays-only
+    // ridge would (0.22 here).
+    let both = lift::moving(&obs, guess, 1e-3, 0.05).unwrap();
+    assert!(
+        err(both) < 0.02 * err(rays_only),
+        "{} vs {}",
+        err(both),
+        err(rays_only)
     );
 }
 
@@ -215,7 +268,7 @@ fn chained_tracks_follow_a_moving_texture_and_classify_it() {
     }
     // One camera centre: every ray passes through it, so no still point fits and no
     // depth is defined; the lift must not invent one.
-    let lifted = lift_track(&frames, &tr, &st);
+    let lifted = lift_track(&frames, &tr, &st, &[]);
     assert!(
         lifted.is_none_or(|l| !matches!(l, Lifted::Still(_))),
         "{lifted:?}"
@@ -419,4 +472,73 @@ fn the_tracks_file_reads_back_and_refuses_what_does_not_fit() {
         let e = read(&path, n, views).unwrap_err().to_string();
         assert!(e.contains(TRACKS_FILE), "{e}");
     }
+}
+
+/// Three cameras over a still plane 4 units away, the priors its true depth except where
+/// frame 0 sees something 2.5 units away in front of one point: a Gaussian on the plane
+/// stays (also the one hidden in one frame of three), one floating 1.5 units in front of
+/// it (where a stereo init puts a moving object) goes.
+#[test]
+fn the_prior_drops_initial_gaussians_off_its_surface() {
+    use gaussians::splats::{Gaussian, Splats};
+    use gaussians::tracks::{depth::Aligned, drop_where_prior_disagrees};
+    let (w, h) = (32usize, 32usize);
+    let k = Intrinsics::from_fov_x(w as u32, h as u32, 60f64.to_radians());
+    let cams: Vec<Camera> = [-0.4, 0.0, 0.4]
+        .iter()
+        .map(|&x| Camera {
+            intrinsics: k,
+            cam_to_world: Pose::new(DQuat::IDENTITY, DVec3::new(x, 0.0, 4.0)),
+        })
+        .collect();
+    let frames: Vec<Frame> = (cams.iter().enumerate())
+        .map(|(i, c)| Frame {
+            camera: c,
+            time: i as f64 / 2.0,
+            pyramid: Pyramid::new(texture(w, h, Vec2::ZERO), 1),
+        })
+        .collect();
+    let hidden = DVec3::new(0.5, 0.3, 0.0);
+    let depths: Vec<Option<Aligned>> = cams
+        .iter()
+        .enumerate()
+        .map(|(i, c)| {
+            let mut z = vec![4.0f32; w * h];
+            if i == 0 {
+                let (p, _) = c.project_world(hidden).unwrap();
+                for dy in -2..=2 {
+                    for dx in -2..=2 {
+                        let (x, y) = (p.x.round() as i64 + dx, p.y.round() as i64 + dy);
+                        z[y as usize * w + x as usize] = 2.5;
+                    }
+                }
+            }
+            Some(Aligned {
+                width: w,
+                height: h,
+                z,
+                median_rel_error: 0.0,
+                points: 0,
+            })
+        })
+        .collect();
+    let mut s = Splats::default();
+    for p in [
+        [0.0, 0.0, 0.0],
+        [0.5, 0.3, 0.0],
+        [-0.2, 0.1, 1.5],
+        [0.1, -0.3, 0.0],
+    ] {
+        s.push(Gaussian::isotropic(p, -3.0, 0.0, [0.0; 3]));
+    }
+    assert_eq!(
+        drop_where_prior_disagrees(&mut s, &frames, &depths, 0.15),
+        1
+    );
+    assert_eq!(s.len(), 3);
+    let kept: Vec<[f32; 3]> = (0..3).map(|i| s.get(i).mean).collect();
+    assert_eq!(
+        kept,
+        vec![[0.0, 0.0, 0.0], [0.5, 0.3, 0.0], [0.1, -0.3, 0.0]]
+    );
 }

@@ -15,14 +15,26 @@ pub struct StageProgress {
     pub total: u64,
     /// Seconds since the stage began this piece of work (its own clock).
     pub elapsed_s: f64,
-    /// Seconds left at the rate so far; None before the first step is done.
+    /// Seconds left at the rate so far, or the stage's own estimate; None before the
+    /// first step is done.
     pub eta_s: Option<f64>,
+    /// `eta_s` is the stage's estimate from its schedule (`… | left N s`), kept as is.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub eta_from_stage: bool,
 }
 
 /// Read one output line; None for lines that are not progress lines.
 pub fn parse(line: &str) -> Option<StageProgress> {
     let rest = line.strip_prefix('[')?;
     let (secs, rest) = rest.split_once(" s] ")?;
+    // The stage's own estimate, when it ends the line: `… | left 412 s`.
+    let (rest, stage_left) = match rest.rsplit_once(stagekit::progress::LEFT_MARK) {
+        Some((head, tail)) => match tail.strip_suffix(" s").map(str::parse::<f64>) {
+            Some(Ok(v)) if v.is_finite() && v >= 0.0 => (head.trim_end(), Some(v)),
+            _ => (rest, None),
+        },
+        None => (rest, None),
+    };
     let elapsed_s: f64 = secs.trim().parse().ok()?;
     // `LABEL POS/TOTAL` then optionally `: MSG`; the label may hold spaces.
     let head = rest.split_once(": ").map_or(rest, |(h, _)| h);
@@ -38,7 +50,8 @@ pub fn parse(line: &str) -> Option<StageProgress> {
         done,
         total,
         elapsed_s,
-        eta_s,
+        eta_s: stage_left.or(eta_s),
+        eta_from_stage: stage_left.is_some(),
     })
 }
 
@@ -60,6 +73,9 @@ impl RecentRate {
     /// `p` with its time left at the rate of its phase's last [`RECENT_LINES`] lines (at
     /// the rate since the phase began until there are two lines).
     pub fn update(&mut self, mut p: StageProgress) -> StageProgress {
+        if p.eta_from_stage {
+            return p;
+        }
         if p.label != self.label {
             self.label = p.label.clone();
             self.seen.clear();
@@ -77,15 +93,7 @@ impl RecentRate {
     }
 }
 
-/// `2 min 05 s`, `45 s`, `1 h 03 min`.
-pub fn fmt_duration(s: f64) -> String {
-    let s = s.max(0.0).round() as u64;
-    match s {
-        0..60 => format!("{s} s"),
-        60..3600 => format!("{} min {:02} s", s / 60, s % 60),
-        _ => format!("{} h {:02} min", s / 3600, (s % 3600) / 60),
-    }
-}
+pub use stagekit::progress::fmt_duration;
 
 impl StageProgress {
     /// `iteration 1200/3000 (40 %), about 2 min 10 s left`.
@@ -170,8 +178,39 @@ mod tests {
             total: 10,
             elapsed_s: 2.0,
             eta_s: Some(18.0),
+            eta_from_stage: false,
         });
         assert_eq!(p.eta_s, Some(18.0));
+    }
+
+    /// A stage that knows its schedule ends its lines with its own estimate: the runner
+    /// shows that, not the rate of the recent lines.
+    #[test]
+    fn the_stages_own_estimate_is_kept() {
+        let line = stagekit::progress::plain_line(
+            30.0,
+            "iteration",
+            350,
+            3500,
+            "loss 0.06  PSNR 18.90 dB",
+        );
+        let p = parse(&format!("{line} | left 1862 s")).unwrap();
+        assert_eq!(
+            (p.done, p.total, p.eta_s, p.eta_from_stage),
+            (350, 3500, Some(1862.0), true)
+        );
+        let mut r = RecentRate::default();
+        r.update(parse("[   10.0 s] iteration 175/3500 | left 1900 s").unwrap());
+        assert_eq!(r.update(p).eta_s, Some(1862.0));
+        assert_eq!(
+            parse("[   30.0 s] iteration 350/3500 | left 1862 s")
+                .unwrap()
+                .line(),
+            "iteration 350/3500 (10 %), about 31 min 02 s left"
+        );
+        // Not a number: an ordinary message.
+        let q = parse("[   30.0 s] iteration 350/3500: a | left x s").unwrap();
+        assert!(!q.eta_from_stage && (q.eta_s.unwrap() - 270.0).abs() < 1e-9);
     }
 
     #[test]

@@ -7,6 +7,7 @@
 pub mod atomic;
 pub mod camera;
 pub mod check;
+pub mod depth_prior;
 pub mod error;
 pub mod evaluation;
 pub mod events;

@@ -1,7 +1,8 @@
 //! The stage kit: what every degs binary does the same way: the flags they share
 //! ([`args`]), settings files ([`settings`]) and the
 //! defaults their flags show in `--help` ([`help`]), progress on stderr and Ctrl-C
-//! ([`progress`]), the `settings` verb through which the runner learns a stage's
+//! ([`progress`]; with the time left of steps that cost unlike amounts, [`schedule`]),
+//! the `settings` verb through which the runner learns a stage's
 //! settings ([`verb`]), the one-line error exit ([`exit_on_error`]), the phase timings and
 //! peak memory of each stage's `report.json` ([`report`]), and Adam with its learning-rate
 //! schedule, shared by every trainer ([`optim`]).
@@ -11,12 +12,14 @@ pub mod help;
 pub mod optim;
 pub mod progress;
 pub mod report;
+pub mod schedule;
 pub mod settings;
 pub mod verb;
 
 pub use args::{OutputArgs, StageArgs, TrainingArgs};
 pub use help::{parse_with, show_defaults, with_default};
 pub use progress::{Progress, sigint_flag};
+pub use schedule::Schedule;
 pub use settings::Settings;
 pub use verb::SettingsArgs;
 

@@ -1,6 +1,7 @@
 //! Progress on stderr for long work: an indicatif bar on a terminal, a plain line every
 //! twentieth of the work otherwise (logs and CI), and Ctrl-C as a flag the work polls.
 
+use crate::schedule::{Schedule, TimeLeft};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::io::IsTerminal;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -12,6 +13,8 @@ pub struct Progress {
     label: String,
     total: u64,
     start: Instant,
+    /// The stage's own estimate of the time left, from its schedule.
+    time_left: Option<TimeLeft>,
 }
 
 impl Progress {
@@ -42,7 +45,24 @@ impl Progress {
             label: label.to_string(),
             total,
             start: Instant::now(),
+            time_left: None,
         }
+    }
+
+    /// Estimate the time left from `schedule` (steps that cost unlike amounts): the
+    /// estimate leads the message on a terminal and ends each plain line as
+    /// `| left N s`, which the runner shows instead of its own guess from the rate.
+    pub fn with_schedule(mut self, schedule: Schedule) -> Self {
+        if let Some(b) = &self.bar {
+            let style = ProgressStyle::with_template(
+                "{prefix} {elapsed_precise} [{bar:30}] {pos}/{len} {msg}",
+            )
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> ");
+            b.set_style(style);
+        }
+        self.time_left = Some(TimeLeft::new(schedule, self.total));
+        self
     }
 
     /// Change the number of steps (work whose size is known only once it started).
@@ -55,17 +75,27 @@ impl Progress {
 
     /// Step `pos` of the total is done; `msg` (built only when shown) says how it went.
     pub fn set(&self, pos: u64, msg: impl FnOnce() -> String) {
+        let secs = self.start.elapsed().as_secs_f64();
+        let left = (self.time_left.as_ref()).and_then(|t| t.update(pos, secs));
         match &self.bar {
             Some(b) => {
                 b.set_position(pos);
                 if pos.is_multiple_of(10) || pos == self.total {
-                    b.set_message(msg());
+                    match left.filter(|_| pos < self.total) {
+                        Some(l) => {
+                            b.set_message(format!("about {} left  {}", fmt_duration(l), msg()))
+                        }
+                        None => b.set_message(msg()),
+                    }
                 }
             }
             None => {
                 if shows_line(pos, self.total) {
-                    let secs = self.start.elapsed().as_secs_f64();
-                    eprintln!("{}", plain_line(secs, &self.label, pos, self.total, &msg()));
+                    let mut line = plain_line(secs, &self.label, pos, self.total, &msg());
+                    if let Some(l) = left {
+                        line += &format!(" {LEFT_MARK}{:.0} s", l.max(0.0));
+                    }
+                    eprintln!("{line}");
                 }
             }
         }
@@ -90,6 +120,20 @@ impl Progress {
 /// step when there are fewer than 20) and the last step.
 fn shows_line(pos: u64, total: u64) -> bool {
     pos.is_multiple_of((total / 20).max(1)) || pos == total
+}
+
+/// What ends a plain line that carries the stage's own estimate of the time left
+/// (`… | left 412 s`).
+pub const LEFT_MARK: &str = "| left ";
+
+/// `2 min 05 s`, `45 s`, `1 h 03 min`.
+pub fn fmt_duration(s: f64) -> String {
+    let s = s.max(0.0).round() as u64;
+    match s {
+        0..60 => format!("{s} s"),
+        60..3600 => format!("{} min {:02} s", s / 60, s % 60),
+        _ => format!("{} h {:02} min", s / 3600, (s % 3600) / 60),
+    }
 }
 
 /// `[   12.3 s] LABEL POS/TOTAL: MSG` (without `: MSG` when the message is empty): the

@@ -32,11 +32,13 @@ impl Lifted {
     }
 }
 
-/// One observation: the camera, the pixel, and `τ = t − T0` of the frame.
+/// One observation: the camera, the pixel, and `τ = t − T0` of the frame; with a
+/// depth prior, the point's camera-space depth there (`tracks::depth`).
 pub struct Observation<'a> {
     pub camera: &'a Camera,
     pub pixel: DVec2,
     pub tau: f64,
+    pub depth: Option<f64>,
 }
 
 /// Root-mean-square reprojection error (pixels) of a lifted point over the
@@ -76,35 +78,48 @@ pub fn still(obs: &[Observation]) -> Option<DVec3> {
 
 /// The quadratic trajectory through the rays, rows weighted by `1 / depth²` of `guess`
 /// (a still triangulation); `None` when the system is singular.
-pub fn moving(obs: &[Observation], guess: DVec3, ridge: f64) -> Option<Lifted> {
+///
+/// With `depth_sigma > 0`, each observation with a depth `z` adds the row `fᵀ(X(τ) − c)
+/// = z` (`f` the camera's forward axis), weighted so that a relative depth error of
+/// `depth_sigma` costs as much as one pixel of reprojection error: `1 / (f_x σ z)²`
+/// against the rays' `1 / depth²` (their residual, divided by the depth, is an angle,
+/// a pixel being `1 / f_x` of it). These rows fix the distance the rays leave free.
+pub fn moving(obs: &[Observation], guess: DVec3, ridge: f64, depth_sigma: f64) -> Option<Lifted> {
     let mut m = [[0.0f64; 9]; 9];
     let mut b = [0.0f64; 9];
     let mut depth2 = 0.0;
+    let mut add = |w: f64, r: DVec3, rhs: f64, t: f64| {
+        let co = [
+            r.x,
+            r.y,
+            r.z,
+            r.x * t,
+            r.y * t,
+            r.z * t,
+            r.x * t * t,
+            r.y * t * t,
+            r.z * t * t,
+        ];
+        for u in 0..9 {
+            b[u] += w * co[u] * rhs;
+            for (q, cq) in co.iter().enumerate() {
+                m[u][q] += w * co[u] * cq;
+            }
+        }
+    };
     for o in obs {
         let (c, p) = ray(o);
         let w = 1.0 / (guess - c).length_squared().max(1e-12);
         depth2 += (guess - c).length_squared() / obs.len() as f64;
         let t = o.tau;
+        if let Some(z) = o.depth.filter(|z| depth_sigma > 0.0 && *z > 0.0) {
+            let f = o.camera.cam_to_world.rotation * DVec3::NEG_Z;
+            let fx = o.camera.intrinsics.fx;
+            add(1.0 / (fx * depth_sigma * z).powi(2), f, z + f.dot(c), t);
+        }
         for i in 0..3 {
             let r = p.row(i);
-            let co = [
-                r.x,
-                r.y,
-                r.z,
-                r.x * t,
-                r.y * t,
-                r.z * t,
-                r.x * t * t,
-                r.y * t * t,
-                r.z * t * t,
-            ];
-            let rhs = r.dot(c);
-            for u in 0..9 {
-                b[u] += w * co[u] * rhs;
-                for (q, cq) in co.iter().enumerate() {
-                    m[u][q] += w * co[u] * cq;
-                }
-            }
+            add(w, r, r.dot(c), t);
         }
     }
     for (u, row) in m.iter_mut().enumerate().skip(6) {

@@ -14,13 +14,14 @@
 //! far apart for Lucas–Kanade: −4.5 dB on `fast`, BENCHMARKS.md "Tracks lifted to
 //! trajectories") and adds the moving tracks' Gaussians.
 
+pub mod depth;
 pub mod file;
 pub mod lift;
 pub mod lk;
 pub mod loss;
 
 use crate::splats::{Gaussian, Splats};
-use glam::{DVec2, Vec2};
+use glam::{DVec2, DVec3, Vec2};
 use lift::{Lifted, Observation};
 use rayon::prelude::*;
 use scene::Camera;
@@ -54,6 +55,19 @@ pub struct TrackSettings {
     /// `L_track`'s gradient also trains the deformation field (else only the tracked
     /// Gaussians' own centres and trajectories).
     pub into_field: bool,
+    /// With a depth prior (`scene::depth_prior`): the relative depth error that costs as
+    /// much as one pixel of reprojection error when a moving track is lifted, and a third
+    /// of the disagreement with the prior that makes a track whose rays meet moving
+    /// after all (its 2D motion mimicked a still point's parallax). 0 ignores the prior.
+    pub depth_sigma: f64,
+    /// The acceleration penalty in place of `ridge` for a track with prior depths (with
+    /// them its distance is known: the penalty only keeps the fit well conditioned).
+    pub depth_ridge: f64,
+    /// With a depth prior, drop the initial (stereo) Gaussians that lie off the prior's
+    /// surface in most frames they project into ([`drop_where_prior_disagrees`]). Off:
+    /// measured +0.3 dB on `rigid`'s co-visible novel pixels but −0.4 on its moving ones,
+    /// and −1.3 dB co-visible on `fast` at 4 fps, where the alignment is poorer.
+    pub prior_prunes: bool,
 }
 
 impl Default for TrackSettings {
@@ -69,6 +83,9 @@ impl Default for TrackSettings {
             weight: 0.0,
             huber_px: 1.0,
             into_field: true,
+            depth_sigma: 0.05,
+            depth_ridge: 1e-3,
+            prior_prunes: false,
         }
     }
 }
@@ -87,10 +104,12 @@ impl TrackSettings {
             || !(self.ridge >= 0.0 && self.min_texture >= 0.0)
             || !(self.weight.is_finite() && self.weight >= 0.0)
             || !(self.huber_px.is_finite() && self.huber_px > 0.0)
+            || !(self.depth_sigma.is_finite() && self.depth_sigma >= 0.0)
+            || !(self.depth_ridge.is_finite() && self.depth_ridge >= 0.0)
         {
             return Err(
-                "tracks: thresholds and huber_px must be positive, ridge, min_texture and \
-                 weight finite and ≥ 0"
+                "tracks: thresholds and huber_px must be positive, ridge, min_texture, \
+                 weight, depth_sigma and depth_ridge finite and ≥ 0"
                     .into(),
             );
         }
@@ -141,6 +160,7 @@ pub fn track_from(frames: &[Frame], r: usize, p: Vec2, st: &TrackSettings) -> Ve
 
 /// A lifted track: where it starts (frame, Lucas–Kanade pixel), what it lifted to, and
 /// where it was seen in each frame (camera pixels, [`camera_pixel`]; `None` where lost).
+#[derive(Clone)]
 pub struct LiftedTrack {
     pub frame: usize,
     pub pixel: Vec2,
@@ -155,16 +175,27 @@ pub fn camera_pixel(p: Vec2) -> DVec2 {
     DVec2::new(p.x as f64 - 0.5, p.y as f64 - 0.5)
 }
 
-/// Lift one track (Lucas–Kanade positions): still if its rays meet, else a trajectory
-/// when it was seen in at least 5 frames (9 unknowns) and it fits; `None` otherwise.
-pub fn lift_track(frames: &[Frame], track: &[Option<Vec2>], st: &TrackSettings) -> Option<Lifted> {
+/// Lift one track (Lucas–Kanade positions): still if its rays meet (and, with depth
+/// priors, its depth agrees with theirs), else a trajectory when it was seen in at least
+/// 5 frames (9 unknowns; 3 with prior depths) and it fits; `None` otherwise. `depths` holds each frame's
+/// aligned prior (empty: none).
+pub fn lift_track(
+    frames: &[Frame],
+    track: &[Option<Vec2>],
+    st: &TrackSettings,
+    depths: &[Option<depth::Aligned>],
+) -> Option<Lifted> {
     let t0 = crate::motion::T0 as f64;
-    let obs: Vec<Observation> = (frames.iter().zip(track))
-        .filter_map(|(f, p)| {
-            p.map(|p| Observation {
-                camera: f.camera,
-                pixel: camera_pixel(p),
-                tau: f.time - t0,
+    let obs: Vec<Observation> = (frames.iter().enumerate().zip(track))
+        .filter_map(|((k, f), p)| {
+            p.map(|p| {
+                let pixel = camera_pixel(p);
+                Observation {
+                    camera: f.camera,
+                    pixel,
+                    tau: f.time - t0,
+                    depth: depths.get(k).and_then(|d| d.as_ref()?.at(pixel)),
+                }
             })
         })
         .collect();
@@ -173,42 +204,88 @@ pub fn lift_track(frames: &[Frame], track: &[Option<Vec2>], st: &TrackSettings) 
     }
     let x = lift::still(&obs)?;
     let still = Lifted::Still(x);
-    if lift::rms_pixels(&still, &obs) < st.still_pixels {
+    if lift::rms_pixels(&still, &obs) < st.still_pixels
+        && agrees_with_prior(x, &obs, 3.0 * st.depth_sigma)
+    {
         return Some(still);
     }
-    if obs.len() < 5 {
+    // 9 unknowns: five frames of rays (two rows each), or three with prior depths
+    // (three rows each: the distance is no longer free).
+    let with_depth = obs.iter().filter(|o| o.depth.is_some()).count();
+    if obs.len() < 5 && !(st.depth_sigma > 0.0 && with_depth >= 3) {
         return None;
     }
-    let m = lift::moving(&obs, x, st.ridge)?;
+    // The guess weights the rays by distance: the prior's, where there is one.
+    let (guess, ridge) = match prior_point(&obs) {
+        Some(p) if st.depth_sigma > 0.0 => (p, st.depth_ridge),
+        _ => (x, st.ridge),
+    };
+    let m = lift::moving(&obs, guess, ridge, st.depth_sigma)?;
     (lift::rms_pixels(&m, &obs) < st.moving_pixels).then_some(m)
 }
 
-/// Tracks from every `stride`-th pixel of `references` frames evenly spaced over the
-/// recording and of the one nearest `T0`, lifted. Still points come from every
-/// reference frame, moving ones from the one nearest `T0` only.
-pub fn lift_frames(
-    frames: &[Frame],
-    stride: usize,
-    references: usize,
-    st: &TrackSettings,
-) -> Vec<LiftedTrack> {
-    let n = frames.len();
-    if n < 3 {
-        return Vec::new();
+/// Whether still point `x`'s depth in the observations' frames is within `tolerance`
+/// (relative, median over the observations with a prior) of the prior; true without one.
+fn agrees_with_prior(x: DVec3, obs: &[Observation], tolerance: f64) -> bool {
+    let mut rel: Vec<f64> = obs
+        .iter()
+        .filter_map(|o| {
+            let z = o.depth?;
+            let (_, d) = o.camera.project_world(x)?;
+            Some((d - z).abs() / z)
+        })
+        .collect();
+    if rel.is_empty() || tolerance <= 0.0 {
+        return true;
     }
+    let k = rel.len() / 2;
+    *rel.select_nth_unstable_by(k, f64::total_cmp).1 <= tolerance
+}
+
+/// The mean of the observations' points at their prior depths.
+fn prior_point(obs: &[Observation]) -> Option<DVec3> {
+    let pts: Vec<DVec3> = (obs.iter())
+        .filter_map(|o| Some(o.camera.unproject_world(o.pixel, o.depth?)))
+        .collect();
+    (!pts.is_empty()).then(|| pts.iter().sum::<DVec3>() / pts.len() as f64)
+}
+
+/// A track before lifting: its start (frame, Lucas–Kanade pixel) and its positions.
+pub struct RawTrack {
+    pub frame: usize,
+    pub pixel: Vec2,
+    pub track: Vec<Option<Vec2>>,
+}
+
+/// The frame nearest the middle of the recording (`T0`).
+fn middle_frame(frames: &[Frame]) -> usize {
     let t0 = crate::motion::T0 as f64;
-    let middle = (0..n)
+    (0..frames.len())
         .min_by(|&i, &j| {
             (frames[i].time - t0)
                 .abs()
                 .total_cmp(&(frames[j].time - t0).abs())
         })
-        .unwrap_or(0);
+        .unwrap_or(0)
+}
+
+/// Tracks from every `stride`-th pixel of `references` frames evenly spaced over the
+/// recording and of the one nearest `T0`.
+pub fn raw_tracks(
+    frames: &[Frame],
+    stride: usize,
+    references: usize,
+    st: &TrackSettings,
+) -> Vec<RawTrack> {
+    let n = frames.len();
+    if n < 3 {
+        return Vec::new();
+    }
     let count = references.min(n);
     let mut refs: Vec<usize> = (0..count)
         .map(|i| ((i as f64 + 0.5) * n as f64 / count as f64) as usize)
         .collect();
-    refs.push(middle);
+    refs.push(middle_frame(frames));
     refs.sort_unstable();
     refs.dedup();
     let g = &frames[0].pyramid.0[0];
@@ -225,19 +302,130 @@ pub fn lift_frames(
         })
         .collect();
     starts
-        .par_iter()
-        .filter_map(|&(r, p)| {
-            let tr = track_from(frames, r, p, st);
-            let point = lift_track(frames, &tr, st)?;
-            let keep = matches!(point, Lifted::Still(_)) || r == middle;
+        .into_par_iter()
+        .map(|(frame, pixel)| RawTrack {
+            frame,
+            pixel,
+            track: track_from(frames, frame, pixel, st),
+        })
+        .collect()
+}
+
+/// `raws` lifted (with the frames' aligned priors, `depths`, empty for none). Still
+/// points come from every reference frame, moving ones from the one nearest `T0` only.
+pub fn lift_raw(
+    frames: &[Frame],
+    raws: &[RawTrack],
+    st: &TrackSettings,
+    depths: &[Option<depth::Aligned>],
+) -> Vec<LiftedTrack> {
+    let middle = middle_frame(frames);
+    raws.par_iter()
+        .filter_map(|r| {
+            let point = lift_track(frames, &r.track, st, depths)?;
+            let keep = matches!(point, Lifted::Still(_)) || r.frame == middle;
             keep.then(|| LiftedTrack {
-                frame: r,
-                pixel: p,
+                frame: r.frame,
+                pixel: r.pixel,
                 point,
-                seen: tr.iter().map(|q| q.map(camera_pixel)).collect(),
+                seen: r.track.iter().map(|q| q.map(camera_pixel)).collect(),
             })
         })
         .collect()
+}
+
+/// [`raw_tracks`] lifted without depth priors.
+pub fn lift_frames(
+    frames: &[Frame],
+    stride: usize,
+    references: usize,
+    st: &TrackSettings,
+) -> Vec<LiftedTrack> {
+    lift_raw(frames, &raw_tracks(frames, stride, references, st), st, &[])
+}
+
+/// Each frame's prior aligned to the still points of `lifted` seen in it (`None` where a
+/// frame has no map or too few still points); with a line per frame on stderr saying
+/// how well the prior agrees with the triangulated still scene.
+pub fn align_priors(
+    frames: &[Frame],
+    lifted: &[LiftedTrack],
+    priors: &scene::depth_prior::DepthPriors,
+) -> Vec<Option<depth::Aligned>> {
+    let g = &frames[0].pyramid.0[0];
+    let (w, h) = (g.width, g.height);
+    let out: Vec<Option<depth::Aligned>> = (frames.iter().enumerate())
+        .map(|(k, f)| {
+            let map = priors.maps.get(k)?.as_ref()?;
+            let refs: Vec<(DVec2, f64)> = (lifted.iter())
+                .filter_map(|l| {
+                    let Lifted::Still(x) = l.point else {
+                        return None;
+                    };
+                    let seen = l.seen.get(k).copied().flatten()?;
+                    Some((seen, f.camera.project_world(x)?.1))
+                })
+                .collect();
+            depth::align(priors.kind, map, w, h, &refs)
+        })
+        .collect();
+    let errs: Vec<String> = (out.iter())
+        .map(|a| {
+            a.as_ref()
+                .map_or("-".into(), |a| format!("{:.1}", 100.0 * a.median_rel_error))
+        })
+        .collect();
+    eprintln!(
+        "depth prior: {} of {} train frames aligned to the still tracks; median error per frame, %: {}",
+        out.iter().flatten().count(),
+        frames.len(),
+        errs.join(" ")
+    );
+    out
+}
+
+/// Drop the Gaussians of `s` whose depth disagrees with the aligned priors (relative
+/// difference over `tolerance`) in more of the frames they project into than it agrees:
+/// the stereo init's copies of moving objects, placed still at the distance where their
+/// motion mimics parallax (BENCHMARKS.md, "What moves them"). A still point agrees
+/// wherever nothing moves in front of it. A Gaussian seen against fewer than two priors
+/// is kept. Returns how many were dropped.
+pub fn drop_where_prior_disagrees(
+    s: &mut Splats,
+    frames: &[Frame],
+    depths: &[Option<depth::Aligned>],
+    tolerance: f64,
+) -> usize {
+    let keep: Vec<bool> = (0..s.len())
+        .into_par_iter()
+        .map(|i| {
+            let x = glam::Vec3::from(s.means[i]).as_dvec3();
+            let (mut agree, mut disagree) = (0u32, 0u32);
+            for (f, d) in frames.iter().zip(depths) {
+                let Some(d) = d else { continue };
+                let Some((px, z)) = f.camera.project_world(x) else {
+                    continue;
+                };
+                let Some(prior) = d.at(px) else { continue };
+                if (z - prior).abs() <= tolerance * prior {
+                    agree += 1;
+                } else {
+                    disagree += 1;
+                }
+            }
+            // Judged only where at least two frames see it against a prior.
+            agree + disagree < 2 || disagree <= agree
+        })
+        .collect();
+    let dropped = keep.iter().filter(|k| !**k).count();
+    if dropped > 0 {
+        let mut kept = Splats::with_capacity(s.len() - dropped);
+        for (i, _) in keep.iter().enumerate().filter(|(_, k)| **k) {
+            kept.push(s.get(i));
+        }
+        *s = kept;
+    }
+    dropped
 }
 
 /// A train frame as the init sees it: planar RGB (all red, then green, then blue).
@@ -259,6 +447,7 @@ pub(crate) fn add_moving(
     views: &[Image],
     stride: usize,
     st: &TrackSettings,
+    priors: Option<&scene::depth_prior::DepthPriors>,
 ) -> loss::Table {
     let Some(first) = views.first() else {
         return Vec::new();
@@ -273,7 +462,41 @@ pub(crate) fn add_moving(
             pyramid: lk::Pyramid::new(lk::Grey::from_planar(v.rgb, w, h), st.levels as usize),
         })
         .collect();
-    let lifted = lift_frames(&frames, stride, 0, st);
+    let raws = raw_tracks(&frames, stride, 0, st);
+    let mut lifted = lift_raw(&frames, &raws, st, &[]);
+    if let Some(p) = priors.filter(|_| st.depth_sigma > 0.0) {
+        // The priors are aligned to still tracks from frames spread over the recording
+        // as well (every fourth pixel of five): the middle frame's tracks do not reach
+        // the ends when the frames are far apart.
+        let spread = lift_raw(&frames, &raw_tracks(&frames, 4 * stride, 5, st), st, &[]);
+        let still: Vec<LiftedTrack> = (lifted.iter().chain(&spread))
+            .filter(|l| matches!(l.point, Lifted::Still(_)))
+            .cloned()
+            .collect();
+        let mut depths = align_priors(&frames, &still, p);
+        // A frame whose prior the still scene does not confirm is not used.
+        let mut set_aside = 0;
+        for d in &mut depths {
+            if d.as_ref()
+                .is_some_and(|a| a.median_rel_error > st.depth_sigma)
+            {
+                (*d, set_aside) = (None, set_aside + 1);
+            }
+        }
+        if set_aside > 0 {
+            eprintln!(
+                "depth prior: {set_aside} frames' maps set aside (median error over depth_sigma = {})",
+                st.depth_sigma
+            );
+        }
+        lifted = lift_raw(&frames, &raws, st, &depths);
+        if st.prior_prunes {
+            let dropped = drop_where_prior_disagrees(s, &frames, &depths, 3.0 * st.depth_sigma);
+            eprintln!(
+                "depth prior: {dropped} initial Gaussians dropped (off the prior's surface in most frames)"
+            );
+        }
+    }
     let t0 = crate::motion::T0 as f64;
     let before = s.len();
     s.motion.resize(before, [0.0; 6]);

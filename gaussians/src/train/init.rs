@@ -1,11 +1,17 @@
 //! Initial Gaussians: random points inside the region the cameras look at (Deform-GS
 //! synthetic init: random points, random colours, opacity 0.1, identity rotation), and
-//! the scene extent (1.1 × the largest camera-centre distance from their mean).
+//! the scene extent (1.1 × the largest camera-centre distance from their mean), and the
+//! choice among the inits ([`initial_splats`]).
 
+use super::settings::{Init, TrainSettings};
+use super::view::View;
 use crate::splats::{Gaussian, Splats};
 use glam::DVec3;
 use rand::{RngExt, SeedableRng};
 use scene::Camera;
+use scene::error::{Error, Result};
+use scene::manifest::Scene;
+use std::path::Path;
 
 /// 0th-order SH constant: colour = 0.5 + C0 · dc.
 pub const SH_C0: f32 = 0.282_094_8;
@@ -228,4 +234,70 @@ pub fn stereo_splats(
         });
     }
     (s, found)
+}
+
+/// Initial Gaussians: the PLY if given (all flagged dynamic), else as `settings.init`
+/// says; with the number of them placed on surfaces (PLY points or stereo points) and
+/// the number of fully transparent PLY Gaussians dropped; the moving tracks' term into
+/// `tracks` (`init = "tracks"`).
+pub(crate) fn initial_splats(
+    settings: &TrainSettings,
+    views: &[View],
+    ply: Option<&Path>,
+    tracks: &mut crate::tracks::loss::TrackTerm,
+    scene: &Scene,
+) -> Result<(Splats, usize, usize)> {
+    match ply {
+        Some(p) => {
+            let r = crate::ply::read_counted(p)?;
+            let mut s = r.splats;
+            if s.is_empty() {
+                return Err(Error::invalid(p, "the point cloud has no Gaussians"));
+            }
+            s.dynamic = vec![true; s.len()];
+            let n = s.len();
+            Ok((s, n, r.dropped_transparent))
+        }
+        None => {
+            let cams: Vec<_> = views.iter().map(|v| v.camera).collect();
+            let n = settings.init_points;
+            let (near, far) = (settings.init_near, settings.init_far);
+            let priors = match settings.init {
+                Init::Auto | Init::Tracks => scene::depth_prior::load(&scene.root, &scene.train)?,
+                _ => None,
+            };
+            let (splats, surface) = match settings.init.resolve(priors.is_some()) {
+                Init::Auto | Init::Stereo => {
+                    stereo_splats(views, n, near, far, &settings.stereo, settings.seed)
+                }
+                Init::Tracks => {
+                    let (mut s, found) =
+                        stereo_splats(views, n, near, far, &settings.stereo, settings.seed);
+                    let images: Vec<_> = (views.iter())
+                        .map(|v| crate::tracks::Image {
+                            camera: &v.camera,
+                            time: v.time as f64,
+                            rgb: &v.rgb,
+                        })
+                        .collect();
+                    let table = crate::tracks::add_moving(
+                        &mut s,
+                        &images,
+                        1,
+                        &settings.tracks,
+                        priors.as_ref(),
+                    );
+                    let moving = table.len();
+                    *tracks = crate::tracks::loss::TrackTerm::new(table);
+                    (s, found + moving)
+                }
+                Init::Frustum => (frustum_splats(&cams, n, near, far, settings.seed), 0),
+                Init::Box => {
+                    let (centre, half) = camera_bounds(&cams);
+                    (random_splats(n, centre, half, settings.seed), 0)
+                }
+            };
+            Ok((splats, surface, 0))
+        }
+    }
 }

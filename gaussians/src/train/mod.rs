@@ -27,7 +27,7 @@ use crate::raster::{Rasterizer, RenderedImage};
 use crate::splats::{SplatGrads, Splats};
 use field_probe::FieldProbeSummary;
 use judge::{Candidate, Judge, spread};
-pub use run::{RunSummary, run};
+pub use run::{RunSummary, run, work_schedule};
 use scene::Camera;
 use scene::metrics;
 pub use settings::TrainSettings;

@@ -83,3 +83,50 @@ impl Trainer {
         field_probe::iterations(&self.settings, split, sizing)
     }
 }
+
+/// The expected relative cost of each of the run's steps, for the time left the
+/// progress shows (`stagekit::schedule`): half-resolution steps without the field cost 1;
+/// with the field on every Gaussian 5.5; at full resolution 2 and 9; after the sizing
+/// (or the early static split) the field runs on the dynamic Gaussians only, 3.5 (3 at
+/// half resolution). Measured on the quiet 2-core machine at DAVIS346 size (0.036,
+/// 0.20, 0.35 and 0.145 s per step, the second growing with the densification) and
+/// close at 640×480 (BENCHMARKS.md); the runs' own recent steps set the seconds per unit.
+pub fn work_schedule(s: &super::TrainSettings, pixels: usize) -> stagekit::Schedule {
+    let field_from = if s.deform {
+        s.static_iterations.min(s.iterations)
+    } else {
+        s.iterations
+    };
+    let coarse_end = s.coarse_end(pixels);
+    let split = (s.deform && !s.dynamic_only && s.static_tolerance_px > 0.0).then(|| {
+        let field_its = s.iterations.saturating_sub(s.static_iterations) as f32;
+        s.static_iterations + (s.static_split_at.clamp(0.0, 1.0) * field_its) as u32
+    });
+    let sizing = sizing::iteration(&s.size, s.densify.until_iter, s.iterations);
+    let reduced_from = match (split, sizing) {
+        (Some(a), Some(b)) => a.min(b),
+        (a, b) => a.or(b).unwrap_or(u32::MAX),
+    };
+    let cost = |k: u32| match (k < coarse_end, k >= field_from, k >= reduced_from) {
+        (true, false, _) => 1.0,
+        (true, true, false) => 5.5,
+        (true, true, true) => 3.0,
+        (false, false, _) => 2.0,
+        (false, true, false) => 9.0,
+        (false, true, true) => 3.5,
+    };
+    let mut ends = vec![field_from, coarse_end, reduced_from, s.iterations];
+    ends.retain(|&e| e > 0 && e <= s.iterations);
+    ends.sort_unstable();
+    ends.dedup();
+    let mut start = 0;
+    let phases = ends
+        .into_iter()
+        .map(|end| {
+            let c = cost(start);
+            start = end;
+            (u64::from(end), c)
+        })
+        .collect();
+    stagekit::Schedule::new(phases)
+}

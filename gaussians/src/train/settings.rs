@@ -12,16 +12,31 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum Init {
-    /// Plane-sweep stereo over the train frames, plus a few random frustum points.
+    /// `tracks` when the scene has depth priors (`depth/depth.json`,
+    /// `scene::depth_prior`), else `stereo`.
     #[default]
+    Auto,
+    /// Plane-sweep stereo over the train frames, plus a few random frustum points.
     Stereo,
     /// Random points in the train cameras' viewing frusta.
     Frustum,
     /// Random points in the box the cameras look at (Deform-GS synthetic init).
     Box,
     /// Lucas–Kanade tracks through the train frames, lifted to still points and to
-    /// quadratic trajectories (`crate::tracks`): the moving objects start moving.
+    /// quadratic trajectories (`crate::tracks`): the moving objects start moving; with
+    /// the scene's depth priors, at their distance.
     Tracks,
+}
+
+impl Init {
+    /// What `auto` means for a scene with or without depth priors; the others as they are.
+    pub fn resolve(self, has_depth_priors: bool) -> Init {
+        match self {
+            Init::Auto if has_depth_priors => Init::Tracks,
+            Init::Auto => Init::Stereo,
+            i => i,
+        }
+    }
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -131,7 +146,7 @@ impl Default for TrainSettings {
             size: SizeSettings::default(),
             max_gaussians_per_pixel: 2.0,
             init_points: 20_000,
-            init: Init::Stereo,
+            init: Init::Auto,
             stereo: StereoSettings::default(),
             tracks: Default::default(),
             init_near: 0.3,
