@@ -157,14 +157,12 @@ fn the_lift_recovers_still_points_and_quadratic_trajectories_exactly() {
     assert!(still_rms > 3.0, "{still_rms}");
 }
 
-#[test]
-fn the_ridge_picks_the_still_acceleration_when_the_camera_path_is_quadratic() {
-    // A camera moving along a parabola and a point moving at constant velocity: the
-    // family C(τ) + s (X(τ) − C(τ)) fits every observation for any s, with
-    // acceleration (1 − s)·C''. The penalty selects s = 1, the true (unaccelerated) path.
+/// Nine cameras at times 0, ⅛, …, 1 whose centres move along a parabola (sideways
+/// linearly, upwards quadratically), looking down −Z.
+fn parabola_cameras() -> (Vec<Camera>, Vec<f64>) {
     let k = Intrinsics::from_fov_x(96, 96, 60f64.to_radians());
     let times: Vec<f64> = (0..9).map(|i| i as f64 / 8.0).collect();
-    let cams: Vec<Camera> = times
+    let cams = times
         .iter()
         .map(|&t| {
             let tau = t - 0.5;
@@ -175,6 +173,15 @@ fn the_ridge_picks_the_still_acceleration_when_the_camera_path_is_quadratic() {
             }
         })
         .collect();
+    (cams, times)
+}
+
+#[test]
+fn the_ridge_picks_the_still_acceleration_when_the_camera_path_is_quadratic() {
+    // A camera moving along a parabola and a point moving at constant velocity: the
+    // family C(τ) + s (X(τ) − C(τ)) fits every observation for any s, with
+    // acceleration (1 − s)·C''. The penalty selects s = 1, the true (unaccelerated) path.
+    let (cams, times) = parabola_cameras();
     let (mu, v) = (DVec3::new(0.2, 0.1, 0.0), DVec3::new(-0.6, 0.3, 0.5));
     let obs = observe(&cams, &times, |t| mu + v * t);
     let guess = lift::still(&obs).unwrap();
@@ -192,19 +199,7 @@ fn the_ridge_picks_the_still_acceleration_when_the_camera_path_is_quadratic() {
 /// ridge picks a wrong one; the true depths (what an aligned prior gives) pin it.
 #[test]
 fn depth_rows_fix_the_distance_the_rays_leave_free() {
-    let k = Intrinsics::from_fov_x(96, 96, 60f64.to_radians());
-    let times: Vec<f64> = (0..9).map(|i| i as f64 / 8.0).collect();
-    let cams: Vec<Camera> = times
-        .iter()
-        .map(|&t| {
-            let tau = t - 0.5;
-            let eye = DVec3::new(1.5 * tau, 0.3 + 2.0 * tau * tau, 4.0);
-            Camera {
-                intrinsics: k,
-                cam_to_world: Pose::new(DQuat::IDENTITY, eye),
-            }
-        })
-        .collect();
+    let (cams, times) = parabola_cameras();
     let (mu, v, a) = (
         DVec3::new(0.2, 0.1, 0.0),
         DVec3::new(-0.6, 0.3, 0.5),
