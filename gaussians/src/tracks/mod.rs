@@ -160,7 +160,6 @@ pub fn track_from(frames: &[Frame], r: usize, p: Vec2, st: &TrackSettings) -> Ve
 
 /// A lifted track: where it starts (frame, Lucas–Kanade pixel), what it lifted to, and
 /// where it was seen in each frame (camera pixels, [`camera_pixel`]; `None` where lost).
-#[derive(Clone)]
 pub struct LiftedTrack {
     pub frame: usize,
     pub pixel: Vec2,
@@ -349,7 +348,7 @@ pub fn lift_frames(
 /// how well the prior agrees with the triangulated still scene.
 pub fn align_priors(
     frames: &[Frame],
-    lifted: &[LiftedTrack],
+    lifted: &[&LiftedTrack],
     priors: &scene::depth_prior::DepthPriors,
 ) -> Vec<Option<depth::Aligned>> {
     let g = &frames[0].pyramid.0[0];
@@ -469,9 +468,8 @@ pub(crate) fn add_moving(
         // as well (every fourth pixel of five): the middle frame's tracks do not reach
         // the ends when the frames are far apart.
         let spread = lift_raw(&frames, &raw_tracks(&frames, 4 * stride, 5, st), st, &[]);
-        let still: Vec<LiftedTrack> = (lifted.iter().chain(&spread))
+        let still: Vec<&LiftedTrack> = (lifted.iter().chain(&spread))
             .filter(|l| matches!(l.point, Lifted::Still(_)))
-            .cloned()
             .collect();
         let mut depths = align_priors(&frames, &still, p);
         // A frame whose prior the still scene does not confirm is not used.

@@ -60,21 +60,31 @@ where
     sum
 }
 
-impl Trainer {
+impl super::TrainSettings {
     /// The iteration of the static/dynamic split (`None`: no split in this run).
     pub fn static_split_iteration(&self) -> Option<u32> {
-        let s = &self.settings;
-        if !s.deform || s.dynamic_only || s.static_tolerance_px <= 0.0 {
+        if !self.deform || self.dynamic_only || self.static_tolerance_px <= 0.0 {
             return None;
         }
-        let field_its = s.iterations.saturating_sub(s.static_iterations) as f32;
-        Some(s.static_iterations + (s.static_split_at.clamp(0.0, 1.0) * field_its) as u32)
+        let field_its = self.iterations.saturating_sub(self.static_iterations) as f32;
+        Some(self.static_iterations + (self.static_split_at.clamp(0.0, 1.0) * field_its) as u32)
     }
 
     /// The iteration of the sizing (`None`: no sizing in this run).
     pub fn sizing_iteration(&self) -> Option<u32> {
-        let s = &self.settings;
-        sizing::iteration(&s.size, s.densify.until_iter, s.iterations)
+        sizing::iteration(&self.size, self.densify.until_iter, self.iterations)
+    }
+}
+
+impl Trainer {
+    /// The iteration of the static/dynamic split (`None`: no split in this run).
+    pub fn static_split_iteration(&self) -> Option<u32> {
+        self.settings.static_split_iteration()
+    }
+
+    /// The iteration of the sizing (`None`: no sizing in this run).
+    pub fn sizing_iteration(&self) -> Option<u32> {
+        self.settings.sizing_iteration()
     }
 
     /// The length of the field's width probe (`None`: no probe in this run).
@@ -98,12 +108,7 @@ pub fn work_schedule(s: &super::TrainSettings, pixels: usize) -> stagekit::Sched
         s.iterations
     };
     let coarse_end = s.coarse_end(pixels);
-    let split = (s.deform && !s.dynamic_only && s.static_tolerance_px > 0.0).then(|| {
-        let field_its = s.iterations.saturating_sub(s.static_iterations) as f32;
-        s.static_iterations + (s.static_split_at.clamp(0.0, 1.0) * field_its) as u32
-    });
-    let sizing = sizing::iteration(&s.size, s.densify.until_iter, s.iterations);
-    let reduced_from = match (split, sizing) {
+    let reduced_from = match (s.static_split_iteration(), s.sizing_iteration()) {
         (Some(a), Some(b)) => a.min(b),
         (a, b) => a.or(b).unwrap_or(u32::MAX),
     };
