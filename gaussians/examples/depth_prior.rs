@@ -14,7 +14,8 @@
 //! relative amplitude of a smooth multiplicative error over each frame (three random
 //! waves of one to three periods across the image). `BLUR` (default 0): the radius in
 //! pixels of a box blur of the inverse depth, which mixes an object's depth with its
-//! background's at its edges as networks do. Writes over an earlier prior of the scene.
+//! background's at its edges as networks do. Refuses a scene that already has a
+//! `depth/` folder.
 
 use glam::DVec2;
 use rand::{RngExt, SeedableRng};

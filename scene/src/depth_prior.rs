@@ -100,9 +100,17 @@ pub fn load(root: &Path, train: &Manifest) -> Result<Option<DepthPriors>> {
     Ok(Some(DepthPriors { kind, maps }))
 }
 
-/// Write a scene's priors (tests, scripts): the kind file and each frame's map.
+/// Write a scene's priors (tests, scripts): the kind file and each frame's map, into a
+/// `depth/` folder this creates; an existing one (a user's maps) is refused, not
+/// overwritten.
 pub fn write(root: &Path, train: &Manifest, priors: &DepthPriors) -> Result<()> {
     let dir = root.join(DIR);
+    if dir.exists() {
+        return Err(Error::invalid(
+            &dir,
+            "already exists: remove it to write new depth priors",
+        ));
+    }
     std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
     let kind = match priors.kind {
         DepthKind::Z => "z",
@@ -157,6 +165,8 @@ mod tests {
             maps: vec![Some(map.clone()), None, Some(vec![0.0; 24])],
         };
         write(dir.path(), &m, &p).unwrap();
+        let again = write(dir.path(), &m, &p).unwrap_err().to_string();
+        assert!(again.contains("already exists"), "{again}");
         assert!(dir.path().join("depth/train_0000.exr").is_file());
         assert!(!dir.path().join("depth/train_0001.exr").exists());
         assert_eq!(load(dir.path(), &m).unwrap(), Some(p));
