@@ -55,6 +55,9 @@ pub struct Inputs {
     pub warmup: TrainSettings,
     /// The warm-up's moving tracks (`gaussians::tracks::file`; empty without).
     pub tracks: gaussians::tracks::loss::Table,
+    /// The warm-up's aligned depth priors per train view (`depth_prior.safetensors`;
+    /// empty without).
+    pub priors: Vec<Option<gaussians::tracks::depth::Aligned>>,
     /// Bindings per train frame, from `assoc.bin`.
     pub bindings: Vec<assoc::Bindings>,
     /// Half-width δt of the association window.
@@ -182,6 +185,15 @@ impl Inputs {
         } else {
             Vec::new()
         };
+        // The warm-up's aligned depth priors, when it trained with `L_depth`.
+        let priors_file = model_dir.join(gaussians::tracks::file::PRIORS_FILE);
+        let priors = if priors_file.exists() {
+            let k = &views[0].camera.intrinsics;
+            let (w, h) = (k.width as usize, k.height as usize);
+            gaussians::tracks::file::read_priors(&priors_file, views.len(), w, h)?
+        } else {
+            Vec::new()
+        };
         // The warm-up's resolved settings, validated like the warm-up's own input.
         let warmup: TrainSettings =
             stagekit::settings::read_file(&model_dir.join("settings.toml"))?;
@@ -192,6 +204,7 @@ impl Inputs {
         Ok(Inputs {
             scene,
             views,
+            priors,
             test,
             linear,
             luma,

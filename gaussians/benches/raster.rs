@@ -7,7 +7,7 @@
 //! scales around 0.5 × the mean spacing (so they tile the volume like a trained
 //! model), opacity ≈ 0.3–0.9.
 
-use gaussians::raster::{Rasterizer, TileRasterizer};
+use gaussians::raster::{Planes, Rasterizer, TileRasterizer};
 use gaussians::{Gaussian, SplatGrads, Splats};
 use glam::DVec3;
 use scene::{Camera, Intrinsics, Pose};
@@ -130,7 +130,17 @@ fn main() {
                 };
                 let (c1, t1) = (cpu_ms(), Instant::now());
                 if reuse {
-                    r.backward_view_into(&s, &cam, &st, &d_rgb, Some(&d_depth), &mut g);
+                    r.backward_view_into(
+                        &s,
+                        &cam,
+                        &st,
+                        &d_rgb,
+                        Planes {
+                            depth: Some(&d_depth),
+                            alpha: None,
+                        },
+                        &mut g,
+                    );
                 } else {
                     g = r
                         .backward_full(&s, &cam, &st, &d_rgb, Some(&d_depth), None)

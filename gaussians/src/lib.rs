@@ -24,5 +24,5 @@ pub mod train;
 pub mod trajectory;
 pub mod video;
 
-pub use raster::{Rasterizer, RenderedImage, TileRasterizer};
+pub use raster::{Planes, Rasterizer, RenderedImage, TileRasterizer};
 pub use splats::{Gaussian, SplatGrads, Splats};

@@ -420,12 +420,18 @@ pub fn train(
     let sizing = trainer.sizing.take();
     let field_probe = trainer.field_probe.take();
     let tracks = std::mem::take(&mut trainer.tracks.table);
+    let priors = std::mem::take(&mut trainer.tracks.priors.maps);
     drop(trainer);
     model.save(out.path())?;
     let ids = &model.splats.track;
     if !tracks.is_empty() && ids.len() == model.splats.len() {
         let path = out.path().join(crate::tracks::file::TRACKS_FILE);
         crate::tracks::file::write(&path, ids, &tracks)?;
+    }
+    if settings.tracks.depth_weight > 0.0 && priors.iter().any(Option::is_some) {
+        let path = out.path().join(crate::tracks::file::PRIORS_FILE);
+        let k = &views[0].camera.intrinsics;
+        crate::tracks::file::write_priors(&path, &priors, k.width as usize, k.height as usize)?;
     }
     let model_size = crate::model::size::ModelSize::of(&model, out.path())?;
     write_resolved(out.path(), &settings)?;

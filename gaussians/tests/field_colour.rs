@@ -5,6 +5,7 @@
 
 mod raster_common;
 
+use gaussians::Planes;
 use gaussians::field::{FieldSettings, Mlp};
 use gaussians::raster::TileRasterizer;
 use gaussians::raster::reference::{self, Gaussians64};
@@ -53,7 +54,7 @@ fn the_colour_fields_gradient_matches_finite_differences() {
     let w32: Vec<f32> = weights.iter().map(|&x| x as f32).collect();
     let r = TileRasterizer;
     let v = tr.render_view(&r, &cam, t);
-    let g = tr.view_backward(&r, &v, &w32, None, None);
+    let g = tr.view_backward(&r, &v, &w32, Planes::NONE, None);
     assert_eq!(g.field.len(), tr.field.params.len());
 
     let bg = tr.settings.background.map(f64::from);

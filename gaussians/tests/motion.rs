@@ -5,6 +5,7 @@
 
 mod raster_common;
 
+use gaussians::Planes;
 use gaussians::model::{Model, motion_file};
 use gaussians::motion::{self, T0};
 use gaussians::raster::TileRasterizer;
@@ -66,7 +67,7 @@ fn the_trainer_gradient_of_the_trajectories_matches_finite_differences() {
     let w32: Vec<f32> = weights.iter().map(|&x| x as f32).collect();
     let r = TileRasterizer;
     let v = tr.render_view(&r, &cam, t);
-    let g = tr.view_backward(&r, &v, &w32, None, None);
+    let g = tr.view_backward(&r, &v, &w32, Planes::NONE, None);
     assert_eq!(g.splats.motion.len(), n);
     let bg = tr.settings.background.map(f64::from);
     let tau = t as f64 - 0.5;

@@ -5,6 +5,7 @@
 
 mod raster_common;
 
+use gaussians::Planes;
 use gaussians::field::{FieldSettings, Mlp, MlpCache, MlpScratch};
 use gaussians::raster::{Rasterizer, TileRasterizer};
 use gaussians::train::{TrainSettings, Trainer};
@@ -62,7 +63,17 @@ fn render_and_backward_into_reused_buffers_match_fresh_ones() {
             .collect();
         let d_depth: Vec<f32> = (0..np).map(|i| ((i % 5) as f32 - 2.0) * 1e-3).collect();
         let (g0, tw0) = r.backward_full(&s, &cam, &st, &d_rgb, Some(&d_depth), None);
-        let tw = r.backward_view_into(&s, &cam, &state, &d_rgb, Some(&d_depth), &mut grads);
+        let tw = r.backward_view_into(
+            &s,
+            &cam,
+            &state,
+            &d_rgb,
+            Planes {
+                depth: Some(&d_depth),
+                alpha: None,
+            },
+            &mut grads,
+        );
         assert_eq!(bits(&flat(&grads)), bits(&flat(&g0)), "call {k}: gradients");
         assert_eq!(tw, tw0, "call {k}: camera gradient");
         assert!(
@@ -123,7 +134,7 @@ fn recycled_views_and_gradients_change_nothing() {
     for (k, w) in [80u32, 40, 64].into_iter().enumerate() {
         let v = warm.render_view(&r, &cam(-0.3 + 0.2 * k as f64, w), 0.2 * k as f32);
         let d: Vec<f32> = vec![1e-2; v.image.rgb.len()];
-        let g = warm.view_backward(&r, &v, &d, None, None);
+        let g = warm.view_backward(&r, &v, &d, Planes::NONE, None);
         warm.recycle_view(v);
         warm.recycle_grads(g);
     }
@@ -135,8 +146,8 @@ fn recycled_views_and_gradients_change_nothing() {
         .map(|i| ((i % 7) as f32 - 3.0) * 1e-2)
         .collect();
     let dm = vec![[1e-3f32, -2e-3, 5e-4]; a.deformed.len()];
-    let ga = warm.view_backward(&r, &a, &d, None, Some(&dm));
-    let gb = fresh.view_backward(&r, &b, &d, None, Some(&dm));
+    let ga = warm.view_backward(&r, &a, &d, Planes::NONE, Some(&dm));
+    let gb = fresh.view_backward(&r, &b, &d, Planes::NONE, Some(&dm));
     assert_eq!(bits(&flat(&ga.splats)), bits(&flat(&gb.splats)));
     assert_eq!(bits(&ga.field), bits(&gb.field));
     assert!(

@@ -4,6 +4,7 @@
 
 mod raster_common;
 
+use gaussians::Planes;
 use gaussians::train::rigidity::Neighbours;
 use rand::{RngExt, SeedableRng};
 
@@ -174,7 +175,7 @@ fn the_trainer_takes_the_isometry_term_into_the_field() {
     let t = 0.37f32;
     let r = TileRasterizer;
     let v = tr.render_view(&r, &cam, t);
-    let g = tr.view_backward(&r, &v, &vec![0.0; 3 * 32 * 32], None, None);
+    let g = tr.view_backward(&r, &v, &vec![0.0; 3 * 32 * 32], Planes::NONE, None);
     assert_eq!(g.field.len(), tr.field.params.len());
     let loss = |tr: &Trainer| -> f64 {
         let (d, _) = field::splat_deltas(&tr.field, &tr.splats, t, false);

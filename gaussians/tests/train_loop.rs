@@ -4,7 +4,7 @@
 
 use gaussians::train::init::{SH_C0, camera_bounds, camera_extent, random_splats};
 use gaussians::train::{TrainSettings, Trainer, View};
-use gaussians::{Rasterizer, RenderedImage, SplatGrads, Splats};
+use gaussians::{Planes, Rasterizer, RenderedImage, SplatGrads, Splats};
 use glam::DVec3;
 use scene::{Camera, Intrinsics, Pose};
 
@@ -79,9 +79,13 @@ impl Rasterizer for Additive {
         cam: &Camera,
         st: &(),
         d: &[f32],
-        d_depth: Option<&[f32]>,
+        d_planes: Planes,
     ) -> (SplatGrads, [f64; 6]) {
-        assert!(d_depth.is_none(), "the additive test renderer has no depth");
+        let no_planes = d_planes.depth.is_none() && d_planes.alpha.is_none();
+        assert!(
+            no_planes,
+            "the additive test renderer has no depth or alpha"
+        );
         (self.backward_rgb(s, cam, st, d), [0.0; 6])
     }
 }

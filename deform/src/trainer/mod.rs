@@ -20,7 +20,7 @@ use crate::posenet::{PoseNet, apply_correction, correction_backward};
 use crate::settings::{DeformSettings, EventChannels};
 use gaussians::stage::PSNR_CAP;
 use gaussians::train::{ModelGrads, Trainer, ViewRender};
-use gaussians::{Rasterizer, TileRasterizer};
+use gaussians::{Planes, Rasterizer, TileRasterizer};
 use rand::{RngExt, SeedableRng};
 use scene::Camera;
 use scene::metrics::psnr_u8;
@@ -158,6 +158,7 @@ impl JointTrainer {
         }
         inner.iteration = done;
         inner.tracks = gaussians::tracks::loss::TrackTerm::new(d.tracks.clone());
+        inner.tracks.priors = gaussians::tracks::prior_loss::PriorTerm::new(d.priors.clone());
         let posenet = settings
             .posenet
             .then(|| PoseNet::<f32>::new(settings.posenet_net));
@@ -322,7 +323,8 @@ impl JointTrainer {
     /// The view's gradients from `d_rgb` with the motion term's joined in: its part on the
     /// rendered centres goes back through the view's pass, its canonical and field parts
     /// are added, and its camera part accumulates into the PoseNet's gradient. At train
-    /// view `view`, the warm-up's `L_track` joins too (when the model has tracks).
+    /// view `view`, the warm-up's `L_track` and `L_depth` join too (when the model has
+    /// tracks and priors).
     fn backward_with_motion(
         &mut self,
         r: &TileRasterizer,
@@ -364,7 +366,7 @@ impl JointTrainer {
         } else {
             (!m.at_view.is_empty()).then_some(m.at_view.as_slice())
         };
-        let mut g = self.inner.view_backward(r, rv, d_rgb, None, d_means);
+        let mut g = (self.inner).view_backward_with_prior(r, rv, d_rgb, view, d_means);
         if own {
             let (s, d) = (&self.inner.splats, &self.own_means);
             gaussians::motion::add_centre_gradient(s, rv.time, d, &mut g.splats);
@@ -542,7 +544,7 @@ impl JointTrainer {
             self.contrast = lc.value();
         }
         g.iter_mut().for_each(|x| *x *= g1);
-        let ge = self.inner.view_backward(r, &rv, &g, None, None);
+        let ge = self.inner.view_backward(r, &rv, &g, Planes::NONE, None);
         self.inner.recycle_view(rv);
         // While the PoseNet warms up, L_event moves the camera only (not the scene).
         if self.iteration >= self.settings.posenet_warmup || self.posenet.is_none() {

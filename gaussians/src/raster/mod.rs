@@ -34,7 +34,7 @@ pub mod simd;
 pub use alpha::{ALPHA_MAX, ALPHA_MIN, CULL_OPACITY, LOW_PASS, NEAR, SIGMA_CUTOFF, T_MIN};
 pub use contribution::add_contributions;
 pub use forward::{Projected, RenderState, TILE};
-pub use rasterizer::{Rasterizer, RenderedImage};
+pub use rasterizer::{Planes, Rasterizer, RenderedImage};
 
 use crate::splats::{SplatGrads, Splats};
 use glam::{DQuat, DVec3};
@@ -108,9 +108,9 @@ impl Rasterizer for TileRasterizer {
         cam: &Camera,
         state: &RenderState,
         d_rgb: &[f32],
-        d_depth: Option<&[f32]>,
+        d_planes: Planes,
     ) -> (SplatGrads, [f64; 6]) {
-        self.backward_full(s, cam, state, d_rgb, d_depth, None)
+        self.backward_full(s, cam, state, d_rgb, d_planes.depth, d_planes.alpha)
     }
 
     fn render_reusing(
@@ -142,9 +142,10 @@ impl Rasterizer for TileRasterizer {
         cam: &Camera,
         state: &RenderState,
         d_rgb: &[f32],
-        d_depth: Option<&[f32]>,
+        d_planes: Planes,
         grads: &mut SplatGrads,
     ) -> [f64; 6] {
-        backward::backward_into(s, cam, state, d_rgb, d_depth, None, grads)
+        let (dd, da) = (d_planes.depth, d_planes.alpha);
+        backward::backward_into(s, cam, state, d_rgb, dd, da, grads)
     }
 }

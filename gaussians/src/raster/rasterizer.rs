@@ -45,6 +45,22 @@ impl RenderedImage {
     }
 }
 
+/// Loss gradients on the planes a render has beside its colour (`H×W` each): the
+/// alpha-blended depth and the accumulated alpha.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Planes<'a> {
+    pub depth: Option<&'a [f32]>,
+    pub alpha: Option<&'a [f32]>,
+}
+
+impl Planes<'_> {
+    /// No loss on depth or alpha.
+    pub const NONE: Planes<'static> = Planes {
+        depth: None,
+        alpha: None,
+    };
+}
+
 /// A differentiable renderer.
 pub trait Rasterizer: Sync {
     /// What the backward needs from the forward pass.
@@ -56,16 +72,16 @@ pub trait Rasterizer: Sync {
         sh_degree: u32,
         background: [f32; 3],
     ) -> (RenderedImage, Self::State);
-    /// Backward from `∂L/∂rgb` (planar `3×H×W`) and optionally `∂L/∂depth` (`H×W`) to
-    /// every Gaussian parameter and to the camera as a camera-frame right twist
-    /// (`raster::apply_twist`).
+    /// Backward from `∂L/∂rgb` (planar `3×H×W`) and `∂L/∂depth` and `∂L/∂alpha` where
+    /// given (`d_planes`) to every Gaussian parameter and to the camera as a
+    /// camera-frame right twist (`raster::apply_twist`).
     fn backward_view(
         &self,
         s: &Splats,
         cam: &Camera,
         state: &Self::State,
         d_rgb: &[f32],
-        d_depth: Option<&[f32]>,
+        d_planes: Planes,
     ) -> (SplatGrads, [f64; 6]);
     /// [`Self::render`] reusing the buffers of an earlier image and state (a training
     /// loop passes back the last iteration's; the result does not depend on them).
@@ -87,10 +103,10 @@ pub trait Rasterizer: Sync {
         cam: &Camera,
         state: &Self::State,
         d_rgb: &[f32],
-        d_depth: Option<&[f32]>,
+        d_planes: Planes,
         grads: &mut SplatGrads,
     ) -> [f64; 6] {
-        let (g, twist) = self.backward_view(s, cam, state, d_rgb, d_depth);
+        let (g, twist) = self.backward_view(s, cam, state, d_rgb, d_planes);
         *grads = g;
         twist
     }
@@ -103,6 +119,6 @@ pub trait Rasterizer: Sync {
     }
     /// Backward from the gradient of the loss w.r.t. the planar RGB image.
     fn backward(&self, s: &Splats, cam: &Camera, state: &Self::State, d_rgb: &[f32]) -> SplatGrads {
-        self.backward_view(s, cam, state, d_rgb, None).0
+        self.backward_view(s, cam, state, d_rgb, Planes::NONE).0
     }
 }

@@ -11,6 +11,7 @@
 use scene::depth_prior::DepthKind;
 
 /// One frame's map in camera-space depth (`z`, the poses' units; 0 for holes).
+#[derive(Clone, Debug)]
 pub struct Aligned {
     pub width: usize,
     pub height: usize,
@@ -89,6 +90,46 @@ fn median(mut v: Vec<f64>) -> f64 {
     }
     let k = v.len() / 2;
     *v.select_nth_unstable_by(k, f64::total_cmp).1
+}
+
+/// Pairs of (camera pixel, depth) of the `points` (world, believed still: the stereo
+/// init's) that `camera` sees: each point projected, and kept where no other point lies
+/// more than `tolerance` (relative) nearer within a pixel of it, so that a surface
+/// hidden in this frame does not count as seen (a point z-buffer over 3×3 pixels).
+pub fn visible_points(
+    points: &[[f32; 3]],
+    camera: &scene::Camera,
+    tolerance: f64,
+) -> Vec<(glam::DVec2, f64)> {
+    let k = &camera.intrinsics;
+    let (w, h) = (k.width as usize, k.height as usize);
+    let projected: Vec<(glam::DVec2, f64)> = (points.iter())
+        .filter_map(|p| camera.project_world(glam::Vec3::from(*p).as_dvec3()))
+        .filter(|(px, z)| {
+            *z > 0.0
+                && px.x >= -0.5
+                && px.y >= -0.5
+                && px.x < w as f64 - 0.5
+                && px.y < h as f64 - 0.5
+        })
+        .collect();
+    let cell =
+        |p: glam::DVec2| (p.x.round() as usize).min(w - 1) + w * (p.y.round() as usize).min(h - 1);
+    let mut nearest = vec![f64::INFINITY; w * h];
+    for &(p, z) in &projected {
+        let c = cell(p);
+        nearest[c] = nearest[c].min(z);
+    }
+    (projected.into_iter())
+        .filter(|&(p, z)| {
+            let (x, y) = (cell(p) % w, cell(p) / w);
+            let front = (y.saturating_sub(1)..(y + 2).min(h))
+                .flat_map(|yy| (x.saturating_sub(1)..(x + 2).min(w)).map(move |xx| (xx, yy)))
+                .map(|(xx, yy)| nearest[yy * w + xx])
+                .fold(f64::INFINITY, f64::min);
+            z <= front * (1.0 + tolerance)
+        })
+        .collect()
 }
 
 /// Align one frame's `map` (`width × height`, of `kind`) to `refs`, pairs of (camera
@@ -237,6 +278,74 @@ mod tests {
             let want = 2.0 + 0.05 * 10.25 + 0.03 * 7.5;
             assert!((al.at(p).unwrap() - want).abs() < 1e-4, "bilinear {kind:?}");
         }
+    }
+
+    /// A wall at depth 8 behind a board at depth 4 over the left half of the image,
+    /// both sampled densely in the world: every board point is seen, the wall's only
+    /// away from the board (a pixel of margin), and each kept pair is the projection.
+    #[test]
+    fn points_hidden_behind_a_nearer_surface_are_not_seen() {
+        use glam::DVec3;
+        let camera = scene::Camera {
+            intrinsics: scene::Intrinsics {
+                width: 32,
+                height: 24,
+                fx: 20.0,
+                fy: 20.0,
+                cx: 15.5,
+                cy: 11.5,
+                distortion: None,
+            },
+            cam_to_world: scene::Pose::look_at(DVec3::ZERO, -DVec3::Z, DVec3::Y),
+        };
+        // World x of image column u at depth z: (u − cx)·z/fx; columns 0..16 for the board.
+        let plane = |z: f64, u0: f64, u1: f64| -> Vec<[f32; 3]> {
+            let mut out = Vec::new();
+            for i in 0..=4 * (u1 - u0) as usize {
+                for j in 0..=4 * 24 {
+                    let u = u0 + 0.25 * i as f64;
+                    let v = -0.5 + 0.25 * j as f64;
+                    let x = (u - 15.5) * z / 20.0;
+                    let y = -(v - 11.5) * z / 20.0;
+                    out.push([x as f32, y as f32, -z as f32]);
+                }
+            }
+            out
+        };
+        let board = plane(4.0, -0.5, 15.5);
+        let wall = plane(8.0, -0.5, 31.0);
+        let points: Vec<[f32; 3]> = board.iter().chain(&wall).copied().collect();
+        let seen = visible_points(&points, &camera, 0.05);
+        let near: Vec<_> = seen
+            .iter()
+            .filter(|(_, z)| (*z - 4.0).abs() < 1e-4)
+            .collect();
+        let far: Vec<_> = seen
+            .iter()
+            .filter(|(_, z)| (*z - 8.0).abs() < 1e-4)
+            .collect();
+        let inside = |p: &DVec2| p.x > -0.5 && p.y > -0.5 && p.x < 31.5 && p.y < 23.5;
+        let board_inside = board.iter().filter(|b| {
+            let x = glam::Vec3::from(**b).as_dvec3();
+            camera.project_world(x).is_some_and(|(p, _)| inside(&p))
+        });
+        assert_eq!(
+            near.len(),
+            board_inside.count(),
+            "every board point is seen"
+        );
+        assert_eq!(near.len() + far.len(), seen.len());
+        assert!(
+            far.iter().all(|(p, _)| p.x > 15.5),
+            "a wall point behind the board"
+        );
+        let open = (wall.iter())
+            .filter_map(|w| camera.project_world(glam::Vec3::from(*w).as_dvec3()))
+            .filter(|(p, _)| p.x > 17.5 && inside(p))
+            .count();
+        let far_open = far.iter().filter(|(p, _)| p.x > 17.5).count();
+        assert_eq!(far_open, open, "the open wall is seen");
+        assert!(open > 1000, "{open}");
     }
 
     #[test]

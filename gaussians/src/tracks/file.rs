@@ -96,3 +96,71 @@ pub fn read(path: &Path, n: usize, views: usize) -> Result<(Vec<u32>, super::los
         .collect();
     Ok((ids, table))
 }
+
+/// The warm-up's aligned depth priors ([`super::prior_loss`]), saved beside its model so
+/// that the joint training keeps `L_depth`: tensor `z`, `F32 [views, height, width]`
+/// (camera depth in the poses' units; a view without a map is all 0).
+pub const PRIORS_FILE: &str = "depth_prior.safetensors";
+
+/// Write the aligned priors `maps` (one per train view, `width × height` each) to `path`
+/// atomically.
+pub fn write_priors(
+    path: &Path,
+    maps: &[Option<super::depth::Aligned>],
+    width: usize,
+    height: usize,
+) -> Result<()> {
+    let n = width * height;
+    if maps.iter().flatten().any(|m| m.z.len() != n) {
+        return Err(Error::invalid(path, "aligned priors of different sizes"));
+    }
+    let bytes: Vec<u8> = (maps.iter())
+        .flat_map(|m| m.as_ref().map_or(vec![0.0; n], |m| m.z.clone()))
+        .flat_map(f32::to_le_bytes)
+        .collect();
+    let bad = |e| Error::invalid(path, format!("priors tensor: {e}"));
+    let z = TensorView::new(Dtype::F32, vec![maps.len(), height, width], &bytes).map_err(bad)?;
+    let data = safetensors::serialize([("z", z)], None)
+        .map_err(|e| Error::invalid(path, format!("serialising: {e}")))?;
+    scene::atomic::write_bytes_atomic(path, &data)
+}
+
+/// Read what [`write_priors`] wrote for `views` train views of `width × height`; errors
+/// name the file and what is wrong.
+pub fn read_priors(
+    path: &Path,
+    views: usize,
+    width: usize,
+    height: usize,
+) -> Result<Vec<Option<super::depth::Aligned>>> {
+    let data = std::fs::read(path).at(path)?;
+    let st = SafeTensors::deserialize(&data)
+        .map_err(|e| Error::invalid(path, format!("not a safetensors file: {e}")))?;
+    let z = (st.tensor("z")).map_err(|_| Error::invalid(path, "missing tensor z"))?;
+    if z.dtype() != Dtype::F32 || z.shape() != [views, height, width] {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "tensor z: expected F32 [{views}, {height}, {width}] (one map per train view), \
+                 found {:?} {:?}",
+                z.dtype(),
+                z.shape()
+            ),
+        ));
+    }
+    let values: Vec<f32> = (z.data().chunks_exact(4))
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect();
+    let maps = (values.chunks_exact((width * height).max(1)).take(views))
+        .map(|m| {
+            m.iter().any(|&v| v > 0.0).then(|| super::depth::Aligned {
+                width,
+                height,
+                z: m.to_vec(),
+                median_rel_error: f64::NAN,
+                points: 0,
+            })
+        })
+        .collect();
+    Ok(maps)
+}

@@ -99,6 +99,8 @@ pub struct TrackTerm {
     grad: Vec<[f32; 3]>,
     /// `L_track` and the Gaussians it counted at the last view.
     pub last: (f64, usize),
+    /// The depth priors' term (`L_depth`), empty without priors.
+    pub priors: super::prior_loss::PriorTerm,
 }
 
 impl TrackTerm {

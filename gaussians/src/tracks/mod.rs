@@ -19,6 +19,7 @@ pub mod file;
 pub mod lift;
 pub mod lk;
 pub mod loss;
+pub mod prior_loss;
 
 use crate::splats::{Gaussian, Splats};
 use glam::{DVec2, DVec3, Vec2};
@@ -68,6 +69,11 @@ pub struct TrackSettings {
     /// measured +0.3 dB on `rigid`'s co-visible novel pixels but −0.4 on its moving ones,
     /// and −1.3 dB co-visible on `fast` at 4 fps, where the alignment is poorer.
     pub prior_prunes: bool,
+    /// With a depth prior, the weight of `L_depth` in the warm-up and the joint training
+    /// ([`prior_loss`]): each train view's rendered depth pulled to its aligned prior
+    /// (0 = off). 0.1 measured best of 0.01, 0.1, 0.3 and 1 (BENCHMARKS.md, "The prior in
+    /// the loss").
+    pub depth_weight: f64,
 }
 
 impl Default for TrackSettings {
@@ -86,6 +92,7 @@ impl Default for TrackSettings {
             depth_sigma: 0.05,
             depth_ridge: 1e-3,
             prior_prunes: false,
+            depth_weight: 0.1,
         }
     }
 }
@@ -106,16 +113,21 @@ impl TrackSettings {
             || !(self.huber_px.is_finite() && self.huber_px > 0.0)
             || !(self.depth_sigma.is_finite() && self.depth_sigma >= 0.0)
             || !(self.depth_ridge.is_finite() && self.depth_ridge >= 0.0)
+            || !(self.depth_weight.is_finite() && self.depth_weight >= 0.0)
         {
             return Err(
                 "tracks: thresholds and huber_px must be positive, ridge, min_texture, \
-                 weight, depth_sigma and depth_ridge finite and ≥ 0"
+                 weight, depth_sigma, depth_ridge and depth_weight finite and ≥ 0"
                     .into(),
             );
         }
         Ok(())
     }
 }
+
+/// How much nearer (relative) another point within a pixel may be before a stereo point
+/// counts as hidden when the priors are aligned ([`depth::visible_points`]).
+const VISIBLE_TOLERANCE: f64 = 0.05;
 
 /// One frame for tracking: its camera, normalised time and pyramid.
 pub struct Frame<'a> {
@@ -343,12 +355,14 @@ pub fn lift_frames(
     lift_raw(frames, &raw_tracks(frames, stride, references, st), st, &[])
 }
 
-/// Each frame's prior aligned to the still points of `lifted` seen in it (`None` where a
-/// frame has no map or too few still points); with a line per frame on stderr saying
-/// how well the prior agrees with the triangulated still scene.
+/// Each frame's prior aligned to the still points of `lifted` seen in it and to the
+/// `points` (world, believed still: the stereo init's) it sees ([`depth::visible_points`];
+/// `None` where a frame has no map or too few still points); with a line per frame on
+/// stderr saying how well the prior agrees with the still scene.
 pub fn align_priors(
     frames: &[Frame],
     lifted: &[&LiftedTrack],
+    points: &[[f32; 3]],
     priors: &scene::depth_prior::DepthPriors,
 ) -> Vec<Option<depth::Aligned>> {
     let g = &frames[0].pyramid.0[0];
@@ -356,7 +370,7 @@ pub fn align_priors(
     let out: Vec<Option<depth::Aligned>> = (frames.iter().enumerate())
         .map(|(k, f)| {
             let map = priors.maps.get(k)?.as_ref()?;
-            let refs: Vec<(DVec2, f64)> = (lifted.iter())
+            let mut refs: Vec<(DVec2, f64)> = (lifted.iter())
                 .filter_map(|l| {
                     let Lifted::Still(x) = l.point else {
                         return None;
@@ -365,6 +379,7 @@ pub fn align_priors(
                     Some((seen, f.camera.project_world(x)?.1))
                 })
                 .collect();
+            refs.extend(depth::visible_points(points, f.camera, VISIBLE_TOLERANCE));
             depth::align(priors.kind, map, w, h, &refs)
         })
         .collect();
@@ -375,7 +390,7 @@ pub fn align_priors(
         })
         .collect();
     eprintln!(
-        "depth prior: {} of {} train frames aligned to the still tracks; median error per frame, %: {}",
+        "depth prior: {} of {} train frames aligned to the still scene (tracks and stereo points); median error per frame, %: {}",
         out.iter().flatten().count(),
         frames.len(),
         errs.join(" ")
@@ -440,16 +455,16 @@ pub struct Image<'a> {
 /// already in `s` stay still. Colour of the start pixel, opacity ½, a footprint of
 /// `stride` pixels at its depth. Returns the added Gaussians' tracks (camera pixels
 /// per view), the table `s.track` indexes (`loss::NONE` for the Gaussians already in
-/// `s`).
+/// `s`), and the priors as aligned (one per view; empty without priors).
 pub(crate) fn add_moving(
     s: &mut Splats,
     views: &[Image],
     stride: usize,
     st: &TrackSettings,
     priors: Option<&scene::depth_prior::DepthPriors>,
-) -> loss::Table {
+) -> (loss::Table, Vec<Option<depth::Aligned>>) {
     let Some(first) = views.first() else {
-        return Vec::new();
+        return (Vec::new(), Vec::new());
     };
     let k = &first.camera.intrinsics;
     let (w, h) = (k.width as usize, k.height as usize);
@@ -463,6 +478,7 @@ pub(crate) fn add_moving(
         .collect();
     let raws = raw_tracks(&frames, stride, 0, st);
     let mut lifted = lift_raw(&frames, &raws, st, &[]);
+    let mut aligned = Vec::new();
     if let Some(p) = priors.filter(|_| st.depth_sigma > 0.0) {
         // The priors are aligned to still tracks from frames spread over the recording
         // as well (every fourth pixel of five): the middle frame's tracks do not reach
@@ -471,7 +487,7 @@ pub(crate) fn add_moving(
         let still: Vec<&LiftedTrack> = (lifted.iter().chain(&spread))
             .filter(|l| matches!(l.point, Lifted::Still(_)))
             .collect();
-        let mut depths = align_priors(&frames, &still, p);
+        let mut depths = align_priors(&frames, &still, &s.means, p);
         // A frame whose prior the still scene does not confirm is not used.
         let mut set_aside = 0;
         for d in &mut depths {
@@ -494,6 +510,7 @@ pub(crate) fn add_moving(
                 "depth prior: {dropped} initial Gaussians dropped (off the prior's surface in most frames)"
             );
         }
+        aligned = depths;
     }
     let t0 = crate::motion::T0 as f64;
     let before = s.len();
@@ -522,5 +539,5 @@ pub(crate) fn add_moving(
         *s.track.last_mut().expect("just pushed") = table.len() as u32;
         table.push(l.seen);
     }
-    table
+    (table, aligned)
 }

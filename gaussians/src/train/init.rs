@@ -280,7 +280,7 @@ pub(crate) fn initial_splats(
                             rgb: &v.rgb,
                         })
                         .collect();
-                    let table = crate::tracks::add_moving(
+                    let (table, aligned) = crate::tracks::add_moving(
                         &mut s,
                         &images,
                         1,
@@ -289,6 +289,7 @@ pub(crate) fn initial_splats(
                     );
                     let moving = table.len();
                     *tracks = crate::tracks::loss::TrackTerm::new(table);
+                    tracks.priors = crate::tracks::prior_loss::PriorTerm::new(aligned);
                     (s, found + moving)
                 }
                 Init::Frustum => (frustum_splats(&cams, n, near, far, settings.seed), 0),

@@ -23,7 +23,7 @@ mod view;
 use crate::densify::{self, Geometry, GradStats};
 use crate::field::{self, Mlp};
 use crate::optim::{Adam, ExpSchedule};
-use crate::raster::{Rasterizer, RenderedImage};
+use crate::raster::{Planes, Rasterizer, RenderedImage};
 use crate::splats::{SplatGrads, Splats};
 use field_probe::FieldProbeSummary;
 use judge::{Candidate, Judge, spread};
@@ -226,8 +226,8 @@ impl Trainer {
         }
     }
 
-    /// Gradients of a loss on a rendered view, from `∂L/∂rgb` (planar), optionally
-    /// `∂L/∂depth` and `∂L/∂(rendered centres)` (from a loss on the deformed centres
+    /// Gradients of a loss on a rendered view, from `∂L/∂rgb` (planar), `∂L/∂depth` and
+    /// `∂L/∂alpha` where given (`d_planes`) and optionally `∂L/∂(rendered centres)` (from a loss on the deformed centres
     /// themselves, one per Gaussian), taken back through the rasterizer and the field to the
     /// canonical Gaussians, the field's parameters and the camera (in the buffers of the
     /// last gradients given to [`Self::recycle_grads`], if any).
@@ -236,12 +236,12 @@ impl Trainer {
         r: &R,
         v: &ViewRender<R::State>,
         d_rgb: &[f32],
-        d_depth: Option<&[f32]>,
+        d_planes: Planes,
         d_means: Option<&[[f32; 3]]>,
     ) -> ModelGrads {
         let mut out = self.spare.lock().take_grads();
         let g = &mut out.splats;
-        out.camera = r.backward_view_into(&v.deformed, &v.camera, &v.state, d_rgb, d_depth, g);
+        out.camera = r.backward_view_into(&v.deformed, &v.camera, &v.state, d_rgb, d_planes, g);
         if let Some(dm) = d_means {
             assert_eq!(dm.len(), g.means.len(), "view_backward: d_means size");
             for (a, b) in g.means.iter_mut().zip(dm) {
@@ -317,23 +317,6 @@ impl Trainer {
         self.spare.lock().rigidity_loss
     }
 
-    /// The RGB loss of the warm-up (`(1−λ)·L1 + λ·D-SSIM`) of a render against a planar
-    /// target, and its gradient w.r.t. the render.
-    pub fn rgb_loss(&self, image: &RenderedImage, target: &[f32]) -> (f64, Vec<f32>) {
-        let (w, h) = (image.width, image.height);
-        let lam = self.settings.dssim_weight;
-        let (l1, mut grad) = metrics::l1_loss(&image.rgb, target);
-        let mut loss = (1.0 - lam) * l1;
-        if lam > 0.0 {
-            let (ds, gd) = metrics::dssim_loss(&image.rgb, target, w, h);
-            loss += lam * ds;
-            for (g, d) in grad.iter_mut().zip(gd) {
-                *g = (1.0 - lam) as f32 * *g + lam as f32 * d;
-            }
-        }
-        (loss, grad)
-    }
-
     /// The next view index of the shuffled epoch order (each view once per epoch).
     pub fn next_view(&mut self, views: usize) -> usize {
         use rand::seq::SliceRandom;
@@ -369,6 +352,7 @@ impl Trainer {
         let (loss, grad) = self.rgb_loss(&rendered.image, &target.rgb);
         let psnr = metrics::psnr_u8(&rendered.image.rgb, &target.rgb);
         let mut tracks = std::mem::take(&mut self.tracks);
+        let mut priors = std::mem::take(&mut tracks.priors);
         let (ids, st) = (&self.splats.track, &self.settings.tracks);
         let d_means = tracks.gradient(&rendered.deformed.means, ids, k, &view.camera, st);
         let (d_field, d_own) = if st.into_field {
@@ -376,10 +360,12 @@ impl Trainer {
         } else {
             (None, d_means)
         };
-        let mut g = self.view_backward(r, &rendered, &grad, None, d_field);
+        let planes = (priors.gradient(&rendered.image, k, st)).unwrap_or(Planes::NONE);
+        let mut g = self.view_backward(r, &rendered, &grad, planes, d_field);
         if let Some(d) = d_own {
             crate::motion::add_centre_gradient(&self.splats, view.time, d, &mut g.splats);
         }
+        tracks.priors = priors;
         self.tracks = tracks;
         self.recycle_view(rendered);
         self.apply_gradients(&g);

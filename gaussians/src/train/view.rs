@@ -5,7 +5,7 @@
 use crate::field;
 use crate::raster::RenderedImage;
 use crate::splats::{SplatGrads, Splats};
-use scene::Camera;
+use scene::{Camera, metrics};
 
 /// A training view: camera, normalised time, planar RGB target.
 #[derive(Clone, Debug)]
@@ -16,6 +16,40 @@ pub struct View {
 }
 
 impl super::Trainer {
+    /// [`Self::view_backward`] with `L_depth` ([`crate::tracks::prior_loss`]) joined at
+    /// train view `view` (where it has an aligned prior).
+    pub fn view_backward_with_prior<R: crate::Rasterizer>(
+        &mut self,
+        r: &R,
+        v: &ViewRender<R::State>,
+        d_rgb: &[f32],
+        view: Option<usize>,
+        d_means: Option<&[[f32; 3]]>,
+    ) -> ModelGrads {
+        let mut priors = std::mem::take(&mut self.tracks.priors);
+        let planes = view.and_then(|k| priors.gradient(&v.image, k, &self.settings.tracks));
+        let g = self.view_backward(r, v, d_rgb, planes.unwrap_or_default(), d_means);
+        self.tracks.priors = priors;
+        g
+    }
+
+    /// The RGB loss of the warm-up (`(1−λ)·L1 + λ·D-SSIM`) of a render against a planar
+    /// target, and its gradient w.r.t. the render.
+    pub fn rgb_loss(&self, image: &RenderedImage, target: &[f32]) -> (f64, Vec<f32>) {
+        let (w, h) = (image.width, image.height);
+        let lam = self.settings.dssim_weight;
+        let (l1, mut grad) = metrics::l1_loss(&image.rgb, target);
+        let mut loss = (1.0 - lam) * l1;
+        if lam > 0.0 {
+            let (ds, gd) = metrics::dssim_loss(&image.rgb, target, w, h);
+            loss += lam * ds;
+            for (g, d) in grad.iter_mut().zip(gd) {
+                *g = (1.0 - lam) as f32 * *g + lam as f32 * d;
+            }
+        }
+        (loss, grad)
+    }
+
     /// Whether this step trains at half resolution (`coarse_until`); the half views are
     /// built at the first such step and dropped after the last.
     pub(super) fn coarse_views(&mut self, views: &[View]) -> bool {

@@ -1,0 +1,116 @@
+//! The depth-prior term `L_depth` (issue #30): each train view's rendered depth pulled
+//! to that frame's aligned prior ([`super::depth::Aligned`]), as the depth loss of Shape
+//! of Motion (Wang et al. 2025):
+//!
+//! ```text
+//! L_depth = w · (1/N) Σ_p H(r_p),   r_p = (D_p / α_p − z_p) / (σ · z_p)
+//! ```
+//!
+//! over the `N` pixels where the prior has a depth (`z_p > 0`) and the render covers
+//! (`α_p ≥ ½`): `D` the alpha-blended depth, `α` the accumulated alpha (so `D/α` is the
+//! depth of what the pixel shows), `σ = depth_sigma` (a relative error of `σ` is one
+//! unit, the scale at which the tracks' lift weighs a depth as one pixel), `H` Huber at
+//! 1 (`r²/2` up to 1, `|r| − ½` beyond: where the network blurs an edge, or a frame keeps
+//! some misalignment, the prior pulls no harder than `σ`). With `q = w·H'(r_p)/N`:
+//!
+//! ```text
+//! ∂L/∂D_p = q / (σ z_p α_p),   ∂L/∂α_p = −q · D_p / (σ z_p α_p²)
+//! ```
+//!
+//! The still scene's distance is fixed by parallax already; what the term adds is the
+//! distance of the moving objects at every train time, which one moving camera cannot
+//! tell: the rendering loss lets their Gaussians slide along the rays (DESIGN §5).
+
+use super::depth::Aligned;
+use crate::raster::{Planes, RenderedImage};
+
+/// Alpha below which a pixel is not compared (the render shows nothing there).
+pub const MIN_ALPHA: f32 = 0.5;
+
+/// `L_depth` of one view: its rendered `depth` and `alpha` against the aligned `prior`
+/// (`H×W` each, 0 for no prior), weight `weight`, relative scale `sigma`. Writes
+/// `∂L/∂depth` and `∂L/∂alpha` into `d_depth` and `d_alpha` (resized; zero off the
+/// compared pixels). Returns the loss and `N`.
+pub fn at_view(
+    depth: &[f32],
+    alpha: &[f32],
+    prior: &[f32],
+    weight: f64,
+    sigma: f64,
+    d_depth: &mut Vec<f32>,
+    d_alpha: &mut Vec<f32>,
+) -> (f64, usize) {
+    let n = depth.len();
+    assert!(
+        alpha.len() == n && prior.len() == n,
+        "prior_loss: plane sizes differ"
+    );
+    d_depth.clear();
+    d_depth.resize(n, 0.0);
+    d_alpha.clear();
+    d_alpha.resize(n, 0.0);
+    let on = |p: usize| prior[p] > 0.0 && prior[p].is_finite() && alpha[p] >= MIN_ALPHA;
+    let count = (0..n).filter(|&p| on(p)).count();
+    if count == 0 || weight <= 0.0 || sigma <= 0.0 {
+        return (0.0, 0);
+    }
+    let scale = weight / count as f64;
+    let mut loss = 0.0;
+    for p in (0..n).filter(|&p| on(p)) {
+        let (d, a, z) = (depth[p] as f64, alpha[p] as f64, prior[p] as f64);
+        let r = (d / a - z) / (sigma * z);
+        let (h, dh) = if r.abs() <= 1.0 {
+            (0.5 * r * r, r)
+        } else {
+            (r.abs() - 0.5, r.signum())
+        };
+        loss += h;
+        let q = scale * dh / (sigma * z);
+        d_depth[p] = (q / a) as f32;
+        d_alpha[p] = (-q * d / (a * a)) as f32;
+    }
+    (loss * scale, count)
+}
+
+/// The trainer's depth-prior term: each train view's aligned prior (`None` for a view
+/// without one) and reused gradient planes.
+#[derive(Clone, Debug, Default)]
+pub struct PriorTerm {
+    pub maps: Vec<Option<Aligned>>,
+    d_depth: Vec<f32>,
+    d_alpha: Vec<f32>,
+    /// `L_depth` and the pixels it compared at the last view.
+    pub last: (f64, usize),
+}
+
+impl PriorTerm {
+    pub fn new(maps: Vec<Option<Aligned>>) -> Self {
+        PriorTerm {
+            maps,
+            ..Self::default()
+        }
+    }
+
+    /// The gradient planes of `L_depth` at train view `view` of its render `image`
+    /// ([`at_view`]); `None` when the term is off, the view has no prior or a size
+    /// other than the prior's (a coarse view).
+    pub fn gradient(
+        &mut self,
+        image: &RenderedImage,
+        view: usize,
+        st: &super::TrackSettings,
+    ) -> Option<Planes<'_>> {
+        self.last = (0.0, 0);
+        let map = self.maps.get(view)?.as_ref()?;
+        if st.depth_weight <= 0.0 || (map.width, map.height) != (image.width, image.height) {
+            return None;
+        }
+        let (w, s) = (st.depth_weight, st.depth_sigma);
+        let (dd, da) = (&mut self.d_depth, &mut self.d_alpha);
+        self.last = at_view(&image.depth, &image.alpha, &map.z, w, s, dd, da);
+        (self.last.1 > 0).then_some(Planes {
+            depth: Some(&self.d_depth),
+            alpha: Some(&self.d_alpha),
+        })
+    }
+}
