@@ -1,5 +1,6 @@
 //! The `gaussians train` progress display: [`stagekit::Progress`] over the iterations,
-//! each shown with its loss, PSNR and Gaussian count.
+//! each shown with its loss, PSNR and Gaussian count (and, with depth priors, how far
+//! the render's depth is from the prior).
 
 use crate::train::StepInfo;
 use stagekit::Progress;
@@ -16,8 +17,11 @@ impl TrainProgress {
 
     pub fn step(&self, s: &StepInfo) {
         self.0.set(s.iteration as u64, || {
+            let prior = (s.prior_error).map_or(String::new(), |e| {
+                format!("  depth {:.1} % off the prior", 100.0 * e)
+            });
             format!(
-                "loss {:.4}  PSNR {:.2} dB  {} Gaussians{}",
+                "loss {:.4}  PSNR {:.2} dB  {} Gaussians{}{prior}",
                 s.loss,
                 s.psnr,
                 s.gaussians,

@@ -52,6 +52,8 @@ pub struct JointStep {
     pub l_motion: f64,
     /// The warm-up's track term at the train frame (0 without tracks; weighted).
     pub l_track: f64,
+    /// The warm-up's depth-prior term at the train frame (0 without priors; weighted).
+    pub l_depth: f64,
     pub total: f64,
     /// PSNR of the train frame's render (dB, at most `gaussians::stage::PSNR_CAP`).
     pub psnr: f64,
@@ -421,7 +423,7 @@ impl JointTrainer {
         let clock = Instant::now();
         self.posenet_grad.fill(0.0);
         let mut grads = self.backward_with_motion(r, d, &rv, &grad, &motion, Some(i));
-        let l_track = self.inner.tracks.last.0;
+        let (l_track, l_depth) = (self.inner.tracks.last.0, self.inner.tracks.priors.last.0);
         self.fallbacks.drop_bindings(&dropped);
         self.inner.recycle_view(rv);
         self.timings.rgb += clock.elapsed().as_secs_f64();
@@ -457,7 +459,8 @@ impl JointTrainer {
             l_event,
             l_motion,
             l_track,
-            total: l_rgb + g1 * l_event + g2 * l_motion + l_track,
+            l_depth,
+            total: l_rgb + g1 * l_event + g2 * l_motion + l_track + l_depth,
             psnr,
             bound,
             gaussians: self.inner.splats.len(),

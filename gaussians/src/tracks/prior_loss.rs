@@ -81,6 +81,8 @@ pub struct PriorTerm {
     d_alpha: Vec<f32>,
     /// `L_depth` and the pixels it compared at the last view.
     pub last: (f64, usize),
+    /// The mean relative difference `|D/α − z|/z` over those pixels.
+    pub last_rel_error: f64,
 }
 
 impl PriorTerm {
@@ -100,7 +102,7 @@ impl PriorTerm {
         view: usize,
         st: &super::TrackSettings,
     ) -> Option<Planes<'_>> {
-        self.last = (0.0, 0);
+        (self.last, self.last_rel_error) = ((0.0, 0), 0.0);
         let map = self.maps.get(view)?.as_ref()?;
         if st.depth_weight <= 0.0 || (map.width, map.height) != (image.width, image.height) {
             return None;
@@ -108,6 +110,11 @@ impl PriorTerm {
         let (w, s) = (st.depth_weight, st.depth_sigma);
         let (dd, da) = (&mut self.d_depth, &mut self.d_alpha);
         self.last = at_view(&image.depth, &image.alpha, &map.z, w, s, dd, da);
+        let rel = (image.depth.iter().zip(&image.alpha).zip(&map.z))
+            .filter(|((_, a), z)| **z > 0.0 && z.is_finite() && **a >= MIN_ALPHA)
+            .map(|((d, a), z)| ((d / a - z) / z).abs() as f64)
+            .sum::<f64>();
+        self.last_rel_error = rel / self.last.1.max(1) as f64;
         (self.last.1 > 0).then_some(Planes {
             depth: Some(&self.d_depth),
             alpha: Some(&self.d_alpha),

@@ -365,6 +365,7 @@ impl Trainer {
         if let Some(d) = d_own {
             crate::motion::add_centre_gradient(&self.splats, view.time, d, &mut g.splats);
         }
+        let prior_error = (priors.last.1 > 0).then_some(priors.last_rel_error);
         tracks.priors = priors;
         self.tracks = tracks;
         self.recycle_view(rendered);
@@ -378,6 +379,7 @@ impl Trainer {
             psnr,
             gaussians: self.splats.len(),
             field_on,
+            prior_error,
         }
     }
 

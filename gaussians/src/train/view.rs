@@ -27,6 +27,7 @@ impl super::Trainer {
         d_means: Option<&[[f32; 3]]>,
     ) -> ModelGrads {
         let mut priors = std::mem::take(&mut self.tracks.priors);
+        priors.last = (0.0, 0);
         let planes = view.and_then(|k| priors.gradient(&v.image, k, &self.settings.tracks));
         let g = self.view_backward(r, v, d_rgb, planes.unwrap_or_default(), d_means);
         self.tracks.priors = priors;
@@ -132,4 +133,7 @@ pub struct StepInfo {
     pub psnr: f64,
     pub gaussians: usize,
     pub field_on: bool,
+    /// With `L_depth` at this view: the render's mean relative depth difference from
+    /// the aligned prior.
+    pub prior_error: Option<f64>,
 }
