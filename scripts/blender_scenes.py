@@ -25,6 +25,9 @@ DIR receives
   cameras.json         intrinsics (degs conventions: pixel centres at integers, so
                        cx = (w - 1) / 2) and every rendered view's camera-to-world
                        matrix (OpenGL axes, as Blender's camera) and time
+  depth/hr_NNNNN.exr   with --depth-only (into an earlier render's DIR): the camera
+                       depth (channel Z, −z in the camera's axes, from Cycles' Position
+                       pass) of every hr frame on the 20 fps grid, for a depth prior
 
 `scripts/outside_scene.py` turns DIR into degs scene directories at a chosen train
 frame rate. Times: frame i of hr/ is at i / rate seconds; the test times are the hr
@@ -58,6 +61,11 @@ def parse_args():
         "--masks-only",
         action="store_true",
         help="render only the moving-object masks (into an earlier render's DIR)",
+    )
+    p.add_argument(
+        "--depth-only",
+        action="store_true",
+        help="render only the train frames' depth (into an earlier render's DIR)",
     )
     args = p.parse_args(argv)
     if args.rate % 20:
@@ -363,6 +371,72 @@ def render_masks(moving, paths):
             s.material = m
 
 
+def write_exr_z(path, w, h, z):
+    """`z` (row-major floats, top row first) as an uncompressed single-channel f32 EXR
+    with channel Z (the layout degs reads; OpenEXR 2 scanline format)."""
+    import struct
+
+    def attr(name, kind, data):
+        return name.encode() + b"\0" + kind.encode() + b"\0" + struct.pack("<i", len(data)) + data
+
+    box = struct.pack("<iiii", 0, 0, w - 1, h - 1)
+    header = b"".join(
+        [
+            struct.pack("<ii", 20000630, 2),
+            attr("channels", "chlist", b"Z\0" + struct.pack("<iB3xii", 2, 0, 1, 1) + b"\0"),
+            attr("compression", "compression", b"\0"),
+            attr("dataWindow", "box2i", box),
+            attr("displayWindow", "box2i", box),
+            attr("lineOrder", "lineOrder", b"\0"),
+            attr("pixelAspectRatio", "float", struct.pack("<f", 1.0)),
+            attr("screenWindowCenter", "v2f", struct.pack("<ff", 0.0, 0.0)),
+            attr("screenWindowWidth", "float", struct.pack("<f", 1.0)),
+            b"\0",
+        ]
+    )
+    line = 8 + 4 * w
+    first = len(header) + 8 * h
+    offsets = b"".join(struct.pack("<Q", first + y * line) for y in range(h))
+    rows = b"".join(
+        struct.pack("<ii", y, 4 * w) + struct.pack(f"<{w}f", *z[y * w : (y + 1) * w]) for y in range(h)
+    )
+    with open(path, "wb") as f:
+        f.write(header + offsets + rows)
+
+
+def render_depth(cam, size, path):
+    """Render the Position pass once and write each pixel's camera depth to `path`."""
+    sc = bpy.context.scene
+    bpy.ops.render.render()
+    px = bpy.data.images["Viewer Node"].pixels[:]
+    inv = cam.matrix_world.inverted()
+    z = []
+    for y in range(size):
+        row = size - 1 - y  # Blender's images start at the bottom row
+        for x in range(size):
+            i = 4 * (row * size + x)
+            p = inv @ Vector((px[i], px[i + 1], px[i + 2]))
+            z.append(max(-p.z, 0.0))
+    write_exr_z(path, size, size, z)
+
+
+def setup_depth():
+    """Cycles at one sample with the Position pass routed to the compositor's viewer."""
+    sc = bpy.context.scene
+    sc.cycles.samples = 1
+    sc.view_layers[0].use_pass_position = True
+    sc.use_nodes = True
+    sc.render.use_compositing = True
+    tree = sc.node_tree
+    for n in list(tree.nodes):
+        tree.nodes.remove(n)
+    rl = tree.nodes.new("CompositorNodeRLayers")
+    viewer = tree.nodes.new("CompositorNodeViewer")
+    comp = tree.nodes.new("CompositorNodeComposite")
+    tree.links.new(rl.outputs["Position"], viewer.inputs[0])
+    tree.links.new(rl.outputs["Image"], comp.inputs[0])
+
+
 def main():
     args = parse_args()
     clear()
@@ -379,6 +453,22 @@ def main():
     sc.camera = cam
 
     out = os.path.abspath(args.out)
+    if args.depth_only:
+        if not os.path.isfile(os.path.join(out, "cameras.json")):
+            sys.exit(f"{out}: not an earlier render of this script (no cameras.json)")
+        os.makedirs(os.path.join(out, "depth"), exist_ok=False)
+        setup_depth()
+        n = int(round(args.rate * args.seconds))
+        frames = [i for i in range(n + 1) if i % (args.rate // 20) == 0]
+        for k, i in enumerate(frames):
+            t = i / args.rate
+            eye, look = camera_at(t)
+            animate(t)
+            cam.matrix_world = camera_matrix(eye, look)
+            bpy.context.view_layer.update()
+            render_depth(cam, args.size, os.path.join(out, "depth", f"hr_{i:05d}.exr"))
+            print(f"blender_scenes: {args.scene} depth {k + 1}/{len(frames)}", flush=True)
+        return
     if args.masks_only:
         if not os.path.isfile(os.path.join(out, "cameras.json")):
             sys.exit(f"{out}: not an earlier render of this script (no cameras.json)")

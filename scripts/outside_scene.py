@@ -8,7 +8,10 @@ EVENTS: an event file made from RENDER/hr/ by any simulator (e.g. `evflow simula
 --frames RENDER/hr --out events.evs`); copied into OUT as is.
 OUT: a new folder (refused when it exists): transforms_train.json (every hr frame on the
 --fps grid), transforms_test.json (the in-between times blender_scenes.py chose),
-transforms_novel.json, images/, gt/{test,novel}/ (the moving-object masks) and events.*.
+transforms_novel.json, images/, gt/{test,novel}/ (the moving-object masks) and events.*;
+with RENDER/depth/ (`blender_scenes.py --depth-only`) also gt/train/depth_NNNN.exr, the
+train frames' true depth (channel Z), from which `gaussians/examples/depth_prior.rs`
+writes a depth prior.
 
 The frames are 8-bit sRGB (no `frame_encoding` field: the manifest default). Only the
 Python standard library is needed.
@@ -62,6 +65,11 @@ def main():
             name = f"train_{len(train):04d}.png"
             copy(f"hr_{i:05d}.png", name)
             train.append(frame(name, hr[i]["time"], hr[i]["transform_matrix"]))
+            depth = os.path.join(a.render, "depth", f"hr_{i:05d}.exr")
+            if os.path.exists(depth):
+                os.makedirs(os.path.join(a.out, "gt", "train"), exist_ok=True)
+                dst = os.path.join(a.out, "gt", "train", f"depth_{len(train) - 1:04d}.exr")
+                shutil.copyfile(depth, dst)
     test = []
     for k, v in enumerate(meta["views"]["test"]):
         i = v["index"]
