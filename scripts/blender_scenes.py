@@ -26,8 +26,9 @@ DIR receives
                        cx = (w - 1) / 2) and every rendered view's camera-to-world
                        matrix (OpenGL axes, as Blender's camera) and time
   depth/hr_NNNNN.exr   with --depth-only (into an earlier render's DIR): the camera
-                       depth (channel Z, −z in the camera's axes, from Cycles' Position
-                       pass) of every hr frame on the 20 fps grid, for a depth prior
+                       depth (channel Z, −z in the camera's axes, each pixel's ray cast
+                       through the scene) of every hr frame on the 20 fps grid, for a
+                       depth prior
 
 `scripts/outside_scene.py` turns DIR into degs scene directories at a chosen train
 frame rate. Times: frame i of hr/ is at i / rate seconds; the test times are the hr
@@ -404,37 +405,23 @@ def write_exr_z(path, w, h, z):
         f.write(header + offsets + rows)
 
 
-def render_depth(cam, size, path):
-    """Render the Position pass once and write each pixel's camera depth to `path`."""
-    sc = bpy.context.scene
-    bpy.ops.render.render()
-    px = bpy.data.images["Viewer Node"].pixels[:]
-    inv = cam.matrix_world.inverted()
+def render_depth(cam, size, fov_deg, path):
+    """Each pixel's camera depth (−z in the camera's axes) by casting its ray through
+    the scene as it is now (pixel centres at integers, as in cameras.json), to `path`."""
+    dg = bpy.context.evaluated_depsgraph_get()
+    f = (size / 2) / math.tan(math.radians(fov_deg) / 2)
+    c = (size - 1) / 2
+    m = cam.matrix_world
+    origin = m.translation
+    rot = m.to_3x3()
+    inv = m.inverted()
     z = []
     for y in range(size):
-        row = size - 1 - y  # Blender's images start at the bottom row
         for x in range(size):
-            i = 4 * (row * size + x)
-            p = inv @ Vector((px[i], px[i + 1], px[i + 2]))
-            z.append(max(-p.z, 0.0))
+            d = rot @ Vector(((x - c) / f, -(y - c) / f, -1.0))
+            hit, loc, _, _, _, _ = bpy.context.scene.ray_cast(dg, origin, d.normalized())
+            z.append(max(-(inv @ loc).z, 0.0) if hit else 0.0)
     write_exr_z(path, size, size, z)
-
-
-def setup_depth():
-    """Cycles at one sample with the Position pass routed to the compositor's viewer."""
-    sc = bpy.context.scene
-    sc.cycles.samples = 1
-    sc.view_layers[0].use_pass_position = True
-    sc.use_nodes = True
-    sc.render.use_compositing = True
-    tree = sc.node_tree
-    for n in list(tree.nodes):
-        tree.nodes.remove(n)
-    rl = tree.nodes.new("CompositorNodeRLayers")
-    viewer = tree.nodes.new("CompositorNodeViewer")
-    comp = tree.nodes.new("CompositorNodeComposite")
-    tree.links.new(rl.outputs["Position"], viewer.inputs[0])
-    tree.links.new(rl.outputs["Image"], comp.inputs[0])
 
 
 def main():
@@ -457,7 +444,6 @@ def main():
         if not os.path.isfile(os.path.join(out, "cameras.json")):
             sys.exit(f"{out}: not an earlier render of this script (no cameras.json)")
         os.makedirs(os.path.join(out, "depth"), exist_ok=False)
-        setup_depth()
         n = int(round(args.rate * args.seconds))
         frames = [i for i in range(n + 1) if i % (args.rate // 20) == 0]
         for k, i in enumerate(frames):
@@ -466,7 +452,8 @@ def main():
             animate(t)
             cam.matrix_world = camera_matrix(eye, look)
             bpy.context.view_layer.update()
-            render_depth(cam, args.size, os.path.join(out, "depth", f"hr_{i:05d}.exr"))
+            path = os.path.join(out, "depth", f"hr_{i:05d}.exr")
+            render_depth(cam, args.size, args.fov_deg, path)
             print(f"blender_scenes: {args.scene} depth {k + 1}/{len(frames)}", flush=True)
         return
     if args.masks_only:
