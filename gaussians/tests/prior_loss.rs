@@ -51,7 +51,7 @@ fn depth_and_alpha_gradients_match_finite_differences() {
         .map(|p| alpha[p] * prior[p].max(2.0) * (1.0 + rng.uf(-0.15, 0.15)))
         .collect();
     let (mut dd, mut da) = (Vec::new(), Vec::new());
-    let (l, count) = at_view(&depth, &alpha, &prior, w, sigma, &mut dd, &mut da);
+    let (l, count, rel) = at_view(&depth, &alpha, &prior, w, sigma, &mut dd, &mut da);
     let f64v = |v: &[f32]| v.iter().map(|&x| x as f64).collect::<Vec<f64>>();
     let (d64, a64, z64) = (f64v(&depth), f64v(&alpha), f64v(&prior));
     let expected = (0..n)
@@ -60,6 +60,12 @@ fn depth_and_alpha_gradients_match_finite_differences() {
     assert_eq!(count, expected);
     assert!(count > n / 2, "too few pixels compared: {count}");
     assert!((l - loss64(&d64, &a64, &z64, w, sigma)).abs() < 1e-9 * l.max(1.0));
+    let rel64: f64 = (0..n)
+        .filter(|&p| prior[p] > 0.0 && alpha[p] >= MIN_ALPHA)
+        .map(|p| (d64[p] / a64[p] - z64[p]).abs() / z64[p])
+        .sum::<f64>()
+        / count as f64;
+    assert!((rel - rel64).abs() < 1e-9, "{rel} against {rel64}");
     let eps = 1e-6;
     let mut worst = 0.0f64;
     for p in 0..n {
@@ -118,7 +124,7 @@ fn depth_term_gradients_reach_the_gaussians() {
         let (img, st) = r.render_full(&s, &cam, 0, [0.0; 3]);
         let prior32: Vec<f32> = prior.iter().map(|&z| z as f32).collect();
         let (mut dd, mut da) = (Vec::new(), Vec::new());
-        let (_, count) = at_view(&img.depth, &img.alpha, &prior32, w, sigma, &mut dd, &mut da);
+        let (_, count, _) = at_view(&img.depth, &img.alpha, &prior32, w, sigma, &mut dd, &mut da);
         assert!(count > 50, "seed {seed}: {count} pixels compared");
         let zero = vec![0.0f32; 3 * img.depth.len()];
         let (g, _) = r.backward_full(&s, &cam, &st, &zero, Some(&dd), Some(&da));

@@ -30,7 +30,8 @@ pub const MIN_ALPHA: f32 = 0.5;
 /// `L_depth` of one view: its rendered `depth` and `alpha` against the aligned `prior`
 /// (`H×W` each, 0 for no prior), weight `weight`, relative scale `sigma`. Writes
 /// `∂L/∂depth` and `∂L/∂alpha` into `d_depth` and `d_alpha` (resized; zero off the
-/// compared pixels). Returns the loss and `N`.
+/// compared pixels). Returns the loss, `N` and the mean relative difference
+/// `|D/α − z|/z` over those pixels.
 pub fn at_view(
     depth: &[f32],
     alpha: &[f32],
@@ -39,7 +40,7 @@ pub fn at_view(
     sigma: f64,
     d_depth: &mut Vec<f32>,
     d_alpha: &mut Vec<f32>,
-) -> (f64, usize) {
+) -> (f64, usize, f64) {
     let n = depth.len();
     assert!(
         alpha.len() == n && prior.len() == n,
@@ -52,10 +53,10 @@ pub fn at_view(
     let on = |p: usize| prior[p] > 0.0 && prior[p].is_finite() && alpha[p] >= MIN_ALPHA;
     let count = (0..n).filter(|&p| on(p)).count();
     if count == 0 || weight <= 0.0 || sigma <= 0.0 {
-        return (0.0, 0);
+        return (0.0, 0, 0.0);
     }
     let scale = weight / count as f64;
-    let mut loss = 0.0;
+    let (mut loss, mut rel) = (0.0, 0.0);
     for p in (0..n).filter(|&p| on(p)) {
         let (d, a, z) = (depth[p] as f64, alpha[p] as f64, prior[p] as f64);
         let r = (d / a - z) / (sigma * z);
@@ -64,12 +65,12 @@ pub fn at_view(
         } else {
             (r.abs() - 0.5, r.signum())
         };
-        loss += h;
+        (loss, rel) = (loss + h, rel + r.abs() * sigma);
         let q = scale * dh / (sigma * z);
         d_depth[p] = (q / a) as f32;
         d_alpha[p] = (-q * d / (a * a)) as f32;
     }
-    (loss * scale, count)
+    (loss * scale, count, rel / count as f64)
 }
 
 /// The trainer's depth-prior term: each train view's aligned prior (`None` for a view
@@ -109,12 +110,8 @@ impl PriorTerm {
         }
         let (w, s) = (st.depth_weight, st.depth_sigma);
         let (dd, da) = (&mut self.d_depth, &mut self.d_alpha);
-        self.last = at_view(&image.depth, &image.alpha, &map.z, w, s, dd, da);
-        let rel = (image.depth.iter().zip(&image.alpha).zip(&map.z))
-            .filter(|((_, a), z)| **z > 0.0 && z.is_finite() && **a >= MIN_ALPHA)
-            .map(|((d, a), z)| ((d / a - z) / z).abs() as f64)
-            .sum::<f64>();
-        self.last_rel_error = rel / self.last.1.max(1) as f64;
+        let (loss, count, rel) = at_view(&image.depth, &image.alpha, &map.z, w, s, dd, da);
+        (self.last, self.last_rel_error) = ((loss, count), rel);
         (self.last.1 > 0).then_some(Planes {
             depth: Some(&self.d_depth),
             alpha: Some(&self.d_alpha),

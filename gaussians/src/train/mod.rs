@@ -227,10 +227,11 @@ impl Trainer {
     }
 
     /// Gradients of a loss on a rendered view, from `∂L/∂rgb` (planar), `∂L/∂depth` and
-    /// `∂L/∂alpha` where given (`d_planes`) and optionally `∂L/∂(rendered centres)` (from a loss on the deformed centres
-    /// themselves, one per Gaussian), taken back through the rasterizer and the field to the
-    /// canonical Gaussians, the field's parameters and the camera (in the buffers of the
-    /// last gradients given to [`Self::recycle_grads`], if any).
+    /// `∂L/∂alpha` where given (`d_planes`) and optionally `∂L/∂(rendered centres)` (from
+    /// a loss on the deformed centres themselves, one per Gaussian), taken back through
+    /// the rasterizer and the field to the canonical Gaussians, the field's parameters
+    /// and the camera (in the buffers of the last gradients given to
+    /// [`Self::recycle_grads`], if any).
     pub fn view_backward<R: Rasterizer>(
         &self,
         r: &R,
