@@ -31,7 +31,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     let scene = Scene::open(std::path::Path::new(&dir))?;
     let views = load_views(&scene, &scene.train)?;
-    let srgb = scene.train.frame_encoding.is_none_or(|e| e.is_srgb());
+    let srgb = scene.train.frames_srgb();
     let linear: Vec<Vec<f32>> = views
         .iter()
         .map(|v| {

@@ -124,7 +124,7 @@ impl Inputs {
         let srgb = match s.frame_encoding {
             FrameEncoding::Srgb => true,
             FrameEncoding::Linear => false,
-            FrameEncoding::Auto => scene.train.frame_encoding.is_none_or(|e| e.is_srgb()),
+            FrameEncoding::Auto => scene.train.frames_srgb(),
         };
         let linear: Vec<Vec<f32>> = views
             .iter()

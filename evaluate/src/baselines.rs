@@ -41,7 +41,7 @@ pub fn compute(scene: &Scene, dir: &Path) -> Result<Option<(BaselineFigures, Bas
         times: &times,
         events: events.as_ref(),
         contrast: scene.contrast_threshold(),
-        srgb: scene.train.frame_encoding.is_none_or(|e| e.is_srgb()),
+        srgb: scene.train.frames_srgb(),
     };
     let b = deform::baselines::evaluate(&rec, &test, &test_times);
     let score = |s: &BaselineScore| Score {

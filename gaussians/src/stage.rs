@@ -209,8 +209,9 @@ fn hash_file(path: &Path) -> Result<InputHash> {
     })
 }
 
-/// Hashes of the manifests, every image, the initial point cloud and its trajectories.
-fn input_hashes(scene: &Scene, init: [Option<&Path>; 2]) -> Result<Vec<InputHash>> {
+/// Hashes of the manifests, every image, the initial point cloud and its trajectories,
+/// and the events file when the init reads it (`events`).
+fn input_hashes(scene: &Scene, init: [Option<&Path>; 2], events: bool) -> Result<Vec<InputHash>> {
     let mut out = Vec::new();
     use scene::manifest::{NOVEL_FILE, TEST_FILE, TRAIN_FILE};
     for name in [TRAIN_FILE, TEST_FILE, NOVEL_FILE] {
@@ -225,6 +226,9 @@ fn input_hashes(scene: &Scene, init: [Option<&Path>; 2]) -> Result<Vec<InputHash
     }
     for p in init.into_iter().flatten() {
         out.push(hash_file(p)?);
+    }
+    if let Some(p) = events.then(|| scene.events_path()).flatten() {
+        out.push(hash_file(&p)?);
     }
     Ok(out)
 }
@@ -377,9 +381,16 @@ pub fn train(
     let scene = Scene::open(&args.stage.scene)?;
     let views = load_views(&scene, &scene.train)?;
     let test_views = load_views(&scene, &scene.test)?;
+    let reads_events = args.init_ply.is_none()
+        && settings.tracks.event_steps > 0
+        && settings
+            .init
+            .resolve(scene::depth_prior::exists(&scene.root))
+            == Init::Tracks;
     let inputs = input_hashes(
         &scene,
         [args.init_ply.as_deref(), args.init_motion.as_deref()],
+        reads_events,
     )?;
     phases.start("init");
     let mut tracks = crate::tracks::loss::TrackTerm::default();

@@ -251,6 +251,7 @@ fn chained_tracks_follow_a_moving_texture_and_classify_it() {
             camera: &cam,
             time: i as f64 / 6.0,
             pyramid: Pyramid::new(texture(w, h, step * i as f32), 3),
+            between: Vec::new(),
         })
         .collect();
     let st = TrackSettings::default();
@@ -296,6 +297,7 @@ fn on_a_synthetic_scene_still_tracks_are_on_still_surfaces_and_moving_ones_move(
                 },
                 3,
             ),
+            between: Vec::new(),
         })
         .collect();
     let median = |v: &mut Vec<f64>| {
@@ -491,6 +493,7 @@ fn the_prior_drops_initial_gaussians_off_its_surface() {
             camera: c,
             time: i as f64 / 2.0,
             pyramid: Pyramid::new(texture(w, h, Vec2::ZERO), 1),
+            between: Vec::new(),
         })
         .collect();
     let hidden = DVec3::new(0.5, 0.3, 0.0);

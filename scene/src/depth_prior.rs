@@ -57,14 +57,20 @@ pub fn map_path(root: &Path, image: &str) -> PathBuf {
     root.join(DIR).join(format!("{stem}.exr"))
 }
 
+/// Whether the scene at `root` has depth priors (its `depth/depth.json`; [`load`] reads
+/// and checks them).
+pub fn exists(root: &Path) -> bool {
+    root.join(DIR).join(KIND_FILE).exists()
+}
+
 /// Read the priors of `train` (the scene's train manifest, at `root`): `None` when the
 /// scene has no `depth/depth.json`. A map of the wrong size, a kind file that does not
 /// parse, or a `depth.json` with no map at all is an error naming the file.
 pub fn load(root: &Path, train: &Manifest) -> Result<Option<DepthPriors>> {
-    let kind_path = root.join(DIR).join(KIND_FILE);
-    if !kind_path.exists() {
+    if !exists(root) {
         return Ok(None);
     }
+    let kind_path = root.join(DIR).join(KIND_FILE);
     let text = std::fs::read_to_string(&kind_path).map_err(|e| Error::io(&kind_path, e))?;
     let kind = serde_json::from_str::<KindFile>(&text)
         .map_err(|e| {

@@ -30,6 +30,15 @@ pub fn srgb_to_linear(c: f32) -> f32 {
     }
 }
 
+/// Linear intensity in `[0, 1]` → its sRGB code value, the inverse of [`srgb_to_linear`].
+pub fn linear_to_srgb(c: f32) -> f32 {
+    if c <= 0.003_130_8 {
+        12.92 * c
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    }
+}
+
 /// An `f32` image, row-major with interleaved channels.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Image {

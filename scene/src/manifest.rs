@@ -155,6 +155,11 @@ struct RawManifest {
 }
 
 impl Manifest {
+    /// Whether the frames' codes are sRGB (the default when the manifest does not say).
+    pub fn frames_srgb(&self) -> bool {
+        self.frame_encoding.is_none_or(|e| e.is_srgb())
+    }
+
     /// Read and check one manifest: camera complete and finite, every frame's pose rigid,
     /// `time` in [0, 1], timestamps finite and strictly increasing. Errors name the file
     /// and the frame index.

@@ -280,12 +280,25 @@ pub(crate) fn initial_splats(
                             rgb: &v.rgb,
                         })
                         .collect();
+                    let stream = event_stream(scene, &settings.tracks)?;
+                    let seconds: Vec<f64> =
+                        scene.train.frames.iter().map(|f| f.timestamp).collect();
+                    let source = stream
+                        .as_ref()
+                        .map(|ev| crate::tracks::events::EventSource {
+                            events: ev.as_slice(),
+                            seconds: &seconds,
+                            contrast: scene.contrast_threshold() as f32,
+                            srgb: scene.train.frames_srgb(),
+                            steps: settings.tracks.event_steps as usize,
+                        });
                     let (table, aligned) = crate::tracks::add_moving(
                         &mut s,
                         &images,
                         1,
                         &settings.tracks,
                         priors.as_ref(),
+                        source.as_ref(),
                     );
                     let moving = table.len();
                     *tracks = crate::tracks::loss::TrackTerm::new(table);
@@ -301,4 +314,16 @@ pub(crate) fn initial_splats(
             Ok((splats, surface, 0))
         }
     }
+}
+
+/// The scene's events when the tracks are to be chained through event images
+/// (`tracks.event_steps` > 0 and the scene has events).
+fn event_stream(
+    scene: &Scene,
+    st: &crate::tracks::TrackSettings,
+) -> Result<Option<scene::EventStream>> {
+    if st.event_steps == 0 || scene.train.events.is_none() {
+        return Ok(None);
+    }
+    Ok(Some(scene.load_events()?))
 }
