@@ -134,7 +134,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     gaussians::ply::write(Path::new(&args[2]), &splats, 0)?;
     if let Some(path) = motion_out {
-        gaussians::model::motion_file::write(Path::new(path), &motion)?;
+        gaussians::model::motion_file::write(Path::new(path), &motion, &[])?;
     }
     eprintln!("{}: {} Gaussians", args[2], splats.len());
     Ok(())

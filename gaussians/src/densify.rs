@@ -160,7 +160,7 @@ impl Plan {
     }
 
     /// The new Gaussians: `sp`'s gathered, with the plan's centres and scales (flags,
-    /// trajectories and tracks follow their sources; a track only its first copy).
+    /// trajectories, lives and tracks follow their sources; a track only its first copy).
     pub fn apply(&self, sp: &crate::splats::Splats) -> crate::splats::Splats {
         crate::splats::Splats {
             means: self.means.clone(),
@@ -172,6 +172,7 @@ impl Plan {
             dynamic: self.gather_rows(&sp.dynamic, sp.len()),
             motion: self.gather_rows(&sp.motion, sp.len()),
             track: crate::splats::first_copies(self.gather_rows(&sp.track, sp.len())),
+            life: self.gather_rows(&sp.life, sp.len()),
         }
     }
 

@@ -41,18 +41,36 @@ pub fn shift(s: &Splats, i: usize, t: f32) -> [f32; 3] {
     std::array::from_fn(|k| m[k] * p1 + m[3 + k] * p2)
 }
 
-/// Add every Gaussian's trajectory shift at time `t` to `means` (the centres of `s` as
-/// rendered, one per Gaussian); nothing when `s` has no motion.
-pub fn advance(s: &Splats, t: f32, means: &mut [[f32; 3]]) {
-    if s.motion.is_empty() {
-        return;
+/// Move the Gaussians of `out` (those of `s` as rendered, one per Gaussian) along the
+/// trajectories of `s` to time `t`, and hide those whose life ([`Splats::life`]) does
+/// not hold `t`; nothing when `s` has neither.
+pub fn advance(s: &Splats, t: f32, out: &mut Splats) {
+    if !s.motion.is_empty() {
+        assert_eq!(s.motion.len(), out.len(), "motion: one row per Gaussian");
+        let (p1, p2) = powers(t);
+        (out.means.as_mut_slice(), &s.motion)
+            .into_par_iter()
+            .with_min_len(4096)
+            .for_each(|(x, m)| (0..3).for_each(|k| x[k] += m[k] * p1 + m[3 + k] * p2));
     }
-    assert_eq!(s.motion.len(), means.len(), "motion: one row per Gaussian");
-    let (p1, p2) = powers(t);
-    (means, &s.motion)
-        .into_par_iter()
-        .with_min_len(4096)
-        .for_each(|(x, m)| (0..3).for_each(|k| x[k] += m[k] * p1 + m[3 + k] * p2));
+    if !s.life.is_empty() {
+        assert_eq!(s.life.len(), out.len(), "life: one row per Gaussian");
+        for (o, l) in out.opacity_logits.iter_mut().zip(&s.life) {
+            if !alive(*l, t) {
+                *o += HIDDEN_LOGIT;
+            }
+        }
+    }
+}
+
+/// Added to the opacity logit of a Gaussian outside its life: its opacity falls below
+/// 10⁻¹⁷, under what the rasterizer draws. A constant, so the opacity's gradient passes
+/// through unchanged (and is zero for a hidden Gaussian).
+const HIDDEN_LOGIT: f32 = -40.0;
+
+/// Whether a Gaussian of life `[from, to)` exists at time `t`.
+pub fn alive(life: [f32; 2], t: f32) -> bool {
+    t >= life[0] && t < life[1]
 }
 
 /// Gradient of the trajectory parameters from the rendered centres' gradient `g_means`
@@ -88,17 +106,18 @@ pub(crate) fn at_time<'s>(
     with_trajectories(s, t, deformed)
 }
 
-/// `deformed` (the Gaussians of `s` deformed by a field) moved along their trajectories.
+/// `deformed` (the Gaussians of `s` deformed by a field) moved along their trajectories
+/// and hidden outside their lives.
 pub(crate) fn with_trajectories<'s>(
     s: &Splats,
     t: f32,
     deformed: Cow<'s, Splats>,
 ) -> Cow<'s, Splats> {
-    if s.motion.is_empty() {
+    if s.motion.is_empty() && s.life.is_empty() {
         return deformed;
     }
     let mut out = deformed.into_owned();
-    advance(s, t, &mut out.means);
+    advance(s, t, &mut out);
     Cow::Owned(out)
 }
 

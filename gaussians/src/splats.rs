@@ -25,7 +25,14 @@ pub struct Splats {
     /// Per Gaussian: the index of the track that pulls it (`tracks::loss`, the warm-up's
     /// `L_track`), [`NO_TRACK`] for none. Empty when no Gaussian has a track.
     pub track: Vec<u32>,
+    /// Per Gaussian: the span of normalised time it exists in, `[from, to)`
+    /// (`motion::advance` hides it outside: a trajectory fitted over a window of the
+    /// tracks, `tracks.window`). Empty when every Gaussian exists at every time.
+    pub life: Vec<[f32; 2]>,
 }
+
+/// A life spanning every time (an entry of [`Splats::life`]).
+pub const ALWAYS: [f32; 2] = [f32::MIN, f32::MAX];
 
 /// No track (a Gaussian's entry in [`Splats::track`]).
 pub const NO_TRACK: u32 = u32::MAX;
@@ -58,6 +65,7 @@ impl Clone for Splats {
         self.dynamic.clone_from(&src.dynamic);
         self.motion.clone_from(&src.motion);
         self.track.clone_from(&src.track);
+        self.life.clone_from(&src.life);
     }
 }
 
@@ -103,6 +111,7 @@ impl Splats {
             dynamic: Vec::with_capacity(n),
             motion: Vec::new(),
             track: Vec::new(),
+            life: Vec::new(),
         }
     }
 
@@ -122,6 +131,9 @@ impl Splats {
         }
         if !self.track.is_empty() {
             self.track.push(NO_TRACK);
+        }
+        if !self.life.is_empty() {
+            self.life.push(ALWAYS);
         }
         self.means.push(g.mean);
         self.log_scales.push(g.log_scale);

@@ -413,6 +413,7 @@ pub fn train(
             ));
         }
         splats.motion = crate::model::motion_file::read(m, splats.len())?;
+        splats.life = crate::model::motion_file::read_life(m, splats.len())?;
     }
     let cams: Vec<_> = views.iter().map(|v| v.camera).collect();
     let extent = scene_extent(&settings, &cams);

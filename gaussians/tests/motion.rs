@@ -25,8 +25,9 @@ fn a_centre_follows_its_quadratic_path() {
     let mut s = random_splats(50, glam::DVec3::ZERO, 0.5, 1);
     s.motion = random_motion(50, 2, 0.4);
     for t in [0.0f32, 0.3, T0, 1.0] {
-        let mut means = s.means.clone();
-        motion::advance(&s, t, &mut means);
+        let mut moved = s.clone();
+        motion::advance(&s, t, &mut moved);
+        let means = moved.means;
         let tau = t as f64 - 0.5;
         let rows = means.iter().zip(s.means.iter().zip(&s.motion));
         for (i, (got, (mu, m))) in rows.enumerate() {
@@ -38,9 +39,53 @@ fn a_centre_follows_its_quadratic_path() {
     }
     // No trajectories: nothing moves.
     let still = random_splats(5, glam::DVec3::ZERO, 0.5, 1);
-    let mut means = still.means.clone();
-    motion::advance(&still, 0.9, &mut means);
-    assert_eq!(means, still.means);
+    let mut moved = still.clone();
+    motion::advance(&still, 0.9, &mut moved);
+    assert_eq!(moved.means, still.means);
+}
+
+#[test]
+fn a_gaussian_renders_only_within_its_life_and_as_before_there() {
+    // Two Gaussians side by side; the second lives over [0.25, 0.5). Inside its life the
+    // render is the one without lives; outside, the one of the first Gaussian alone.
+    use gaussians::{Rasterizer, TileRasterizer};
+    let cam = scene::Camera {
+        intrinsics: scene::Intrinsics::from_fov_x(32, 32, 1.0),
+        cam_to_world: scene::Pose::default(),
+    };
+    let mut both = gaussians::Splats::default();
+    for x in [-0.3f32, 0.3] {
+        both.push(gaussians::Gaussian::isotropic(
+            [x, 0.0, -3.0],
+            -2.0,
+            2.0,
+            [0.8, 0.1, -0.5],
+        ));
+    }
+    let mut first = gaussians::Splats::default();
+    first.push(both.get(0));
+    let mut lived = both.clone();
+    lived.life = vec![gaussians::splats::ALWAYS, [0.25, 0.5]];
+    let r = TileRasterizer;
+    let render = |s: &gaussians::Splats| r.render(s, &cam, 0, [0.0; 3]).0.rgb;
+    let at = |t: f32| {
+        let mut s = lived.clone();
+        motion::advance(&lived, t, &mut s);
+        render(&s)
+    };
+    let (all, one) = (render(&both), render(&first));
+    assert_ne!(all, one, "the second Gaussian shows");
+    for t in [0.25f32, 0.3, 0.49] {
+        assert_eq!(at(t), all, "t = {t}: alive");
+    }
+    for t in [0.0f32, 0.2, 0.5, 0.9] {
+        let diff = at(t)
+            .iter()
+            .zip(&one)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f32::max);
+        assert!(diff < 1e-6, "t = {t}: hidden, differs by {diff}");
+    }
 }
 
 /// Without a field, the trainer's gradient of the trajectories matches central
@@ -109,6 +154,8 @@ fn the_trainer_gradient_of_the_trajectories_matches_finite_differences() {
 fn a_saved_model_keeps_its_trajectories_and_moves_them() {
     let mut splats = random_splats(30, glam::DVec3::ZERO, 0.5, 7);
     splats.motion = random_motion(30, 8, 0.5);
+    splats.life = (0..30).map(|i| [i as f32 / 40.0, 0.9]).collect();
+    splats.life[3] = gaussians::splats::ALWAYS;
     let model = Model {
         splats,
         field: None,
@@ -119,6 +166,7 @@ fn a_saved_model_keeps_its_trajectories_and_moves_them() {
     assert!(dir.path().join(motion_file::MOTION_FILE).is_file());
     let back = Model::load(dir.path()).unwrap();
     assert_eq!(back.splats.motion, model.splats.motion);
+    assert_eq!(back.splats.life, model.splats.life);
     let at = back.at(0.2);
     let tau = 0.2f64 - 0.5;
     for i in 0..30 {
@@ -130,7 +178,7 @@ fn a_saved_model_keeps_its_trajectories_and_moves_them() {
     }
     // A file of the wrong shape is refused, naming it.
     let bad = dir.path().join("bad.safetensors");
-    motion_file::write(&bad, &model.splats.motion[..29]).unwrap();
+    motion_file::write(&bad, &model.splats.motion[..29], &[]).unwrap();
     let e = motion_file::read(&bad, 30).unwrap_err().to_string();
     assert!(
         e.contains("bad.safetensors") && e.contains("[30, 6]"),

@@ -101,9 +101,9 @@ impl Model {
                 format!("{} dynamic flags for {n} Gaussians", flags.len()),
             ));
         }
-        let motion = &self.splats.motion;
+        let (motion, life) = (&self.splats.motion, &self.splats.life);
         info.has_motion = !motion.is_empty();
-        if info.has_motion && motion.len() != n {
+        if info.has_motion && motion.len() != n || !life.is_empty() && motion.len() != n {
             return Err(Error::invalid(
                 dir.join(MOTION_FILE),
                 format!("{} trajectories for {n} Gaussians", motion.len()),
@@ -111,7 +111,7 @@ impl Model {
         }
         crate::ply::write(&dir.join(PLY_FILE), &self.splats, info.sh_degree)?;
         if info.has_motion {
-            motion_file::write(&dir.join(MOTION_FILE), motion)?;
+            motion_file::write(&dir.join(MOTION_FILE), motion, life)?;
         }
         if info.has_dynamic_flags {
             dynamic_flags::write(&dir.join(FLAGS_FILE), flags)?;
@@ -163,7 +163,9 @@ impl Model {
             splats.dynamic = dynamic_flags::read(&dir.join(FLAGS_FILE), info.gaussians)?;
         }
         if info.has_motion {
-            splats.motion = motion_file::read(&dir.join(MOTION_FILE), info.gaussians)?;
+            let path = dir.join(MOTION_FILE);
+            splats.motion = motion_file::read(&path, info.gaussians)?;
+            splats.life = motion_file::read_life(&path, info.gaussians)?;
         }
         // In memory the model is in the current layout (what `save` writes).
         info.format_version = FORMAT_VERSION;

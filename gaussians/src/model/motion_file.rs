@@ -1,8 +1,10 @@
 //! The per-Gaussian trajectories of a saved model ([`crate::Splats::motion`],
 //! [`crate::motion`]) in `motion.safetensors`: one tensor `motion`, dtype `F32`, shape
 //! `[n, 6]` (velocity then acceleration, world units per normalised time, about
-//! [`crate::motion::T0`]), rows in PLY order. Also the `--init-motion` file of `gaussians
-//! train`, beside an `--init-ply`.
+//! [`crate::motion::T0`]), rows in PLY order; and, when the Gaussians have lives
+//! ([`crate::Splats::life`]), a tensor `life`, `F32 [n, 2]` (the normalised time span
+//! each exists in, `[from, to)`). Also the `--init-motion` file of `gaussians train`,
+//! beside an `--init-ply`.
 
 use crate::motion::WIDTH;
 use safetensors::{Dtype, SafeTensors, tensor::TensorView};
@@ -12,25 +14,74 @@ use std::path::Path;
 pub const MOTION_FILE: &str = "motion.safetensors";
 /// Name of the tensor inside [`MOTION_FILE`].
 pub(crate) const MOTION_TENSOR: &str = "motion";
+/// Name of the optional lives tensor inside [`MOTION_FILE`].
+pub(crate) const LIFE_TENSOR: &str = "life";
 
-/// Write `motion` to `path` atomically; refuses non-finite values.
-pub fn write(path: &Path, motion: &[[f32; WIDTH]]) -> Result<()> {
-    if let Some(i) = motion.iter().position(|m| m.iter().any(|v| !v.is_finite())) {
+/// Write `motion` (and `life` unless empty) to `path` atomically; refuses non-finite
+/// values.
+pub fn write(path: &Path, motion: &[[f32; WIDTH]], life: &[[f32; 2]]) -> Result<()> {
+    let rows = (motion.iter().map(|m| m.as_slice())).chain(life.iter().map(|l| l.as_slice()));
+    if let Some(i) = rows.clone().position(|m| m.iter().any(|v| !v.is_finite())) {
         return Err(Error::invalid(
             path,
-            format!("Gaussian {i}: non-finite trajectory"),
+            format!(
+                "Gaussian {}: non-finite trajectory",
+                i % motion.len().max(1)
+            ),
         ));
     }
-    let bytes: Vec<u8> = motion
-        .as_flattened()
-        .iter()
-        .flat_map(|v| v.to_le_bytes())
-        .collect();
-    let tensor = TensorView::new(Dtype::F32, vec![motion.len(), WIDTH], &bytes)
-        .map_err(|e| Error::invalid(path, format!("motion tensor: {e}")))?;
-    let data = safetensors::serialize([(MOTION_TENSOR, tensor)], None)
+    if !life.is_empty() && life.len() != motion.len() {
+        return Err(Error::invalid(
+            path,
+            format!("{} lives for {} trajectories", life.len(), motion.len()),
+        ));
+    }
+    let bytes = |v: &[f32]| -> Vec<u8> { v.iter().flat_map(|v| v.to_le_bytes()).collect() };
+    let (m, l) = (bytes(motion.as_flattened()), bytes(life.as_flattened()));
+    let mut tensors = vec![(MOTION_TENSOR, view(path, MOTION_TENSOR, WIDTH, &m)?)];
+    if !life.is_empty() {
+        tensors.push((LIFE_TENSOR, view(path, LIFE_TENSOR, 2, &l)?));
+    }
+    let data = safetensors::serialize(tensors, None)
         .map_err(|e| Error::invalid(path, format!("serialising: {e}")))?;
     scene::atomic::write_bytes_atomic(path, &data)
+}
+
+/// An `F32 [rows, width]` view of `data` (little-endian values).
+fn view<'d>(path: &Path, name: &str, width: usize, data: &'d [u8]) -> Result<TensorView<'d>> {
+    TensorView::new(Dtype::F32, vec![data.len() / 4 / width, width], data)
+        .map_err(|e| Error::invalid(path, format!("{name} tensor: {e}")))
+}
+
+/// The lives of `n` Gaussians in a file of [`write()`]; empty when it has none. Errors
+/// name the file (not safetensors, wrong dtype or shape, a non-finite value).
+pub fn read_life(path: &Path, n: usize) -> Result<Vec<[f32; 2]>> {
+    let data = std::fs::read(path).at(path)?;
+    let st = SafeTensors::deserialize(&data)
+        .map_err(|e| Error::invalid(path, format!("not a safetensors file: {e}")))?;
+    let Ok(t) = st.tensor(LIFE_TENSOR) else {
+        return Ok(Vec::new());
+    };
+    if t.dtype() != Dtype::F32 || t.shape() != [n, 2] {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "tensor {LIFE_TENSOR}: expected F32 [{n}, 2], found {:?} {:?}",
+                t.dtype(),
+                t.shape()
+            ),
+        ));
+    }
+    let v: Vec<f32> = (t.data().chunks_exact(4))
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect();
+    if let Some(k) = v.iter().position(|v| !v.is_finite()) {
+        return Err(Error::invalid(
+            path,
+            format!("Gaussian {}: non-finite life", k / 2),
+        ));
+    }
+    Ok(v.chunks_exact(2).map(|c| [c[0], c[1]]).collect())
 }
 
 /// Read the trajectories of `n` Gaussians written by [`write()`] (or by any tool that

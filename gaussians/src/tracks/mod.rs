@@ -17,13 +17,15 @@
 pub mod depth;
 pub mod events;
 pub mod file;
+pub mod init;
 pub mod lift;
 pub mod lk;
 pub mod loss;
 pub mod prior_loss;
 
-use crate::splats::{Gaussian, Splats};
+use crate::splats::Splats;
 use glam::{DVec2, DVec3, Vec2};
+pub(crate) use init::{Image, add_moving};
 use lift::{Lifted, Observation};
 use rayon::prelude::*;
 use scene::Camera;
@@ -79,6 +81,11 @@ pub struct TrackSettings {
     /// the events carry a window across motion too large for Lucas–Kanade between two
     /// frames. 0 = the frames alone (also when the scene has no events).
     pub event_steps: u32,
+    /// Frames per window of the moving tracks' trajectories ([`init`]): each window's
+    /// middle frame gives its own moving Gaussians, fitted over the window (and a frame
+    /// either side) and shown only within it. 0 = one trajectory over the recording,
+    /// from the middle frame.
+    pub window: u32,
 }
 
 impl Default for TrackSettings {
@@ -99,6 +106,7 @@ impl Default for TrackSettings {
             prior_prunes: false,
             depth_weight: 0.1,
             event_steps: 2,
+            window: 0,
         }
     }
 }
@@ -329,6 +337,16 @@ pub fn raw_tracks(
     refs.push(middle_frame(frames));
     refs.sort_unstable();
     refs.dedup();
+    raw_tracks_at(frames, stride, &refs, st)
+}
+
+/// Tracks from every `stride`-th pixel of the frames `refs`.
+pub fn raw_tracks_at(
+    frames: &[Frame],
+    stride: usize,
+    refs: &[usize],
+    st: &TrackSettings,
+) -> Vec<RawTrack> {
     let g = &frames[0].pyramid.0[0];
     let (w, h) = (g.width, g.height);
     let stride = stride.max(1);
@@ -470,115 +488,4 @@ pub fn drop_where_prior_disagrees(
         *s = kept;
     }
     dropped
-}
-
-/// A train frame as the init sees it: planar RGB (all red, then green, then blue).
-pub struct Image<'a> {
-    pub camera: &'a Camera,
-    /// Normalised time.
-    pub time: f64,
-    pub rgb: &'a [f32],
-}
-
-/// Appends a Gaussian for each moving track of the train frame nearest the middle of
-/// the recording (every `stride`-th pixel) to `s`, with its trajectory; the Gaussians
-/// already in `s` stay still. Colour of the start pixel, opacity ½, a footprint of
-/// `stride` pixels at its depth. Returns the added Gaussians' tracks (camera pixels
-/// per view), the table `s.track` indexes (`loss::NONE` for the Gaussians already in
-/// `s`), and the priors as aligned (one per view; empty without priors). With `events`
-/// the tracks are chained through event images between the frames.
-pub(crate) fn add_moving(
-    s: &mut Splats,
-    views: &[Image],
-    stride: usize,
-    st: &TrackSettings,
-    priors: Option<&scene::depth_prior::DepthPriors>,
-    events: Option<&events::EventSource>,
-) -> (loss::Table, Vec<Option<depth::Aligned>>) {
-    let Some(first) = views.first() else {
-        return (Vec::new(), Vec::new());
-    };
-    let k = &first.camera.intrinsics;
-    let (w, h) = (k.width as usize, k.height as usize);
-    let levels = st.levels as usize;
-    let grey: Vec<lk::Grey> = (views.iter())
-        .map(|v| lk::Grey::from_planar(v.rgb, w, h))
-        .collect();
-    let mut between = match events {
-        Some(src) => events::between(&grey, src),
-        None => Vec::new(),
-    };
-    between.resize_with(views.len(), Vec::new);
-    let frames: Vec<Frame> = (views.iter().zip(grey).zip(between))
-        .map(|((v, g), b)| Frame {
-            camera: v.camera,
-            time: v.time,
-            pyramid: lk::Pyramid::new(g, levels),
-            between: b.into_iter().map(|g| lk::Pyramid::new(g, levels)).collect(),
-        })
-        .collect();
-    let raws = raw_tracks(&frames, stride, 0, st);
-    let mut lifted = lift_raw(&frames, &raws, st, &[]);
-    let mut aligned = Vec::new();
-    if let Some(p) = priors.filter(|_| st.depth_sigma > 0.0) {
-        // The priors are aligned to still tracks from frames spread over the recording
-        // as well (every fourth pixel of five): the middle frame's tracks do not reach
-        // the ends when the frames are far apart.
-        let spread = lift_raw(&frames, &raw_tracks(&frames, 4 * stride, 5, st), st, &[]);
-        let still: Vec<&LiftedTrack> = (lifted.iter().chain(&spread))
-            .filter(|l| matches!(l.point, Lifted::Still(_)))
-            .collect();
-        let mut depths = align_priors(&frames, &still, &s.means, p);
-        // A frame whose prior the still scene does not confirm is not used.
-        let mut set_aside = 0;
-        for d in &mut depths {
-            if d.as_ref()
-                .is_some_and(|a| a.median_rel_error > st.depth_sigma)
-            {
-                (*d, set_aside) = (None, set_aside + 1);
-            }
-        }
-        if set_aside > 0 {
-            eprintln!(
-                "depth prior: {set_aside} frames' maps set aside (median error over depth_sigma = {})",
-                st.depth_sigma
-            );
-        }
-        lifted = lift_raw(&frames, &raws, st, &depths);
-        if st.prior_prunes {
-            let dropped = drop_where_prior_disagrees(s, &frames, &depths, 3.0 * st.depth_sigma);
-            eprintln!(
-                "depth prior: {dropped} initial Gaussians dropped (off the prior's surface in most frames)"
-            );
-        }
-        aligned = depths;
-    }
-    let t0 = crate::motion::T0 as f64;
-    let before = s.len();
-    s.motion.resize(before, [0.0; 6]);
-    s.track.resize(before, loss::NONE);
-    let mut table = Vec::new();
-    for l in lifted {
-        let Lifted::Moving { mu, v, a } = l.point else {
-            continue;
-        };
-        let f = &frames[l.frame];
-        let Some((_, depth)) = f.camera.project_world(l.point.at(f.time - t0)) else {
-            continue;
-        };
-        let (x, y) = (l.pixel.x as usize, l.pixel.y as usize);
-        let (rgb, p) = (views[l.frame].rgb, y * w + x);
-        let c0 = crate::raster::sh::C0 as f32;
-        let sh = [rgb[p], rgb[w * h + p], rgb[2 * w * h + p]].map(|v| (v - 0.5) / c0);
-        let scale = (0.5 * stride as f64 * depth / f.camera.intrinsics.fx) as f32;
-        s.push(Gaussian {
-            dynamic: true,
-            ..Gaussian::isotropic(mu.as_vec3().to_array(), scale.max(1e-6).ln(), 0.0, sh)
-        });
-        *s.motion.last_mut().expect("just pushed") =
-            [v.x, v.y, v.z, a.x, a.y, a.z].map(|c| c as f32);
-        *s.track.last_mut().expect("just pushed") = table.len() as u32;
-        table.push(l.seen);
-    }
-    (table, aligned)
 }

@@ -163,7 +163,7 @@ impl Trainer {
         } else {
             (self.splats.clone(), None)
         };
-        crate::motion::advance(&self.splats, t, &mut s.means);
+        crate::motion::advance(&self.splats, t, &mut s);
         (s, d)
     }
 
@@ -208,7 +208,7 @@ impl Trainer {
             deformed.clone_from(&self.splats);
             None
         };
-        crate::motion::advance(&self.splats, t, &mut deformed.means);
+        crate::motion::advance(&self.splats, t, &mut deformed);
         let (image, state) = r.render_reusing(
             &deformed,
             camera,

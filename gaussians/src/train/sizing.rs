@@ -260,6 +260,11 @@ pub fn gather(s: &Splats, keep: &[usize]) -> Splats {
         } else {
             Vec::new()
         },
+        life: if s.life.len() == s.len() {
+            keep.iter().map(|&i| s.life[i]).collect()
+        } else {
+            Vec::new()
+        },
     }
 }
 

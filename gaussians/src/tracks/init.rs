@@ -1,0 +1,206 @@
+//! The tracks init ([`add_moving`]): the stereo Gaussians plus one per moving track, on
+//! its trajectory; with `tracks.window`, one per moving track of each window of frames,
+//! living over that window only.
+
+use super::lift::Lifted;
+use super::{
+    Frame, LiftedTrack, TrackSettings, align_priors, depth, drop_where_prior_disagrees, events,
+    lift_raw, lift_track, lk, loss, raw_tracks, raw_tracks_at,
+};
+use crate::splats::{ALWAYS, Gaussian, Splats};
+use scene::Camera;
+
+/// A train frame as the init sees it: planar RGB (all red, then green, then blue).
+pub struct Image<'a> {
+    pub camera: &'a Camera,
+    /// Normalised time.
+    pub time: f64,
+    pub rgb: &'a [f32],
+}
+
+/// Appends a Gaussian for each moving track of the train frame nearest the middle of
+/// the recording (every `stride`-th pixel) to `s`, with its trajectory; the Gaussians
+/// already in `s` stay still. Colour of the start pixel, opacity ½, a footprint of
+/// `stride` pixels at its depth. Returns the added Gaussians' tracks (camera pixels
+/// per view), the table `s.track` indexes (`loss::NONE` for the Gaussians already in
+/// `s`), and the priors as aligned (one per view; empty without priors). With `events`
+/// the tracks are chained through event images between the frames.
+pub(crate) fn add_moving(
+    s: &mut Splats,
+    views: &[Image],
+    stride: usize,
+    st: &TrackSettings,
+    priors: Option<&scene::depth_prior::DepthPriors>,
+    events: Option<&events::EventSource>,
+) -> (loss::Table, Vec<Option<depth::Aligned>>) {
+    let Some(first) = views.first() else {
+        return (Vec::new(), Vec::new());
+    };
+    let k = &first.camera.intrinsics;
+    let (w, h) = (k.width as usize, k.height as usize);
+    let levels = st.levels as usize;
+    let grey: Vec<lk::Grey> = (views.iter())
+        .map(|v| lk::Grey::from_planar(v.rgb, w, h))
+        .collect();
+    let mut between = match events {
+        Some(src) => events::between(&grey, src),
+        None => Vec::new(),
+    };
+    between.resize_with(views.len(), Vec::new);
+    let frames: Vec<Frame> = (views.iter().zip(grey).zip(between))
+        .map(|((v, g), b)| Frame {
+            camera: v.camera,
+            time: v.time,
+            pyramid: lk::Pyramid::new(g, levels),
+            between: b.into_iter().map(|g| lk::Pyramid::new(g, levels)).collect(),
+        })
+        .collect();
+    let raws = raw_tracks(&frames, stride, 0, st);
+    let mut lifted = lift_raw(&frames, &raws, st, &[]);
+    let mut aligned = Vec::new();
+    if let Some(p) = priors.filter(|_| st.depth_sigma > 0.0) {
+        // The priors are aligned to still tracks from frames spread over the recording
+        // as well (every fourth pixel of five): the middle frame's tracks do not reach
+        // the ends when the frames are far apart.
+        let spread = lift_raw(&frames, &raw_tracks(&frames, 4 * stride, 5, st), st, &[]);
+        let still: Vec<&LiftedTrack> = (lifted.iter().chain(&spread))
+            .filter(|l| matches!(l.point, Lifted::Still(_)))
+            .collect();
+        let mut depths = align_priors(&frames, &still, &s.means, p);
+        // A frame whose prior the still scene does not confirm is not used.
+        let mut set_aside = 0;
+        for d in &mut depths {
+            if d.as_ref()
+                .is_some_and(|a| a.median_rel_error > st.depth_sigma)
+            {
+                (*d, set_aside) = (None, set_aside + 1);
+            }
+        }
+        if set_aside > 0 {
+            eprintln!(
+                "depth prior: {set_aside} frames' maps set aside (median error over depth_sigma = {})",
+                st.depth_sigma
+            );
+        }
+        lifted = lift_raw(&frames, &raws, st, &depths);
+        if st.prior_prunes {
+            let dropped = drop_where_prior_disagrees(s, &frames, &depths, 3.0 * st.depth_sigma);
+            eprintln!(
+                "depth prior: {dropped} initial Gaussians dropped (off the prior's surface in most frames)"
+            );
+        }
+        aligned = depths;
+    }
+    let moving: Vec<(LiftedTrack, [f32; 2])> = if st.window == 0 {
+        let all = (lifted.into_iter()).filter(|l| matches!(l.point, Lifted::Moving { .. }));
+        all.map(|l| (l, ALWAYS)).collect()
+    } else {
+        windowed(&frames, stride, st, &aligned)
+    };
+    let t0 = crate::motion::T0 as f64;
+    let before = s.len();
+    s.motion.resize(before, [0.0; 6]);
+    s.track.resize(before, loss::NONE);
+    if st.window > 0 {
+        s.life.resize(before, ALWAYS);
+    }
+    let mut table = Vec::new();
+    for (l, life) in moving {
+        let Lifted::Moving { mu, v, a } = l.point else {
+            continue;
+        };
+        let f = &frames[l.frame];
+        let Some((_, depth)) = f.camera.project_world(l.point.at(f.time - t0)) else {
+            continue;
+        };
+        let (x, y) = (l.pixel.x as usize, l.pixel.y as usize);
+        let (rgb, p) = (views[l.frame].rgb, y * w + x);
+        let c0 = crate::raster::sh::C0 as f32;
+        let sh = [rgb[p], rgb[w * h + p], rgb[2 * w * h + p]].map(|v| (v - 0.5) / c0);
+        let scale = (0.5 * stride as f64 * depth / f.camera.intrinsics.fx) as f32;
+        s.push(Gaussian {
+            dynamic: true,
+            ..Gaussian::isotropic(mu.as_vec3().to_array(), scale.max(1e-6).ln(), 0.0, sh)
+        });
+        *s.motion.last_mut().expect("just pushed") =
+            [v.x, v.y, v.z, a.x, a.y, a.z].map(|c| c as f32);
+        *s.track.last_mut().expect("just pushed") = table.len() as u32;
+        if let Some(last) = s.life.last_mut() {
+            *last = life;
+        }
+        table.push(l.seen);
+    }
+    (table, aligned)
+}
+
+/// One window of the moving tracks' trajectories ([`windows`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Window {
+    /// The frames it holds.
+    pub frames: std::ops::Range<usize>,
+    /// The frame its tracks start from (the middle one).
+    pub reference: usize,
+    /// The frames its trajectories are fitted to: its own and one either side.
+    pub context: std::ops::Range<usize>,
+    /// The normalised time span its Gaussians live in, `[from, to)`: from midway to the
+    /// previous window's last frame to midway to the next one's first, open at the
+    /// recording's ends (so that the lives tile time: one copy of an object at any time).
+    pub life: [f32; 2],
+}
+
+/// The windows of `size` consecutive frames (the last may be shorter) over frames at
+/// normalised `times`.
+pub fn windows(times: &[f64], size: usize) -> Vec<Window> {
+    let n = times.len();
+    let edge = |k: usize| (0.5 * (times[k - 1] + times[k])) as f32;
+    (0..n)
+        .step_by(size.max(1))
+        .map(|a| {
+            let b = (a + size.max(1)).min(n);
+            Window {
+                frames: a..b,
+                reference: (a + b).div_ceil(2) - 1,
+                context: a.saturating_sub(1)..(b + 1).min(n),
+                life: [
+                    if a == 0 { ALWAYS[0] } else { edge(a) },
+                    if b == n { ALWAYS[1] } else { edge(b) },
+                ],
+            }
+        })
+        .collect()
+}
+
+/// The moving tracks of each window of `st.window` frames ([`windows`]), from its
+/// reference frame, each lifted from its observations in the window's context, with the
+/// window's life. A quadratic holds a turn or an oscillation over a few frames where it
+/// cannot over the recording.
+fn windowed(
+    frames: &[Frame],
+    stride: usize,
+    st: &TrackSettings,
+    depths: &[Option<depth::Aligned>],
+) -> Vec<(LiftedTrack, [f32; 2])> {
+    let times: Vec<f64> = frames.iter().map(|f| f.time).collect();
+    let wins = windows(&times, st.window as usize);
+    let refs: Vec<usize> = wins.iter().map(|w| w.reference).collect();
+    let raws = raw_tracks_at(frames, stride, &refs, st);
+    raws.into_iter()
+        .filter_map(|r| {
+            let w = wins.iter().find(|w| w.reference == r.frame)?;
+            let track: Vec<_> = (r.track.iter().enumerate())
+                .map(|(k, p)| p.filter(|_| w.context.contains(&k)))
+                .collect();
+            let point = lift_track(frames, &track, st, depths)?;
+            matches!(point, Lifted::Moving { .. }).then(|| {
+                let seen = track.iter().map(|q| q.map(super::camera_pixel)).collect();
+                let l = LiftedTrack {
+                    frame: r.frame,
+                    pixel: r.pixel,
+                    point,
+                    seen,
+                };
+                (l, w.life)
+            })
+        })
+        .collect()
+}
