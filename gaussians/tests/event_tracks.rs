@@ -126,3 +126,67 @@ fn event_images_carry_tracks_across_motion_the_frames_alone_lose() {
     let p50 = quantile(&events.errors, 0.5);
     assert!(p50 < 1.2, "median error of the tracked links {p50:.2} px");
 }
+
+#[test]
+fn an_event_image_is_the_two_sided_log_blend_of_its_frames_and_events() {
+    // Two 2×1 linear frames, C = 0.2, two event images in the interval [1, 4] s (at 2 s
+    // and 3 s). Pixel 0: two ON events at 1.5 s and 2.5 s; pixel 1: one OFF event at
+    // 3.5 s (and one at 4.5 s, after the interval, which must not count).
+    let frame = |a: f32, b: f32| Grey {
+        width: 2,
+        height: 1,
+        data: vec![a, b],
+    };
+    let grey = [frame(0.2, 0.6), frame(0.3, 0.5)];
+    let mut ev = scene::EventStream::new(2, 1);
+    for (t, x, p) in [(1.5, 0, 1), (2.5, 0, 1), (3.5, 1, -1), (4.5, 1, -1)] {
+        ev.push(t, x, 0, p);
+    }
+    let (c, eps) = (0.2f64, 1e-3f64);
+    for srgb in [false, true] {
+        let src = EventSource {
+            events: ev.as_slice(),
+            seconds: &[1.0, 4.0],
+            contrast: c as f32,
+            srgb,
+            steps: 2,
+        };
+        let out = between(&grey, &src);
+        assert_eq!(out.len(), 2);
+        assert!(out[1].is_empty(), "nothing after the last frame");
+        assert_eq!(out[0].len(), 2);
+        let lin = |v: f32| {
+            if srgb {
+                scene::image_io::srgb_to_linear(v) as f64
+            } else {
+                v as f64
+            }
+        };
+        let enc = |v: f64| {
+            if srgb {
+                scene::image_io::linear_to_srgb(v as f32) as f64
+            } else {
+                v
+            }
+        };
+        // Signed counts from t_a to each image's time, and over the whole interval.
+        let left = [[1.0, 0.0], [2.0, 0.0]];
+        let total = [2.0, -1.0];
+        for (j, img) in out[0].iter().enumerate() {
+            let s = (j + 1) as f64 / 3.0;
+            for p in 0..2 {
+                let (la, lb) = (
+                    (lin(grey[0].data[p]) + eps).ln(),
+                    (lin(grey[1].data[p]) + eps).ln(),
+                );
+                let l = (1.0 - s) * (la + c * left[j][p]) + s * (lb - c * (total[p] - left[j][p]));
+                let want = enc((l.exp() - eps).clamp(0.0, 1.0));
+                let got = img.data[p] as f64;
+                assert!(
+                    (got - want).abs() < 1e-5,
+                    "srgb {srgb}, image {j}, pixel {p}: {got} vs {want}"
+                );
+            }
+        }
+    }
+}

@@ -251,3 +251,18 @@ fn failed_write_leaves_the_old_file_and_no_temp() {
         .collect();
     assert_eq!(names, vec![std::ffi::OsString::from("keep.png")]);
 }
+
+#[test]
+fn srgb_encoding_round_trips_and_matches_known_values() {
+    use scene::image_io::{linear_to_srgb, srgb_to_linear};
+    // IEC 61966-2-1: mid grey 0.5 linear is code 0.7354 (188/255), code 0.5 is 0.2140
+    // linear, and the linear segment below 0.0031308 is ×12.92.
+    assert!((linear_to_srgb(0.5) - 0.735_357).abs() < 1e-5);
+    assert!((srgb_to_linear(0.5) - 0.214_041).abs() < 1e-5);
+    assert!((linear_to_srgb(0.002) - 0.025_84).abs() < 1e-6);
+    for i in 0..=1000 {
+        let c = i as f32 / 1000.0;
+        let back = linear_to_srgb(srgb_to_linear(c));
+        assert!((back - c).abs() < 2e-6, "{c} → {back}");
+    }
+}
