@@ -9,6 +9,7 @@ use super::{
 };
 use crate::splats::{ALWAYS, Gaussian, Splats};
 use scene::Camera;
+use std::collections::HashSet;
 
 /// A train frame as the init sees it: planar RGB (all red, then green, then blue).
 pub struct Image<'a> {
@@ -95,7 +96,20 @@ pub(crate) fn add_moving(
         let all = (lifted.into_iter()).filter(|l| matches!(l.point, Lifted::Moving { .. }));
         all.map(|l| (l, ALWAYS)).collect()
     } else {
-        windowed(&frames, stride, st, &aligned)
+        // A track that one quadratic holds over most of the recording keeps one
+        // Gaussian for all of it (from the middle frame, as without windows); the
+        // others are fitted window by window.
+        let most = (3 * frames.len()).div_ceil(4);
+        let whole: Vec<LiftedTrack> = (lifted.into_iter())
+            .filter(|l| matches!(l.point, Lifted::Moving { .. }))
+            .filter(|l| l.seen.iter().flatten().count() >= most)
+            .collect();
+        let covered: HashSet<(u32, u32)> = (whole.iter())
+            .map(|l| (l.pixel.x as u32, l.pixel.y as u32))
+            .collect();
+        let mut all: Vec<_> = whole.into_iter().map(|l| (l, ALWAYS)).collect();
+        all.extend(windowed(&frames, stride, st, &aligned, &covered));
+        all
     };
     let t0 = crate::motion::T0 as f64;
     let before = s.len();
@@ -172,21 +186,29 @@ pub fn windows(times: &[f64], size: usize) -> Vec<Window> {
 
 /// The moving tracks of each window of `st.window` frames ([`windows`]), from its
 /// reference frame, each lifted from its observations in the window's context, with the
-/// window's life. A quadratic holds a turn or an oscillation over a few frames where it
+/// window's life; but none whose position in the middle frame is a pixel of `covered`
+/// (a track from there that has a Gaussian for the whole recording). A quadratic holds a turn or an oscillation over a few frames where it
 /// cannot over the recording.
 fn windowed(
     frames: &[Frame],
     stride: usize,
     st: &TrackSettings,
     depths: &[Option<depth::Aligned>],
+    covered: &HashSet<(u32, u32)>,
 ) -> Vec<(LiftedTrack, [f32; 2])> {
     let times: Vec<f64> = frames.iter().map(|f| f.time).collect();
+    let middle = super::middle_frame(frames);
     let wins = windows(&times, st.window as usize);
     let refs: Vec<usize> = wins.iter().map(|w| w.reference).collect();
     let raws = raw_tracks_at(frames, stride, &refs, st);
     raws.into_iter()
         .filter_map(|r| {
             let w = wins.iter().find(|w| w.reference == r.frame)?;
+            // The surface point already has a Gaussian for the whole recording.
+            let at_middle = r.track.get(middle).copied().flatten();
+            if at_middle.is_some_and(|p| covered.contains(&(p.x as u32, p.y as u32))) {
+                return None;
+            }
             let track: Vec<_> = (r.track.iter().enumerate())
                 .map(|(k, p)| p.filter(|_| w.context.contains(&k)))
                 .collect();

@@ -81,10 +81,13 @@ pub struct TrackSettings {
     /// the events carry a window across motion too large for Lucas–Kanade between two
     /// frames. 0 = the frames alone (also when the scene has no events).
     pub event_steps: u32,
-    /// Frames per window of the moving tracks' trajectories ([`init`]): each window's
-    /// middle frame gives its own moving Gaussians, fitted over the window (and a frame
-    /// either side) and shown only within it. 0 = one trajectory over the recording,
-    /// from the middle frame.
+    /// Frames per window of the moving tracks' trajectories ([`init`]): a moving track
+    /// that one quadratic holds over most of the recording (seen in ¾ of the frames)
+    /// keeps one Gaussian from the middle frame; the others come from each window's
+    /// middle frame, fitted over the window (and a frame either side) and shown only
+    /// within it. 0 = one trajectory over the recording for every track, from the
+    /// middle frame. 3 measured (BENCHMARKS.md, "Tracks through event images, and
+    /// windows of trajectories").
     pub window: u32,
 }
 
@@ -106,7 +109,7 @@ impl Default for TrackSettings {
             prior_prunes: false,
             depth_weight: 0.1,
             event_steps: 2,
-            window: 0,
+            window: 3,
         }
     }
 }
@@ -307,7 +310,7 @@ pub struct RawTrack {
 }
 
 /// The frame nearest the middle of the recording (`T0`).
-fn middle_frame(frames: &[Frame]) -> usize {
+pub(crate) fn middle_frame(frames: &[Frame]) -> usize {
     let t0 = crate::motion::T0 as f64;
     (0..frames.len())
         .min_by(|&i, &j| {
