@@ -30,6 +30,28 @@ impl Bindings {
         let r = self.offsets[g] as usize..self.offsets[g + 1] as usize;
         (&self.events[r.clone()], &self.weights[r])
     }
+
+    /// These bindings of some of `n` Gaussians (the `j`-th is Gaussian `ids[j]`, `ids`
+    /// increasing) as bindings of all `n`, the others bound to none. The events keep
+    /// their order, so only the offsets change.
+    pub fn spread(self, ids: &[usize], n: usize) -> Bindings {
+        assert_eq!(
+            ids.len(),
+            self.gaussians(),
+            "spread: one id per Gaussian bound"
+        );
+        assert!(ids.windows(2).all(|w| w[0] < w[1]) && ids.last().is_none_or(|&i| i < n));
+        let mut counts = vec![0u32; n];
+        for (j, &i) in ids.iter().enumerate() {
+            counts[i] = self.offsets[j + 1] - self.offsets[j];
+        }
+        let mut offsets = Vec::with_capacity(n + 1);
+        offsets.push(0);
+        for c in counts {
+            offsets.push(offsets.last().copied().unwrap_or(0) + c);
+        }
+        Bindings { offsets, ..self }
+    }
 }
 
 /// Per-Gaussian search radius in world units: `radius_px` pixels at the Gaussian's depth

@@ -100,17 +100,19 @@ pub fn run(
         let t0 = frame.timestamp;
         // |t − t0| ≤ δt, both ends included (`window` is half-open).
         let window = events.window(t0 - settings.delta_t, (t0 + settings.delta_t).next_up());
-        let splats = model.at(frame.time as f32);
+        let t = frame.time as f32;
+        let splats = model.at(t);
+        // A Gaussian outside its life (`Splats::life`) is not drawn then: no events bind.
+        let life = &model.splats.life;
+        let alive: Vec<usize> = (0..splats.len())
+            .filter(|&g| life.get(g).is_none_or(|l| gaussians::motion::alive(*l, t)))
+            .collect();
+        let centres: Vec<[f32; 3]> = alive.iter().map(|&g| splats.means[g]).collect();
         let (bindings, s) = associate_frame(
-            &camera,
-            &depth,
-            &alpha,
-            &window,
-            &splats.means,
-            t0,
-            settings,
+            &camera, &depth, &alpha, &window, &centres, t0, settings,
         )
         .map_err(|e| Error::invalid(&events_file, format!("frame {i} (t0 = {t0} s): {e}")))?;
+        let bindings = bindings.spread(&alive, splats.len());
         phases.start("preview");
         let image = read_image(scene.image_path(frame))?;
         let preview = preview_image(&image, &bindings, &window);

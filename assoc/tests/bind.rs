@@ -214,3 +214,38 @@ fn weights_are_normalised_inverse_distances() {
     assert!((b.weights[0] as f64 - 1e6 / 2_000_001.0).abs() < 1e-7);
     assert!((b.weights[2] as f64 - 1.0 / 2_000_001.0).abs() < 1e-12);
 }
+
+#[test]
+fn bindings_of_some_gaussians_spread_to_all_give_each_its_own_events() {
+    // Bind events to the centres of Gaussians 1, 3 and 4 of six (the others not alive),
+    // spread to six: each alive Gaussian's events are the ones binding it alone gives,
+    // the others have none.
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let points: Vec<[f32; 3]> = (0..200)
+        .map(|_| {
+            [
+                rng.random::<f32>(),
+                rng.random::<f32>(),
+                rng.random::<f32>(),
+            ]
+        })
+        .collect();
+    let ids: Vec<u64> = (0..200).collect();
+    let all: Vec<[f32; 3]> = (0..6).map(|g| [0.15 * g as f32 + 0.1, 0.5, 0.5]).collect();
+    let alive = [1usize, 3, 4];
+    let centres: Vec<[f32; 3]> = alive.iter().map(|&g| all[g]).collect();
+    let (b, _) = bind_nearest(&points, &ids, &centres, &[0.2; 3], 4);
+    let spread = b.clone().spread(&alive, 6);
+    assert_eq!(spread.gaussians(), 6);
+    for (g, centre) in all.iter().enumerate() {
+        let (ev, w) = spread.of(g);
+        match alive.iter().position(|&a| a == g) {
+            Some(j) => {
+                let (one, _) = bind_nearest(&points, &ids, &[*centre], &[0.2], 4);
+                assert_eq!(ev, one.of(0).0, "Gaussian {g}");
+                assert_eq!((ev, w), b.of(j));
+            }
+            None => assert!(ev.is_empty() && w.is_empty(), "Gaussian {g} is not alive"),
+        }
+    }
+}
