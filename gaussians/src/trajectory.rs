@@ -12,6 +12,7 @@
 //! (all world units) and the error relative to the true motion (1 = no better than not
 //! moving at all), and the fraction of the Gaussians seen on moving objects' pixels that
 //! lie on the surface (the rest float in front or behind: a smear seen from elsewhere).
+//! A Gaussian with a life (`Splats::life`) counts only at the test times it exists in.
 
 use crate::model::Model;
 use glam::DVec3;
@@ -85,17 +86,21 @@ pub fn trajectory_error(model: &Model, scene: &Scene) -> Option<TrajectoryError>
         return None;
     }
     let (mut err, mut truth, mut moved, mut n) = (0.0, 0.0, 0.0, 0usize);
-    let mut seen_moved = 0.0;
+    let (mut seen_moved, mut seen_n) = (0.0, 0usize);
     let shift = |a: &[f32; 3], b: &[f32; 3]| {
         DVec3::from_array(std::array::from_fn(|k| (a[k] - b[k]) as f64))
     };
+    // A Gaussian with a life (`tracks.window`) is compared only at the times it exists.
+    let life = &model.splats.life;
+    let alive = |i: usize, t: f32| life.get(i).is_none_or(|l| crate::motion::alive(*l, t));
     for f in &scene.test.frames {
-        let at = model.at(f.time as f32);
-        seen_moved += seen
-            .iter()
-            .map(|&i| shift(&at.means[i], &at0.means[i]).length())
-            .sum::<f64>();
-        for &(i, object, local, start) in &tied {
+        let t = f.time as f32;
+        let at = model.at(t);
+        for &i in seen.iter().filter(|&&i| alive(i, t)) {
+            seen_moved += shift(&at.means[i], &at0.means[i]).length();
+            seen_n += 1;
+        }
+        for &(i, object, local, start) in tied.iter().filter(|g| alive(g.0, t)) {
             let want = world.material_to_world(object, local, f.timestamp) - start;
             let got = shift(&at.means[i], &at0.means[i]);
             err += (got - want).length();
@@ -104,12 +109,15 @@ pub fn trajectory_error(model: &Model, scene: &Scene) -> Option<TrajectoryError>
             n += 1;
         }
     }
+    if n == 0 {
+        return None;
+    }
     let n = n as f64;
     Some(TrajectoryError {
         gaussians: tied.len(),
         times: scene.test.frames.len(),
         on_surface_fraction: tied.len() as f64 / seen.len() as f64,
-        seen_motion_mean: seen_moved / (seen.len() * scene.test.frames.len()) as f64,
+        seen_motion_mean: seen_moved / seen_n.max(1) as f64,
         motion_error_mean: err / n,
         true_motion_mean: truth / n,
         model_motion_mean: moved / n,
