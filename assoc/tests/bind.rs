@@ -5,6 +5,19 @@ use assoc::bind_nearest;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+/// `n` points uniform in the unit cube.
+fn random_points(rng: &mut ChaCha8Rng, n: usize) -> Vec<[f32; 3]> {
+    (0..n)
+        .map(|_| {
+            [
+                rng.random::<f32>(),
+                rng.random::<f32>(),
+                rng.random::<f32>(),
+            ]
+        })
+        .collect()
+}
+
 /// Brute force: (squared distance, index) of the k nearest within r, ties by index.
 fn brute(points: &[[f32; 3]], c: [f32; 3], r: f32, k: usize) -> Vec<(f32, usize)> {
     let mut v: Vec<(f32, usize)> = points
@@ -72,24 +85,8 @@ fn random_clouds_match_brute_force() {
     let mut rng = ChaCha8Rng::seed_from_u64(7);
     for trial in 0..20 {
         let n = [0, 1, 2, 5, 50, 2000][trial % 6];
-        let points: Vec<[f32; 3]> = (0..n)
-            .map(|_| {
-                [
-                    rng.random::<f32>(),
-                    rng.random::<f32>(),
-                    rng.random::<f32>(),
-                ]
-            })
-            .collect();
-        let centres: Vec<[f32; 3]> = (0..300)
-            .map(|_| {
-                [
-                    rng.random::<f32>(),
-                    rng.random::<f32>(),
-                    rng.random::<f32>(),
-                ]
-            })
-            .collect();
+        let points: Vec<[f32; 3]> = random_points(&mut rng, n);
+        let centres: Vec<[f32; 3]> = random_points(&mut rng, 300);
         let radii: Vec<f32> = (0..300).map(|_| rng.random::<f32>() * 0.3).collect();
         for k in [1, 3, 7] {
             check_against_brute(&points, &centres, &radii, k);
@@ -221,15 +218,7 @@ fn bindings_of_some_gaussians_spread_to_all_give_each_its_own_events() {
     // spread to six: each alive Gaussian's events are the ones binding it alone gives,
     // the others have none.
     let mut rng = ChaCha8Rng::seed_from_u64(5);
-    let points: Vec<[f32; 3]> = (0..200)
-        .map(|_| {
-            [
-                rng.random::<f32>(),
-                rng.random::<f32>(),
-                rng.random::<f32>(),
-            ]
-        })
-        .collect();
+    let points: Vec<[f32; 3]> = random_points(&mut rng, 200);
     let ids: Vec<u64> = (0..200).collect();
     let all: Vec<[f32; 3]> = (0..6).map(|g| [0.15 * g as f32 + 0.1, 0.5, 0.5]).collect();
     let alive = [1usize, 3, 4];
