@@ -114,3 +114,101 @@ fn assembled_motion_gradient_matches_central_differences() {
         tr.motion_gradient(&r, &d, i).0
     });
 }
+
+/// `L_motion` of a model whose Gaussians follow their own trajectories (the tracks
+/// init's `Splats::motion`) against a plain reference in f64: each bound Gaussian's
+/// centre at both ends of the span is `μ + v·τ + a·τ²` (τ the normalised time minus ½,
+/// the seconds mapped through the train frames' times), projected by the recorded
+/// cameras (no PoseNet), its flow the difference of the two pixels, `r` the events'
+/// weighted mean flow over the span minus it, `L = mean |r|²`. Then the trajectories'
+/// gradient against central differences. The term once took `x(t1)` without the
+/// trajectory: the flow of every tracked Gaussian was its trajectory's shift back.
+#[test]
+fn motion_term_follows_the_trajectories() {
+    let f = build(Variant::Normal);
+    let mut s = DeformSettings {
+        flow_form: FlowForm::Exact,
+        posenet: false,
+        motion_span: 0.02,
+        ..DeformSettings::default()
+    };
+    s.schedule.gamma2_iters = 0.0;
+    s.motion.norm = deform::motion_loss::Norm::L2;
+    s.motion.outlier_px = 0.0;
+    s.motion_neighbours.radius_px = 0.0;
+    let d = Inputs::load(&f.scene, &f.model, &f.flows, &f.assoc, &s).unwrap();
+    let mut tr = JointTrainer::new(&d, s);
+    let mut rng = Rng(11);
+    let n = tr.inner.splats.len();
+    tr.inner.splats.motion = (0..n)
+        .map(|_| std::array::from_fn(|_| 0.6 * (rng.uniform() as f32 - 0.5)))
+        .collect();
+    let r = TileRasterizer;
+    let i = 1;
+    let (t0, t1) = (d.times[i], d.times[i] + 0.02);
+    // Seconds → the field's normalised time, between the train frames around `t`.
+    let norm_time = |t: f64| {
+        let j = (0..d.times.len() - 1)
+            .find(|&j| d.times[j] <= t && t < d.times[j + 1])
+            .unwrap();
+        let a = (t - d.times[j]) / (d.times[j + 1] - d.times[j]);
+        d.views[j].time as f64 + a * (d.views[j + 1].time - d.views[j].time) as f64
+    };
+    let reference = |tr: &JointTrainer| {
+        let sp = &tr.inner.splats;
+        let at = |g: usize, t: f64| {
+            let tau = norm_time(t) - 0.5;
+            let (m, v) = (sp.means[g], sp.motion[g]);
+            glam::DVec3::from_array(std::array::from_fn(|k| {
+                m[k] as f64 + v[k] as f64 * tau + v[3 + k] as f64 * tau * tau
+            }))
+        };
+        let (c0, c1) = (tr.camera_at(&d, t0).0, tr.camera_at(&d, t1).0);
+        let b = &d.bindings[i];
+        let (mut sum, mut count) = (0.0f64, 0usize);
+        for g in 0..b.gaussians() {
+            let (ev, w) = b.of(g);
+            let (Some((p0, _)), Some((p1, _))) =
+                (c0.project_world(at(g, t0)), c1.project_world(at(g, t1)))
+            else {
+                continue;
+            };
+            let (mut fu, mut fv, mut ws) = (0.0f64, 0.0f64, 0.0f64);
+            for (&k, &wk) in ev.iter().zip(w) {
+                let (u, v) = (d.flow_u[k as usize], d.flow_v[k as usize]);
+                if u.is_finite() && v.is_finite() {
+                    (fu, fv, ws) = (
+                        fu + wk as f64 * u as f64,
+                        fv + wk as f64 * v as f64,
+                        ws + wk as f64,
+                    );
+                }
+            }
+            if ws > 0.0 {
+                let dt = t1 - t0;
+                let r = [dt * fu / ws - (p1.x - p0.x), dt * fv / ws - (p1.y - p0.y)];
+                sum += r[0] * r[0] + r[1] * r[1];
+                count += 1;
+            }
+        }
+        assert!(count > 20, "too few bound Gaussians: {count}");
+        sum / count as f64
+    };
+    let want = reference(&tr);
+    let (got, g, _) = tr.motion_gradient(&r, &d, i);
+    assert!(want > 0.05, "the trajectories barely move: L = {want}");
+    assert!(
+        (got - want).abs() <= 1e-3 * want,
+        "L_motion {got} against the reference {want}"
+    );
+    // The trajectories' gradient (both ends of the span) against central differences.
+    let gm: Vec<f32> = g.splats.motion.as_flattened().to_vec();
+    let dirs = directions(&gm, &mut rng, 3);
+    let base = tr.inner.splats.motion.clone();
+    check("trajectories", &gm, &dirs, 1e-2, |step| {
+        for (k, (m, b)) in tr.inner.splats.motion.iter_mut().zip(&base).enumerate() {
+            *m = std::array::from_fn(|c| b[c] + step[6 * k + c]);
+        }
+        tr.motion_gradient(&r, &d, i).0
+    });
+}

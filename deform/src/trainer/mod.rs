@@ -373,7 +373,7 @@ impl JointTrainer {
             let (s, d) = (&self.inner.splats, &self.own_means);
             gaussians::motion::add_centre_gradient(s, rv.time, d, &mut g.splats);
         }
-        m.add_to(&mut g);
+        m.add_to(&self.inner.splats, &mut g);
         for &(t, xi, g_eps) in &m.camera {
             self.posenet_backward(d, t, xi, g_eps);
         }

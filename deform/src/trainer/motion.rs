@@ -19,12 +19,15 @@ use gaussians::{Rasterizer, RenderedImage, Splats, TileRasterizer};
 use scene::Camera;
 
 /// The motion term's gradients: on the centres as rendered at the view's time (`x(t0)`,
-/// taken back with the view's RGB gradient), on the canonical centres and on the field's
-/// parameters (through `x(t1)`). Empty vectors: no contribution.
+/// taken back with the view's RGB gradient), on the centres at the span's other end
+/// (`x(t1)`: to the canonical centres and trajectories) and on the field's parameters
+/// (through `x(t1)`). Empty vectors: no contribution.
 #[derive(Default)]
 pub(super) struct MotionGrads {
     pub(super) at_view: Vec<[f32; 3]>,
-    canonical: Vec<[f32; 3]>,
+    /// `∂L/∂x(t1)`, and the field time `t1` maps to.
+    at_end: Vec<[f32; 3]>,
+    tau1: f32,
     field: Vec<f32>,
     /// `(t, ξ(t), ∂L/∂ε)`: camera-right twist gradients of the corrected camera at the
     /// span's two ends, for the PoseNet.
@@ -32,13 +35,11 @@ pub(super) struct MotionGrads {
 }
 
 impl MotionGrads {
-    /// Add the canonical-centre and field parts to `g` (the rendered-centre part goes
-    /// through `Trainer::view_backward`).
-    pub(super) fn add_to(&self, g: &mut ModelGrads) {
-        if self.canonical.len() == g.splats.means.len() {
-            for (a, b) in g.splats.means.iter_mut().zip(&self.canonical) {
-                (0..3).for_each(|c| a[c] += b[c]);
-            }
+    /// Add the parts through `x(t1)` (canonical centres, trajectories of `s`) and the
+    /// field's to `g` (the rendered-centre part goes through `Trainer::view_backward`).
+    pub(super) fn add_to(&self, s: &Splats, g: &mut ModelGrads) {
+        if self.at_end.len() == g.splats.means.len() {
+            gaussians::motion::add_centre_gradient(s, self.tau1, &self.at_end, &mut g.splats);
         }
         if !self.field.is_empty() && g.field.len() == self.field.len() {
             g.field
@@ -116,27 +117,30 @@ impl MotionTerm<'_> {
             }
             offsets.push(events.len() as u32);
         }
-        // Deformed centres at t0 and t1 (the field sees canonical positions detached).
+        // Deformed centres at t0 (as rendered) and t1: canonical centre, plus the field's
+        // shift (its input the canonical centre, detached), plus the trajectory's, as
+        // `render_view` moves them.
         let xs: Vec<[f32; 3]> = idx.iter().map(|&g| self.splats.means[g]).collect();
         let moves = |k: usize| !self.dynamic_only || self.splats.is_dynamic(idx[k]);
-        let deform = |field: &Mlp<f32>, t: f32| {
-            let (dl, cache) = Deformation::forward(field, &xs, &[t]);
-            let x = (0..xs.len())
-                .map(|k| {
-                    let dx = if moves(k) { dl.dx[k] } else { [0.0; 3] };
-                    std::array::from_fn(|c| xs[k][c] + dx[c])
-                })
-                .collect::<Vec<[f32; 3]>>();
-            (x, cache)
-        };
+        let along = |k: usize| gaussians::motion::shift(self.splats, idx[k], tau1);
         let x0: Vec<[f32; 3]> = idx.iter().map(|&g| rv.deformed.means[g]).collect();
-        let (x1, cache1) = match self.field {
+        let (field_dx, cache1) = match self.field {
             Some(f) => {
-                let (x1, c1) = deform(f, tau1);
-                (x1, Some((f, c1)))
+                let (dl, c1) = Deformation::forward(f, &xs, &[tau1]);
+                (Some(dl.dx), Some((f, c1)))
             }
-            None => (xs.clone(), None),
+            None => (None, None),
         };
+        let x1: Vec<[f32; 3]> = (0..xs.len())
+            .map(|k| {
+                let dx = match &field_dx {
+                    Some(dx) if moves(k) => dx[k],
+                    _ => [0.0; 3],
+                };
+                let tr = along(k);
+                std::array::from_fn(|c| xs[k][c] + dx[c] + tr[c])
+            })
+            .collect();
         let k = d.views[i].camera.intrinsics;
         // The joint training's camera (PoseNet-corrected) at both ends of the span.
         let (ca, xa) = (self.camera_at)(t0);
@@ -209,10 +213,11 @@ impl MotionTerm<'_> {
         gaussian_flow_backward(cams, &x0, &x1, &fgs, &gu, &gv, &mut gg);
         let n = self.splats.len();
         out.at_view = vec![[0.0; 3]; n];
-        out.canonical = vec![[0.0; 3]; n];
+        out.at_end = vec![[0.0; 3]; n];
+        out.tau1 = tau1;
         for (kk, &g) in idx.iter().enumerate() {
             out.at_view[g] = gg.x0[kk];
-            out.canonical[g] = gg.x1[kk];
+            out.at_end[g] = gg.x1[kk];
         }
         if paper && self.posenet {
             let scaled = |g: &[f32]| g.iter().map(|x| x * g2).collect::<Vec<f32>>();
