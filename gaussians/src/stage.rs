@@ -381,12 +381,7 @@ pub fn train(
     let scene = Scene::open(&args.stage.scene)?;
     let views = load_views(&scene, &scene.train)?;
     let test_views = load_views(&scene, &scene.test)?;
-    let reads_events = args.init_ply.is_none()
-        && settings.tracks.event_steps > 0
-        && settings
-            .init
-            .resolve(scene::depth_prior::exists(&scene.root))
-            == Init::Tracks;
+    let reads_events = init::reads_events(&settings, &scene, args.init_ply.as_deref());
     let inputs = input_hashes(
         &scene,
         [args.init_ply.as_deref(), args.init_motion.as_deref()],

@@ -280,7 +280,7 @@ pub(crate) fn initial_splats(
                             rgb: &v.rgb,
                         })
                         .collect();
-                    let stream = event_stream(scene, &settings.tracks)?;
+                    let stream = event_stream(settings, scene)?;
                     let seconds: Vec<f64> =
                         scene.train.frames.iter().map(|f| f.timestamp).collect();
                     let source = stream
@@ -316,13 +316,20 @@ pub(crate) fn initial_splats(
     }
 }
 
-/// The scene's events when the tracks are to be chained through event images
-/// (`tracks.event_steps` > 0 and the scene has events).
-fn event_stream(
-    scene: &Scene,
-    st: &crate::tracks::TrackSettings,
-) -> Result<Option<scene::EventStream>> {
-    if st.event_steps == 0 || scene.train.events.is_none() {
+/// Whether the init reads the scene's events: the tracks init (no PLY given), chaining
+/// its tracks through event images (`tracks.event_steps` > 0), on a scene with events.
+/// The stage hashes the events into its record's inputs by this same answer.
+pub(crate) fn reads_events(settings: &TrainSettings, scene: &Scene, ply: Option<&Path>) -> bool {
+    let priors = scene::depth_prior::exists(&scene.root);
+    ply.is_none()
+        && settings.tracks.event_steps > 0
+        && scene.train.events.is_some()
+        && settings.init.resolve(priors) == Init::Tracks
+}
+
+/// The scene's events when [`reads_events`] says the init reads them.
+fn event_stream(settings: &TrainSettings, scene: &Scene) -> Result<Option<scene::EventStream>> {
+    if !reads_events(settings, scene, None) {
         return Ok(None);
     }
     Ok(Some(scene.load_events()?))
