@@ -4,8 +4,8 @@
 
 use super::lift::Lifted;
 use super::{
-    Frame, LiftedTrack, TrackSettings, align_priors, depth, drop_where_prior_disagrees, events,
-    lift_raw, lift_track, lk, loss, raw_tracks, raw_tracks_at,
+    Frame, LiftedTrack, RawTrack, TrackSettings, align_priors, depth, drop_where_prior_disagrees,
+    events, lift_raw, lift_track, lk, loss, raw_tracks, raw_tracks_at,
 };
 use crate::splats::{ALWAYS, Gaussian, Splats};
 use scene::Camera;
@@ -108,7 +108,7 @@ pub(crate) fn add_moving(
             .map(|l| (l.pixel.x as u32, l.pixel.y as u32))
             .collect();
         let mut all: Vec<_> = whole.into_iter().map(|l| (l, ALWAYS)).collect();
-        all.extend(windowed(&frames, stride, st, &aligned, &covered));
+        all.extend(windowed(&frames, stride, st, &aligned, &covered, &raws));
         all
     };
     let t0 = crate::motion::T0 as f64;
@@ -187,20 +187,28 @@ pub fn windows(times: &[f64], size: usize) -> Vec<Window> {
 /// The moving tracks of each window of `st.window` frames ([`windows`]), from its
 /// reference frame, each lifted from its observations in the window's context, with the
 /// window's life; but none whose position in the middle frame is a pixel of `covered`
-/// (a track from there that has a Gaussian for the whole recording). A quadratic holds a turn or an oscillation over a few frames where it
-/// cannot over the recording.
+/// (a track from there that has a Gaussian for the whole recording). A quadratic holds
+/// a turn or an oscillation over a few frames where it cannot over the recording.
+/// `from_middle`: the middle frame's tracks at `stride`, already followed (not tracked
+/// again when the middle frame is a window's reference).
 fn windowed(
     frames: &[Frame],
     stride: usize,
     st: &TrackSettings,
     depths: &[Option<depth::Aligned>],
     covered: &HashSet<(u32, u32)>,
+    from_middle: &[RawTrack],
 ) -> Vec<(LiftedTrack, [f32; 2])> {
     let times: Vec<f64> = frames.iter().map(|f| f.time).collect();
     let middle = super::middle_frame(frames);
     let wins = windows(&times, st.window as usize);
-    let refs: Vec<usize> = wins.iter().map(|w| w.reference).collect();
-    let raws = raw_tracks_at(frames, stride, &refs, st);
+    let refs: Vec<usize> = (wins.iter().map(|w| w.reference))
+        .filter(|&r| r != middle)
+        .collect();
+    let mut raws = raw_tracks_at(frames, stride, &refs, st);
+    if wins.iter().any(|w| w.reference == middle) {
+        raws.extend(from_middle.iter().filter(|r| r.frame == middle).cloned());
+    }
     raws.into_iter()
         .filter_map(|r| {
             let w = wins.iter().find(|w| w.reference == r.frame)?;
