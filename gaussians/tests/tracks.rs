@@ -4,7 +4,7 @@
 
 use gaussians::tracks::lift::{self, Lifted, Observation};
 use gaussians::tracks::lk::{Grey, Pyramid, track};
-use gaussians::tracks::{Frame, TrackSettings, lift_frames, lift_track, track_from};
+use gaussians::tracks::{Frame, TrackSettings, lift_frames, lift_track, track_from, track_within};
 use glam::{DQuat, DVec3, Vec2};
 use scene::{Camera, Intrinsics, Pose};
 
@@ -261,6 +261,12 @@ fn chained_tracks_follow_a_moving_texture_and_classify_it() {
         let q = q.expect("tracked through every frame");
         let truth = p + step * (i as f32 - 3.0);
         assert!(q.distance(truth) < 0.2, "frame {i}: {q} vs {truth}");
+    }
+    // Followed over frames 2..5 only: the same positions there, none outside.
+    let within = track_within(&frames, 3, p, &st, 2..5);
+    for (i, (a, b)) in within.iter().zip(&tr).enumerate() {
+        let want = if (2..5).contains(&i) { *b } else { None };
+        assert_eq!(*a, want, "frame {i}");
     }
     // One camera centre: every ray passes through it, so no still point fits and no
     // depth is defined; the lift must not invent one.

@@ -5,7 +5,7 @@
 use super::lift::Lifted;
 use super::{
     Frame, LiftedTrack, RawTrack, TrackSettings, align_priors, depth, drop_where_prior_disagrees,
-    events, lift_raw, lift_track, lk, loss, raw_tracks, raw_tracks_at,
+    events, lift_raw, lift_track, lk, loss, raw_tracks, raw_tracks_within,
 };
 use crate::splats::{ALWAYS, Gaussian, Splats};
 use scene::Camera;
@@ -104,8 +104,10 @@ pub(crate) fn add_moving(
             .filter(|l| matches!(l.point, Lifted::Moving { .. }))
             .filter(|l| l.seen.iter().flatten().count() >= most)
             .collect();
-        let covered: HashSet<(u32, u32)> = (whole.iter())
-            .map(|l| (l.pixel.x as u32, l.pixel.y as u32))
+        // The pixels each frame's whole-recording tracks pass through.
+        let covered: HashSet<(usize, u32, u32)> = (whole.iter())
+            .flat_map(|l| l.seen.iter().enumerate())
+            .filter_map(|(k, q)| q.map(|q| (k, (q.x + 0.5) as u32, (q.y + 0.5) as u32)))
             .collect();
         let mut all: Vec<_> = whole.into_iter().map(|l| (l, ALWAYS)).collect();
         all.extend(windowed(&frames, stride, st, &aligned, &covered, &raws));
@@ -185,27 +187,27 @@ pub fn windows(times: &[f64], size: usize) -> Vec<Window> {
 }
 
 /// The moving tracks of each window of `st.window` frames ([`windows`]), from its
-/// reference frame, each lifted from its observations in the window's context, with the
-/// window's life; but none whose position in the middle frame is a pixel of `covered`
-/// (a track from there that has a Gaussian for the whole recording). A quadratic holds
-/// a turn or an oscillation over a few frames where it cannot over the recording.
-/// `from_middle`: the middle frame's tracks at `stride`, already followed (not tracked
-/// again when the middle frame is a window's reference).
+/// reference frame, followed and lifted over the window's context only, with the
+/// window's life; but none that starts at a pixel of `covered` (`(frame, x, y)`: where a
+/// track with a Gaussian for the whole recording passes). A quadratic holds a turn or
+/// an oscillation over a few frames where it cannot over the recording. `from_middle`:
+/// the middle frame's tracks at `stride`, already followed.
 fn windowed(
     frames: &[Frame],
     stride: usize,
     st: &TrackSettings,
     depths: &[Option<depth::Aligned>],
-    covered: &HashSet<(u32, u32)>,
+    covered: &HashSet<(usize, u32, u32)>,
     from_middle: &[RawTrack],
 ) -> Vec<(LiftedTrack, [f32; 2])> {
     let times: Vec<f64> = frames.iter().map(|f| f.time).collect();
     let middle = super::middle_frame(frames);
     let wins = windows(&times, st.window as usize);
-    let refs: Vec<usize> = (wins.iter().map(|w| w.reference))
-        .filter(|&r| r != middle)
+    let spans: Vec<_> = (wins.iter())
+        .filter(|w| w.reference != middle)
+        .map(|w| (w.reference, w.context.clone()))
         .collect();
-    let mut raws = raw_tracks_at(frames, stride, &refs, st);
+    let mut raws = raw_tracks_within(frames, stride, &spans, st);
     if wins.iter().any(|w| w.reference == middle) {
         raws.extend(from_middle.iter().filter(|r| r.frame == middle).cloned());
     }
@@ -213,8 +215,8 @@ fn windowed(
         .filter_map(|r| {
             let w = wins.iter().find(|w| w.reference == r.frame)?;
             // The surface point already has a Gaussian for the whole recording.
-            let at_middle = r.track.get(middle).copied().flatten();
-            if at_middle.is_some_and(|p| covered.contains(&(p.x as u32, p.y as u32))) {
+            let start = (r.frame, r.pixel.x as u32, r.pixel.y as u32);
+            if covered.contains(&start) {
                 return None;
             }
             let track: Vec<_> = (r.track.iter().enumerate())

@@ -182,6 +182,17 @@ fn follow(chain: &[&lk::Pyramid], p: Vec2, st: &TrackSettings) -> Option<Vec2> {
 
 /// The track of pixel `p` of frame `r` through all frames (`None` where it was lost).
 pub fn track_from(frames: &[Frame], r: usize, p: Vec2, st: &TrackSettings) -> Vec<Option<Vec2>> {
+    track_within(frames, r, p, st, 0..frames.len())
+}
+
+/// [`track_from`] followed only over the frames `span` (which holds `r`): `None` outside.
+pub fn track_within(
+    frames: &[Frame],
+    r: usize,
+    p: Vec2,
+    st: &TrackSettings,
+    span: std::ops::Range<usize>,
+) -> Vec<Option<Vec2>> {
     let mut out = vec![None; frames.len()];
     out[r] = Some(p);
     let (w, h) = {
@@ -191,7 +202,7 @@ pub fn track_from(frames: &[Frame], r: usize, p: Vec2, st: &TrackSettings) -> Ve
     let inside = |q: Vec2| q.x >= 0.0 && q.y >= 0.0 && q.x < w && q.y < h;
     for step in [1isize, -1] {
         let mut k = r as isize;
-        while (0..frames.len() as isize).contains(&(k + step)) {
+        while (span.start as isize..span.end as isize).contains(&(k + step)) {
             let mut links = chain(frames, k as usize, step > 0);
             let Some(from) = out[k as usize] else { break };
             let Some(to) = follow(&links, from, st) else {
@@ -351,25 +362,39 @@ pub fn raw_tracks_at(
     refs: &[usize],
     st: &TrackSettings,
 ) -> Vec<RawTrack> {
+    let spans: Vec<_> = refs.iter().map(|&r| (r, 0..frames.len())).collect();
+    raw_tracks_within(frames, stride, &spans, st)
+}
+
+/// Tracks from every `stride`-th pixel of each frame `r` of `refs`, followed over its
+/// own span of frames only (`(r, span)`): the cost grows with the spans, not with the
+/// recording's length times the number of references.
+pub(crate) fn raw_tracks_within(
+    frames: &[Frame],
+    stride: usize,
+    refs: &[(usize, std::ops::Range<usize>)],
+    st: &TrackSettings,
+) -> Vec<RawTrack> {
     let g = &frames[0].pyramid.0[0];
     let (w, h) = (g.width, g.height);
     let stride = stride.max(1);
-    let starts: Vec<(usize, Vec2)> = refs
+    let starts: Vec<(usize, std::ops::Range<usize>, Vec2)> = refs
         .iter()
-        .flat_map(|&r| {
+        .flat_map(|(r, span)| {
             (0..h).step_by(stride).flat_map(move |y| {
-                (0..w)
-                    .step_by(stride)
-                    .map(move |x| (r, Vec2::new(x as f32 + 0.5, y as f32 + 0.5)))
+                (0..w).step_by(stride).map(move |x| {
+                    let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+                    (*r, span.clone(), p)
+                })
             })
         })
         .collect();
     starts
         .into_par_iter()
-        .map(|(frame, pixel)| RawTrack {
+        .map(|(frame, span, pixel)| RawTrack {
             frame,
             pixel,
-            track: track_from(frames, frame, pixel, st),
+            track: track_within(frames, frame, pixel, st, span),
         })
         .collect()
 }
