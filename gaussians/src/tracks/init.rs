@@ -110,7 +110,7 @@ pub(crate) fn add_moving(
             .filter_map(|(k, q)| q.map(|q| (k, (q.x + 0.5) as u32, (q.y + 0.5) as u32)))
             .collect();
         let mut all: Vec<_> = whole.into_iter().map(|l| (l, ALWAYS)).collect();
-        all.extend(windowed(&frames, stride, st, &aligned, &covered, &raws));
+        all.extend(windowed(&frames, stride, st, &aligned, &covered, raws));
         all
     };
     let t0 = crate::motion::T0 as f64;
@@ -191,14 +191,14 @@ pub fn windows(times: &[f64], size: usize) -> Vec<Window> {
 /// window's life; but none that starts at a pixel of `covered` (`(frame, x, y)`: where a
 /// track with a Gaussian for the whole recording passes). A quadratic holds a turn or
 /// an oscillation over a few frames where it cannot over the recording. `from_middle`:
-/// the middle frame's tracks at `stride`, already followed.
+/// the middle frame's tracks at `stride`, already followed (taken, not copied).
 fn windowed(
     frames: &[Frame],
     stride: usize,
     st: &TrackSettings,
     depths: &[Option<depth::Aligned>],
     covered: &HashSet<(usize, u32, u32)>,
-    from_middle: &[RawTrack],
+    from_middle: Vec<RawTrack>,
 ) -> Vec<(LiftedTrack, [f32; 2])> {
     let times: Vec<f64> = frames.iter().map(|f| f.time).collect();
     let middle = super::middle_frame(frames);
@@ -209,7 +209,7 @@ fn windowed(
         .collect();
     let mut raws = raw_tracks_within(frames, stride, &spans, st);
     if wins.iter().any(|w| w.reference == middle) {
-        raws.extend(from_middle.iter().filter(|r| r.frame == middle).cloned());
+        raws.extend(from_middle.into_iter().filter(|r| r.frame == middle));
     }
     raws.into_iter()
         .filter_map(|r| {

@@ -314,7 +314,6 @@ fn prior_point(obs: &[Observation]) -> Option<DVec3> {
 }
 
 /// A track before lifting: its start (frame, Lucas–Kanade pixel) and its positions.
-#[derive(Clone, Debug)]
 pub struct RawTrack {
     pub frame: usize,
     pub pixel: Vec2,
