@@ -180,6 +180,57 @@ fn follow(chain: &[&lk::Pyramid], p: Vec2, st: &TrackSettings) -> Option<Vec2> {
     (chain.windows(2)).try_fold(p, |q, w| lk::track(w[0], w[1], q, r, e))
 }
 
+/// Where a window starting at `p` lands in each image of `chain` after the first
+/// (`None` where it is lost on the way).
+fn follow_each(chain: &[&lk::Pyramid], p: Vec2, st: &TrackSettings) -> Option<Vec<Vec2>> {
+    let (r, e) = (st.radius as i32, st.min_texture);
+    let mut out = Vec::with_capacity(chain.len().saturating_sub(1));
+    let mut q = p;
+    for w in chain.windows(2) {
+        q = lk::track(w[0], w[1], q, r, e)?;
+        out.push(q);
+    }
+    Some(out)
+}
+
+/// Where `track` passed through the event images between two consecutive frames that
+/// both saw it: followed forward again from the earlier frame and kept when it lands
+/// within `forward_backward` of the later one. Each as (camera between the two frames'
+/// at the image's time, normalised time, camera pixel).
+pub fn between_positions(
+    frames: &[Frame],
+    track: &[Option<Vec2>],
+    st: &TrackSettings,
+) -> Vec<(Camera, f64, DVec2)> {
+    let mut out = Vec::new();
+    for k in 0..frames.len().saturating_sub(1) {
+        let (Some(a), Some(b)) = (track[k], track[k + 1]) else {
+            continue;
+        };
+        let n = frames[k].between.len();
+        if n == 0 {
+            continue;
+        }
+        let Some(seen) = follow_each(&chain(frames, k, true), a, st) else {
+            continue;
+        };
+        if seen[n].distance(b) > st.forward_backward {
+            continue;
+        }
+        let (ca, cb) = (frames[k].camera, frames[k + 1].camera);
+        for (j, q) in seen[..n].iter().enumerate() {
+            let s = (j + 1) as f64 / (n + 1) as f64;
+            let camera = Camera {
+                intrinsics: ca.intrinsics,
+                cam_to_world: scene::Pose::interpolate(&ca.cam_to_world, &cb.cam_to_world, s),
+            };
+            let time = frames[k].time + s * (frames[k + 1].time - frames[k].time);
+            out.push((camera, time, camera_pixel(*q)));
+        }
+    }
+    out
+}
+
 /// The track of pixel `p` of frame `r` through all frames (`None` where it was lost).
 pub fn track_from(frames: &[Frame], r: usize, p: Vec2, st: &TrackSettings) -> Vec<Option<Vec2>> {
     track_within(frames, r, p, st, 0..frames.len())
@@ -241,7 +292,10 @@ pub fn camera_pixel(p: Vec2) -> DVec2 {
 /// Lift one track (Lucas–Kanade positions): still if its rays meet (and, with depth
 /// priors, its depth agrees with theirs), else a trajectory when it was seen in at least
 /// 5 frames (9 unknowns; 3 with prior depths) and it fits; `None` otherwise. `depths` holds each frame's
-/// aligned prior (empty: none).
+/// aligned prior (empty: none). Without prior depths the positions of a moving track in
+/// the event images between the frames ([`between_positions`]) count as observations
+/// too: a window of 3 frames (and one either side) then lifts without all 5 frames, and
+/// the fit is checked between the frames as well.
 pub fn lift_track(
     frames: &[Frame],
     track: &[Option<Vec2>],
@@ -249,7 +303,8 @@ pub fn lift_track(
     depths: &[Option<depth::Aligned>],
 ) -> Option<Lifted> {
     let t0 = crate::motion::T0 as f64;
-    let obs: Vec<Observation> = (frames.iter().enumerate().zip(track))
+    let between: Vec<(Camera, f64, DVec2)>;
+    let mut obs: Vec<Observation> = (frames.iter().enumerate().zip(track))
         .filter_map(|((k, f), p)| {
             p.map(|p| {
                 let pixel = camera_pixel(p);
@@ -272,9 +327,18 @@ pub fn lift_track(
     {
         return Some(still);
     }
-    // 9 unknowns: five frames of rays (two rows each), or three with prior depths
-    // (three rows each: the distance is no longer free).
     let with_depth = obs.iter().filter(|o| o.depth.is_some()).count();
+    if depths.iter().all(Option::is_none) {
+        between = between_positions(frames, track, st);
+        obs.extend(between.iter().map(|(camera, time, pixel)| Observation {
+            camera,
+            pixel: *pixel,
+            tau: time - t0,
+            depth: None,
+        }));
+    }
+    // 9 unknowns: five positions of rays (two rows each), or three with prior depths
+    // (three rows each: the distance is no longer free).
     if obs.len() < 5 && !(st.depth_sigma > 0.0 && with_depth >= 3) {
         return None;
     }
