@@ -6,7 +6,7 @@
 
 use super::alpha::{ALPHA_MAX, eval_alpha};
 use super::forward::{BackScratch, Plane, RenderState, TILE, lane_bits, row_span};
-use super::project::{ScreenGrad, project, project_backward};
+use super::project::{ScreenGrad, intermediates, project_backward};
 use super::simd::{self, F4, Lanes, Mask};
 use crate::splats::{SplatGrads, Splats};
 use glam::{DMat3, DVec3};
@@ -265,7 +265,7 @@ pub(crate) fn backward_into(
                 return [0.0f64; 15];
             }
             let sg = &screen[k as usize];
-            let geo = project(s, i, cam32, st.sh_degree).expect("visible in the forward pass");
+            let geo = intermediates(s, i, cam32, st.sh_degree);
             let gg = project_backward(s, i, &geo, cam32, st.sh_degree, sg);
             *m = gg.mean;
             *ls = gg.log_scale;

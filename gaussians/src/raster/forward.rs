@@ -3,7 +3,8 @@
 //! order), then composite each tile front to back (DEGS Eq. 1) in parallel.
 
 use super::alpha::{T_MIN, eval_alpha};
-use super::project::{CamSetup, ScreenGrad, project};
+use super::project::{CamSetup, Geo, ScreenGrad};
+use super::project_lanes::{Projection, project_span};
 use super::rasterizer::RenderedImage;
 use super::simd::{self, F4, Lanes, Mask};
 use crate::splats::Splats;
@@ -45,7 +46,7 @@ pub(crate) struct BackScratch {
 /// Reused buffers of [`render_into`].
 #[derive(Default)]
 struct ForwardScratch {
-    splats: Vec<(f32, Option<Splat2d>)>,
+    splats: Vec<Projection>,
     order: Vec<(u32, u32)>,
     fill: Vec<u32>,
     outs: Vec<TileOut>,
@@ -186,14 +187,28 @@ impl Tiles {
 
 /// What the tile passes need of one projected Gaussian.
 #[derive(Clone, Copy)]
-struct Splat2d {
-    xy: [f32; 2],
-    conic: [f32; 3],
-    opacity: f32,
-    color: [f32; 3],
-    depth: f32,
-    bbox: [u32; 4],
-    cut: f32,
+pub(crate) struct Splat2d {
+    pub xy: [f32; 2],
+    pub conic: [f32; 3],
+    pub opacity: f32,
+    pub color: [f32; 3],
+    pub depth: f32,
+    pub bbox: [u32; 4],
+    pub cut: f32,
+}
+
+impl Splat2d {
+    pub fn of(g: &Geo) -> Self {
+        Splat2d {
+            xy: g.uv,
+            conic: g.conic,
+            opacity: g.opacity,
+            color: g.color,
+            depth: g.depth,
+            bbox: g.bbox,
+            cut: g.cut,
+        }
+    }
 }
 
 /// Project all Gaussians: the visible ones in depth order into `p`, every radius into
@@ -206,25 +221,14 @@ fn project_all(
     p: &mut Projected,
     radius: &mut Vec<f32>,
 ) {
-    (0..s.len())
-        .into_par_iter()
-        .with_min_len(256)
-        .map(|i| match project(s, i, cam, sh_degree) {
-            None => (0.0, None),
-            Some(g) => (
-                g.radius,
-                Some(Splat2d {
-                    xy: g.uv,
-                    conic: g.conic,
-                    opacity: g.opacity,
-                    color: g.color,
-                    depth: g.depth,
-                    bbox: g.bbox,
-                    cut: g.cut,
-                }),
-            ),
-        })
-        .collect_into_vec(&mut sc.splats);
+    // Blocks of 256 (a multiple of every lane count) over the threads.
+    const BLOCK: usize = 256;
+    sc.splats.clear();
+    sc.splats.resize(s.len(), (0.0, None));
+    sc.splats
+        .par_chunks_mut(BLOCK)
+        .enumerate()
+        .for_each(|(c, out)| project_span(s, c * BLOCK, cam, sh_degree, out));
     let splats = &sc.splats;
     radius.clear();
     radius.extend(splats.iter().map(|g| g.0));

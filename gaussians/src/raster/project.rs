@@ -172,27 +172,20 @@ pub fn reach(opacity: f32) -> f32 {
     m.max(0.0) * 1.001 + 0.01
 }
 
-/// Project Gaussian `i`; `None` when it is culled (behind the near plane, degenerate,
-/// transparent, or its 3σ ellipse misses the image).
+/// Every intermediate of Gaussian `i`'s projection, whether or not it is visible (NaN
+/// or infinite where it is degenerate); `bbox`, `cut` and `radius` are left 0. The
+/// backward recomputes a visible Gaussian's intermediates this way, so it never depends
+/// on re-taking the forward pass's culling decisions.
 // Eq. 2: Σ = R S Sᵀ Rᵀ, then its 2-D projection Σ₂ = J W Σ Wᵀ Jᵀ (+ low-pass).
 #[inline]
-pub fn project(s: &Splats, i: usize, cam: &CamSetup, sh_degree: u32) -> Option<Geo> {
+pub fn intermediates(s: &Splats, i: usize, cam: &CamSetup, sh_degree: u32) -> Geo {
     let opacity = 1.0 / (1.0 + (-s.opacity_logits[i]).exp());
-    if !(opacity >= CULL_OPACITY) {
-        return None;
-    }
     let q = s.rotations[i];
     let qnorm = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
-    if !(qnorm > 1e-12) || !qnorm.is_finite() {
-        return None;
-    }
     let n = q.map(|v| v / qnorm);
     let p = Vec3::from(s.means[i]);
     let pc = cam.w * p + cam.tw;
     let depth = -pc.z;
-    if !(depth > NEAR) || !pc.is_finite() {
-        return None;
-    }
     let r = quat_to_mat(n);
     let sc = Vec3::from(s.log_scales[i]).exp();
     let m = Mat3::from_cols(r.x_axis * sc.x, r.y_axis * sc.y, r.z_axis * sc.z);
@@ -207,40 +200,14 @@ pub fn project(s: &Splats, i: usize, cam: &CamSetup, sh_degree: u32) -> Option<G
     let t1 = sigc * j1;
     let cov = [j0.dot(t0) + LOW_PASS, j0.dot(t1), j1.dot(t1) + LOW_PASS];
     let det = cov[0] * cov[2] - cov[1] * cov[1];
-    if !(det > 0.0) || !det.is_finite() {
-        return None;
-    }
     let conic = [cov[2] / det, -cov[1] / det, cov[0] / det];
     let uv = [cam.cx + cam.fx * rx, cam.cy - cam.fy * ry];
-    // Pixels can only receive α ≥ ALPHA_MIN where dᵀΣ⁻¹d ≤ min(9, 2·ln(o/ALPHA_MIN)):
-    // the box (and the kernels' per-row spans) use that, with a margin for rounding.
-    let cut = reach(opacity);
-    let ex = (cut * cov[0]).sqrt() + 1e-3;
-    let ey = (cut * cov[2]).sqrt() + 1e-3;
-    let x0 = ceil(uv[0] - ex).max(0.0);
-    let x1 = floor(uv[0] + ex).min(cam.width as f32 - 1.0);
-    let y0 = ceil(uv[1] - ey).max(0.0);
-    let y1 = floor(uv[1] + ey).min(cam.height as f32 - 1.0);
-    if !(x0 <= x1 && y0 <= y1) {
-        return None;
-    }
-    let mid = 0.5 * (cov[0] + cov[2]);
-    let lmax = mid + (mid * mid - det).max(0.1).sqrt();
-    let radius = ceil(SIGMA_CUTOFF * lmax.sqrt());
-
     let dir = p - cam.centre;
     let dir_len = dir.length().max(1e-12);
     let dn = dir / dir_len;
     let basis = sh::basis_f32(dn.into(), sh_degree);
-    let nc = sh::num_coeffs(sh_degree);
-    let mut color_raw = [0.5f32; 3];
-    for (ch, c) in color_raw.iter_mut().enumerate() {
-        *c += basis[0] * s.sh_dc[i][ch];
-        for k in 1..nc {
-            *c += basis[k] * s.sh_rest[i][(k - 1) * 3 + ch];
-        }
-    }
-    Some(Geo {
+    let color_raw = sh_colour(s, i, &basis, sh_degree);
+    Geo {
         n,
         qnorm,
         r,
@@ -267,10 +234,87 @@ pub fn project(s: &Splats, i: usize, cam: &CamSetup, sh_degree: u32) -> Option<G
         color_raw,
         color: color_raw.map(|c| c.max(0.0)),
         opacity,
-        bbox: [x0 as u32, x1 as u32, y0 as u32, y1 as u32],
-        cut,
-        radius,
-    })
+        bbox: [0; 4],
+        cut: 0.0,
+        radius: 0.0,
+    }
+}
+
+/// `0.5 + Σ_k coeff_k · Y_k` per channel, before the clamp at 0.
+#[inline(always)]
+pub(crate) fn sh_colour(s: &Splats, i: usize, basis: &[f32; 16], sh_degree: u32) -> [f32; 3] {
+    let nc = sh::num_coeffs(sh_degree);
+    let (dc, rest) = (&s.sh_dc[i], &s.sh_rest[i]);
+    let mut c = [0.5; 3];
+    for ch in 0..3 {
+        c[ch] += basis[0] * dc[ch];
+        for k in 1..nc {
+            c[ch] += basis[k] * rest[(k - 1) * 3 + ch];
+        }
+    }
+    c
+}
+
+/// Where a projected Gaussian lands: `(bbox, cut, radius)` (see [`Geo`]), or `None` when
+/// it is culled (transparent, degenerate, behind the near plane, or its ellipse misses
+/// the image). `cut` is [`reach`]`(opacity)`. Shared by [`project`] and the forward
+/// pass's lanes.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn screen_extent(
+    opacity: f32,
+    cut: f32,
+    qnorm: f32,
+    pc: [f32; 3],
+    det: f32,
+    cov: [f32; 3],
+    uv: [f32; 2],
+    cam: &CamSetup,
+) -> Option<([u32; 4], f32, f32)> {
+    if !(opacity >= CULL_OPACITY) || !(qnorm > 1e-12) || !qnorm.is_finite() {
+        return None;
+    }
+    if !(-pc[2] > NEAR) || !pc.iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    if !(det > 0.0) || !det.is_finite() {
+        return None;
+    }
+    // Pixels can only receive α ≥ ALPHA_MIN where dᵀΣ⁻¹d ≤ min(9, 2·ln(o/ALPHA_MIN)):
+    // the box (and the kernels' per-row spans) use that, with a margin for rounding.
+    let ex = (cut * cov[0]).sqrt() + 1e-3;
+    let ey = (cut * cov[2]).sqrt() + 1e-3;
+    let x0 = ceil(uv[0] - ex).max(0.0);
+    let x1 = floor(uv[0] + ex).min(cam.width as f32 - 1.0);
+    let y0 = ceil(uv[1] - ey).max(0.0);
+    let y1 = floor(uv[1] + ey).min(cam.height as f32 - 1.0);
+    if !(x0 <= x1 && y0 <= y1) {
+        return None;
+    }
+    let mid = 0.5 * (cov[0] + cov[2]);
+    let lmax = mid + (mid * mid - det).max(0.1).sqrt();
+    let radius = ceil(SIGMA_CUTOFF * lmax.sqrt());
+    let bbox = [x0 as u32, x1 as u32, y0 as u32, y1 as u32];
+    Some((bbox, cut, radius))
+}
+
+/// Project Gaussian `i`; `None` when it is culled (see [`screen_extent`]). The plain
+/// one-at-a-time path: the forward pass projects `V::N` at once (`project_lanes`).
+#[inline]
+pub fn project(s: &Splats, i: usize, cam: &CamSetup, sh_degree: u32) -> Option<Geo> {
+    let mut g = intermediates(s, i, cam, sh_degree);
+    let (bbox, cut, radius) = screen_extent(
+        g.opacity,
+        reach(g.opacity),
+        g.qnorm,
+        g.pc.into(),
+        g.det,
+        g.cov,
+        g.uv,
+        cam,
+    )?;
+    (g.bbox, g.cut, g.radius) = (bbox, cut, radius);
+    Some(g)
 }
 
 /// Gradients reaching one Gaussian from the image: `[u, v, conic a, b, c, opacity,

@@ -3,6 +3,8 @@
 //! to the Gaussian in world space. Coefficient k = 0 is the DC term (`sh_dc`); k ≥ 1 are
 //! `sh_rest[(k − 1)·3 + channel]` (coefficient-major).
 
+use super::simd::Lanes;
+
 pub const C0: f64 = 0.282_094_791_773_878_14;
 pub const C1: f64 = 0.488_602_511_902_919_9;
 pub const C2: [f64; 5] = [
@@ -116,6 +118,43 @@ macro_rules! sh_impl {
 
 sh_impl!(f32, basis_f32, basis_grad_f32);
 sh_impl!(f64, basis_f64, basis_grad_f64);
+
+/// [`basis_f32`] in lanes (`d` a unit direction per lane); entries above `degree` are 0.
+#[inline(always)]
+pub(crate) fn basis_lanes<V: Lanes>(d: [V; 3], degree: u32) -> [V; 16] {
+    let [x, y, z] = d;
+    // `c` is a function, not a closure: a closure would not inherit the caller's
+    // target features.
+    #[inline(always)]
+    fn c<V: Lanes>(v: f64) -> V {
+        V::splat(v as f32)
+    }
+    let mut b = [V::splat(0.0); 16];
+    b[0] = c::<V>(C0);
+    if degree >= 1 {
+        b[1] = c::<V>(-C1) * y;
+        b[2] = c::<V>(C1) * z;
+        b[3] = c::<V>(-C1) * x;
+    }
+    if degree >= 2 {
+        let (xx, yy, zz) = (x * x, y * y, z * z);
+        b[4] = c::<V>(C2[0]) * x * y;
+        b[5] = c::<V>(C2[1]) * y * z;
+        b[6] = c::<V>(C2[2]) * (c::<V>(2.0) * zz - xx - yy);
+        b[7] = c::<V>(C2[3]) * x * z;
+        b[8] = c::<V>(C2[4]) * (xx - yy);
+        if degree >= 3 {
+            b[9] = c::<V>(C3[0]) * y * (c::<V>(3.0) * xx - yy);
+            b[10] = c::<V>(C3[1]) * x * y * z;
+            b[11] = c::<V>(C3[2]) * y * (c::<V>(4.0) * zz - xx - yy);
+            b[12] = c::<V>(C3[3]) * z * (c::<V>(2.0) * zz - c::<V>(3.0) * xx - c::<V>(3.0) * yy);
+            b[13] = c::<V>(C3[4]) * x * (c::<V>(4.0) * zz - xx - yy);
+            b[14] = c::<V>(C3[5]) * z * (xx - yy);
+            b[15] = c::<V>(C3[6]) * x * (xx - c::<V>(3.0) * yy);
+        }
+    }
+    b
+}
 
 #[cfg(test)]
 mod tests {

@@ -45,6 +45,7 @@ pub(crate) trait Lanes:
     /// `self · 2^i` by adding `i` to the exponent (no overflow handling).
     fn scale_pow2(self, i: Self::I) -> Self;
     fn sum(self) -> f32;
+    fn sqrt(self) -> Self;
     /// `self · b + c` (one rounding where the lanes have a fused multiply-add).
     #[inline(always)]
     fn mul_add(self, b: Self, c: Self) -> Self {
@@ -217,6 +218,10 @@ mod imp4 {
             self.store(&mut a);
             a.iter().sum()
         }
+        #[inline(always)]
+        fn sqrt(self) -> F4 {
+            F4(unsafe { _mm_sqrt_ps(self.0) })
+        }
     }
 
     arith!(F4, _mm_add_ps, _mm_sub_ps, _mm_mul_ps, _mm_div_ps);
@@ -325,6 +330,10 @@ mod imp16 {
             unsafe { _mm512_reduce_add_ps(self.0) }
         }
         #[inline(always)]
+        fn sqrt(self) -> F16 {
+            F16(unsafe { _mm512_sqrt_ps(self.0) })
+        }
+        #[inline(always)]
         fn mul_add(self, b: F16, c: F16) -> F16 {
             F16(unsafe { _mm512_fmadd_ps(self.0, b.0, c.0) })
         }
@@ -425,6 +434,9 @@ mod imp4 {
         }
         fn sum(self) -> f32 {
             self.0.iter().sum()
+        }
+        fn sqrt(self) -> F4 {
+            map(self.0, |_, v| v.sqrt())
         }
     }
 
