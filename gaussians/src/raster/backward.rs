@@ -6,7 +6,8 @@
 
 use super::alpha::{ALPHA_MAX, eval_alpha};
 use super::forward::{BackScratch, Plane, RenderState, TILE, lane_bits, row_span};
-use super::project::{ScreenGrad, intermediates, project_backward};
+use super::project::ScreenGrad;
+use super::project_backward_lanes::{Outs, Shared, backward_span};
 use super::simd::{self, F4, Lanes, Mask};
 use crate::splats::{SplatGrads, Splats};
 use glam::{DMat3, DVec3};
@@ -243,52 +244,40 @@ pub(crate) fn backward_into(
     let n = s.len();
     g.resize(n);
     g.radius.copy_from_slice(&st.radius);
-    let cam32 = &st.cam;
-    let (half_w, half_h) = (0.5 * w as f32, 0.5 * h as f32);
+    let shared = Shared {
+        cam: &st.cam,
+        sh_degree: st.sh_degree,
+        slot,
+        screen,
+        half: [0.5 * w as f32, 0.5 * h as f32],
+    };
+    // Spans of 256 Gaussians (a multiple of every lane count) over the threads.
+    const SPAN: usize = 256;
     let cam_grad = (
-        g.means.par_iter_mut(),
-        g.log_scales.par_iter_mut(),
-        g.rotations.par_iter_mut(),
-        g.opacity_logits.par_iter_mut(),
-        g.sh_dc.par_iter_mut(),
-        g.sh_rest.par_iter_mut(),
-        g.screen_grad_norm.par_iter_mut(),
+        g.means.par_chunks_mut(SPAN),
+        g.log_scales.par_chunks_mut(SPAN),
+        g.rotations.par_chunks_mut(SPAN),
+        g.opacity_logits.par_chunks_mut(SPAN),
+        g.sh_dc.par_chunks_mut(SPAN),
+        g.sh_rest.par_chunks_mut(SPAN),
+        g.screen_grad_norm.par_chunks_mut(SPAN),
     )
         .into_par_iter()
         .enumerate()
-        .with_min_len(256)
-        .map(|(i, (m, ls, rot, op, dc, rest, sgn))| {
-            let k = slot[i];
-            if k == u32::MAX {
-                (*m, *ls, *rot, *op, *dc, *sgn) = Default::default();
-                *rest = [0.0; 45];
-                return [0.0f64; 15];
-            }
-            let sg = &screen[k as usize];
-            let geo = intermediates(s, i, cam32, st.sh_degree);
-            let gg = project_backward(s, i, &geo, cam32, st.sh_degree, sg);
-            *m = gg.mean;
-            *ls = gg.log_scale;
-            *rot = gg.rotation;
-            *op = gg.opacity_logit;
-            *dc = gg.sh[0];
-            for kk in 1..16 {
-                rest[(kk - 1) * 3..kk * 3].copy_from_slice(&gg.sh[kk]);
-            }
-            // 3DGS measures the mean's gradient in NDC (pixels · 2 / size).
-            *sgn = ((sg[0] * half_w).powi(2) + (sg[1] * half_h).powi(2)).sqrt();
-            let mut c = [0.0f64; 15];
-            for col in 0..3 {
-                for row in 0..3 {
-                    c[col * 3 + row] = gg.w.col(col)[row] as f64;
-                }
-            }
-            for a in 0..3 {
-                c[9 + a] = gg.tw[a] as f64;
-                c[12 + a] = gg.centre[a] as f64;
-            }
-            c
-        })
+        .map(
+            |(c, (means, log_scales, rotations, opacity_logits, sh_dc, sh_rest, sgn))| {
+                let out = Outs {
+                    means,
+                    log_scales,
+                    rotations,
+                    opacity_logits,
+                    sh_dc,
+                    sh_rest,
+                    screen_grad_norm: sgn,
+                };
+                backward_span(s, c * SPAN, shared, out)
+            },
+        )
         .reduce(
             || [0.0f64; 15],
             |mut a, b| {

@@ -26,6 +26,7 @@ mod backward;
 mod contribution;
 mod forward;
 pub mod project;
+mod project_backward_lanes;
 mod project_lanes;
 mod rasterizer;
 pub mod reference;

@@ -12,7 +12,8 @@ use super::simd::{self, F4, Lanes};
 use crate::splats::Splats;
 
 /// Widest lane count (AVX-512).
-const MAX: usize = 16;
+pub(super) const MAX: usize = 16;
+pub(super) type Row = [f32; MAX];
 
 /// What the forward pass keeps of Gaussian `i`: its screen radius (0 = culled) and,
 /// when visible, what the tile kernels need.
@@ -78,6 +79,70 @@ fn exp_any<V: Lanes>(x: V) -> V {
     V::select(x.gt(s(0.0)), pos, simd::fast_exp(x))
 }
 
+/// One block's parameters as rows (struct of arrays), lane `l` = Gaussian `start + l`.
+pub(super) struct Rows {
+    pub logit: Row,
+    pub q: [Row; 4],
+    pub mean: [Row; 3],
+    pub ls: [Row; 3],
+}
+
+impl Rows {
+    #[inline(always)]
+    pub fn gather(s: &Splats, start: usize, n: usize) -> Rows {
+        let mut r = Rows {
+            logit: [0.0; MAX],
+            q: [[0.0; MAX]; 4],
+            mean: [[0.0; MAX]; 3],
+            ls: [[0.0; MAX]; 3],
+        };
+        for l in 0..n {
+            let i = start + l;
+            r.logit[l] = s.opacity_logits[i];
+            for k in 0..4 {
+                r.q[k][l] = s.rotations[i][k];
+            }
+            for k in 0..3 {
+                r.mean[k][l] = s.means[i][k];
+                r.ls[k][l] = s.log_scales[i][k];
+            }
+        }
+        r
+    }
+}
+
+/// The intermediates of [`project::intermediates`](super::project::intermediates) in
+/// lanes (matrices `[row][column]`), plus `cut` = [`reach`](super::project::reach)`(o)`.
+pub(super) struct GeoLanes<V> {
+    pub opacity: V,
+    pub cut: V,
+    pub qnorm: V,
+    /// Unit quaternion `(w, x, y, z)`.
+    pub n: [V; 4],
+    pub r: [[V; 3]; 3],
+    pub sc: [V; 3],
+    pub m: [[V; 3]; 3],
+    pub p: [V; 3],
+    /// `W Σ`.
+    pub wsig: [[V; 3]; 3],
+    pub sigc: [[V; 3]; 3],
+    pub pc: [V; 3],
+    pub depth: V,
+    pub rx: V,
+    pub ry: V,
+    pub tx: V,
+    pub ty: V,
+    /// The Jacobian's non-zero entries `J00, J02, J11, J12`.
+    pub j: [V; 4],
+    pub cov: [V; 3],
+    pub det: V,
+    pub conic: [V; 3],
+    pub uv: [V; 2],
+    pub dir: [V; 3],
+    pub dir_len: V,
+    pub basis: [V; 16],
+}
+
 /// Gaussians `start..start + V::N` into `out` (`V::N` long).
 #[inline(always)]
 fn project_block<V: Lanes>(
@@ -88,24 +153,65 @@ fn project_block<V: Lanes>(
     out: &mut [Projection],
 ) {
     let n = V::N;
-    // Gather the block's parameters into rows (struct of arrays).
-    let (mut logit, mut q, mut mean, mut ls) = (
-        [0.0; MAX],
-        [[0.0; MAX]; 4],
-        [[0.0; MAX]; 3],
-        [[0.0; MAX]; 3],
-    );
-    for l in 0..n {
-        let i = start + l;
-        logit[l] = s.opacity_logits[i];
-        for k in 0..4 {
-            q[k][l] = s.rotations[i][k];
-        }
-        for k in 0..3 {
-            mean[k][l] = s.means[i][k];
-            ls[k][l] = s.log_scales[i][k];
-        }
+    let g = geo_lanes::<V>(&Rows::gather(s, start, n), cam, sh_degree);
+    let (opacity, cut, qnorm, det) = (g.opacity, g.cut, g.qnorm, g.det);
+    let (pc, cov, conic, uv, basis) = (g.pc, g.cov, g.conic, g.uv, g.basis);
+    // Back to rows, then culling, box and colour per Gaussian.
+    let (mut o, mut qn, mut dt, mut cu) = ([0.0; MAX], [0.0; MAX], [0.0; MAX], [0.0; MAX]);
+    opacity.store(&mut o[..]);
+    cut.store(&mut cu[..]);
+    qnorm.store(&mut qn[..]);
+    det.store(&mut dt[..]);
+    let mut rows = [[0.0; MAX]; 11];
+    for (k, v) in [
+        pc[0], pc[1], pc[2], cov[0], cov[1], cov[2], conic[0], conic[1], conic[2], uv[0], uv[1],
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        v.store(&mut rows[k][..]);
     }
+    let [pc, cov, conic, uv] = [[0usize, 1, 2], [3, 4, 5], [6, 7, 8], [9, 10, 10]];
+    let nc = sh::num_coeffs(sh_degree);
+    let mut b = [[0.0; MAX]; 16];
+    for k in 0..nc {
+        basis[k].store(&mut b[k][..]);
+    }
+    for (l, slot) in out.iter_mut().enumerate().take(n) {
+        let at = |k: usize| rows[k][l];
+        let cv = [at(cov[0]), at(cov[1]), at(cov[2])];
+        let uvl = [at(uv[0]), at(uv[1])];
+        let pcl = [at(pc[0]), at(pc[1]), at(pc[2])];
+        *slot = match screen_extent(o[l], cu[l], qn[l], pcl, dt[l], cv, uvl, cam) {
+            None => (0.0, None),
+            Some((bbox, cut, radius)) => {
+                let mut bl = [0.0; 16];
+                for k in 0..nc {
+                    bl[k] = b[k][l];
+                }
+                let mut color = sh_colour(s, start + l, &bl, sh_degree);
+                for c in &mut color {
+                    *c = c.max(0.0);
+                }
+                let splat = Splat2d {
+                    xy: uvl,
+                    conic: [at(conic[0]), at(conic[1]), at(conic[2])],
+                    opacity: o[l],
+                    color,
+                    depth: -pcl[2],
+                    bbox,
+                    cut,
+                };
+                (radius, Some(splat))
+            }
+        };
+    }
+}
+
+/// The arithmetic of the projection for one block of rows (Eq. 2).
+#[inline(always)]
+pub(super) fn geo_lanes<V: Lanes>(rows: &Rows, cam: &CamSetup, sh_degree: u32) -> GeoLanes<V> {
+    let Rows { logit, q, mean, ls } = rows;
     // No closures below: they would not inherit the caller's target features, and
     // every intrinsic in them would become a call.
     let sp = V::splat;
@@ -223,55 +329,31 @@ fn project_block<V: Lanes>(
     let len = dot3(dir, dir).sqrt().max(sp(1e-12));
     let basis = sh::basis_lanes([dir[0] / len, dir[1] / len, dir[2] / len], sh_degree);
 
-    // Back to rows, then culling, box and colour per Gaussian.
-    let (mut o, mut qn, mut dt, mut cu) = ([0.0; MAX], [0.0; MAX], [0.0; MAX], [0.0; MAX]);
-    opacity.store(&mut o[..]);
-    cut.store(&mut cu[..]);
-    qnorm.store(&mut qn[..]);
-    det.store(&mut dt[..]);
-    let mut rows = [[0.0; MAX]; 11];
-    for (k, v) in [
-        pc[0], pc[1], pc[2], cov[0], cov[1], cov[2], conic[0], conic[1], conic[2], uv[0], uv[1],
-    ]
-    .into_iter()
-    .enumerate()
-    {
-        v.store(&mut rows[k][..]);
-    }
-    let [pc, cov, conic, uv] = [[0usize, 1, 2], [3, 4, 5], [6, 7, 8], [9, 10, 10]];
-    let nc = sh::num_coeffs(sh_degree);
-    let mut b = [[0.0; MAX]; 16];
-    for k in 0..nc {
-        basis[k].store(&mut b[k][..]);
-    }
-    for (l, slot) in out.iter_mut().enumerate().take(n) {
-        let at = |k: usize| rows[k][l];
-        let cv = [at(cov[0]), at(cov[1]), at(cov[2])];
-        let uvl = [at(uv[0]), at(uv[1])];
-        let pcl = [at(pc[0]), at(pc[1]), at(pc[2])];
-        *slot = match screen_extent(o[l], cu[l], qn[l], pcl, dt[l], cv, uvl, cam) {
-            None => (0.0, None),
-            Some((bbox, cut, radius)) => {
-                let mut bl = [0.0; 16];
-                for k in 0..nc {
-                    bl[k] = b[k][l];
-                }
-                let mut color = sh_colour(s, start + l, &bl, sh_degree);
-                for c in &mut color {
-                    *c = c.max(0.0);
-                }
-                let splat = Splat2d {
-                    xy: uvl,
-                    conic: [at(conic[0]), at(conic[1]), at(conic[2])],
-                    opacity: o[l],
-                    color,
-                    depth: -pcl[2],
-                    bbox,
-                    cut,
-                };
-                (radius, Some(splat))
-            }
-        };
+    GeoLanes {
+        opacity,
+        cut,
+        qnorm,
+        n: [w, x, y, z],
+        r,
+        sc,
+        m,
+        p,
+        wsig: t,
+        sigc,
+        pc,
+        depth,
+        rx,
+        ry,
+        tx,
+        ty,
+        j: [j0x, j0z, j1y, j1z],
+        cov,
+        det,
+        conic,
+        uv,
+        dir,
+        dir_len: len,
+        basis,
     }
 }
 
@@ -282,4 +364,4 @@ fn dot3<V: Lanes>(a: [V; 3], b: [V; 3]) -> V {
 }
 
 #[cfg(test)]
-mod tests;
+pub(super) mod tests;

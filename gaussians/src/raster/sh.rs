@@ -156,6 +156,61 @@ pub(crate) fn basis_lanes<V: Lanes>(d: [V; 3], degree: u32) -> [V; 16] {
     b
 }
 
+/// [`basis_grad_f32`] in lanes.
+#[inline(always)]
+pub(crate) fn basis_grad_lanes<V: Lanes>(d: [V; 3], degree: u32, g: &[V; 16]) -> [V; 3] {
+    #[inline(always)]
+    fn c<V: Lanes>(v: f64) -> V {
+        V::splat(v as f32)
+    }
+    let [x, y, z] = d;
+    let zero = V::splat(0.0);
+    let (mut gx, mut gy, mut gz) = (zero, zero, zero);
+    if degree >= 1 {
+        gy = gy - c::<V>(C1) * g[1];
+        gz = gz + c::<V>(C1) * g[2];
+        gx = gx - c::<V>(C1) * g[3];
+    }
+    if degree >= 2 {
+        let (xx, yy, zz) = (x * x, y * y, z * z);
+        gx = gx + c::<V>(C2[0]) * y * g[4];
+        gy = gy + c::<V>(C2[0]) * x * g[4];
+        gy = gy + c::<V>(C2[1]) * z * g[5];
+        gz = gz + c::<V>(C2[1]) * y * g[5];
+        gx = gx - c::<V>(2.0 * C2[2]) * x * g[6];
+        gy = gy - c::<V>(2.0 * C2[2]) * y * g[6];
+        gz = gz + c::<V>(4.0 * C2[2]) * z * g[6];
+        gx = gx + c::<V>(C2[3]) * z * g[7];
+        gz = gz + c::<V>(C2[3]) * x * g[7];
+        gx = gx + c::<V>(2.0 * C2[4]) * x * g[8];
+        gy = gy - c::<V>(2.0 * C2[4]) * y * g[8];
+        if degree >= 3 {
+            let k = C3;
+            gx = gx + c::<V>(6.0 * k[0]) * x * y * g[9];
+            gy = gy + c::<V>(3.0 * k[0]) * (xx - yy) * g[9];
+            gx = gx + c::<V>(k[1]) * y * z * g[10];
+            gy = gy + c::<V>(k[1]) * x * z * g[10];
+            gz = gz + c::<V>(k[1]) * x * y * g[10];
+            gx = gx - c::<V>(2.0 * k[2]) * x * y * g[11];
+            gy = gy + c::<V>(k[2]) * (c::<V>(4.0) * zz - xx - c::<V>(3.0) * yy) * g[11];
+            gz = gz + c::<V>(8.0 * k[2]) * y * z * g[11];
+            gx = gx - c::<V>(6.0 * k[3]) * x * z * g[12];
+            gy = gy - c::<V>(6.0 * k[3]) * y * z * g[12];
+            gz = gz
+                + c::<V>(k[3]) * (c::<V>(6.0) * zz - c::<V>(3.0) * xx - c::<V>(3.0) * yy) * g[12];
+            gx = gx + c::<V>(k[4]) * (c::<V>(4.0) * zz - c::<V>(3.0) * xx - yy) * g[13];
+            gy = gy - c::<V>(2.0 * k[4]) * x * y * g[13];
+            gz = gz + c::<V>(8.0 * k[4]) * x * z * g[13];
+            gx = gx + c::<V>(2.0 * k[5]) * x * z * g[14];
+            gy = gy - c::<V>(2.0 * k[5]) * y * z * g[14];
+            gz = gz + c::<V>(k[5]) * (xx - yy) * g[14];
+            gx = gx + c::<V>(3.0 * k[6]) * (xx - yy) * g[15];
+            gy = gy - c::<V>(6.0 * k[6]) * x * y * g[15];
+        }
+    }
+    [gx, gy, gz]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

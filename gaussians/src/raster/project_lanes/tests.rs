@@ -7,9 +7,9 @@ use crate::splats::Gaussian;
 use glam::DVec3;
 use scene::{Camera, Intrinsics, Pose};
 
-struct Rng(u64);
+pub(crate) struct Rng(pub u64);
 impl Rng {
-    fn uf(&mut self, lo: f32, hi: f32) -> f32 {
+    pub fn uf(&mut self, lo: f32, hi: f32) -> f32 {
         self.0 = self
             .0
             .wrapping_mul(6_364_136_223_846_793_005)
@@ -20,7 +20,7 @@ impl Rng {
 
 /// Gaussians around the origin, some behind the camera, off the image, transparent,
 /// tiny or huge, and a few degenerate (zero quaternion, NaN mean).
-fn splats(n: usize, rng: &mut Rng) -> Splats {
+pub(crate) fn splats(n: usize, rng: &mut Rng) -> Splats {
     let mut s: Splats = (0..n)
         .map(|_| Gaussian {
             mean: std::array::from_fn(|_| rng.uf(-3.0, 3.0)),
@@ -38,7 +38,7 @@ fn splats(n: usize, rng: &mut Rng) -> Splats {
     s
 }
 
-fn camera() -> CamSetup {
+pub(crate) fn camera() -> CamSetup {
     CamSetup::new(&Camera {
         intrinsics: Intrinsics {
             width: 61,
