@@ -3,7 +3,7 @@
 //! order), then composite each tile front to back (DEGS Eq. 1) in parallel.
 
 use super::alpha::{T_MIN, eval_alpha};
-use super::project::{CamSetup, Geo, ScreenGrad};
+use super::project::{CamSetup, ScreenGrad};
 use super::project_lanes::{Projection, project_span};
 use super::rasterizer::RenderedImage;
 use super::simd::{self, F4, Lanes, Mask};
@@ -182,32 +182,6 @@ impl Tiles {
             ty * TILE,
             ((ty + 1) * TILE).min(height),
         ]
-    }
-}
-
-/// What the tile passes need of one projected Gaussian.
-#[derive(Clone, Copy)]
-pub(crate) struct Splat2d {
-    pub xy: [f32; 2],
-    pub conic: [f32; 3],
-    pub opacity: f32,
-    pub color: [f32; 3],
-    pub depth: f32,
-    pub bbox: [u32; 4],
-    pub cut: f32,
-}
-
-impl Splat2d {
-    pub fn of(g: &Geo) -> Self {
-        Splat2d {
-            xy: g.uv,
-            conic: g.conic,
-            opacity: g.opacity,
-            color: g.color,
-            depth: g.depth,
-            bbox: g.bbox,
-            cut: g.cut,
-        }
     }
 }
 

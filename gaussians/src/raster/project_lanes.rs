@@ -5,8 +5,7 @@
 //! bottom holds it to the one-at-a-time [`project`](super::project::project).
 
 use super::alpha::{ALPHA_MIN, LOW_PASS, SIGMA_CUTOFF};
-use super::forward::Splat2d;
-use super::project::{CamSetup, project, screen_extent, sh_colour};
+use super::project::{CamSetup, Geo, project, screen_extent, sh_colour};
 use super::sh;
 use super::simd::{self, F4, Lanes};
 use crate::splats::Splats;
@@ -14,6 +13,32 @@ use crate::splats::Splats;
 /// Widest lane count (AVX-512).
 pub(super) const MAX: usize = 16;
 pub(super) type Row = [f32; MAX];
+
+/// What the tile passes need of one projected Gaussian.
+#[derive(Clone, Copy)]
+pub(crate) struct Splat2d {
+    pub xy: [f32; 2],
+    pub conic: [f32; 3],
+    pub opacity: f32,
+    pub color: [f32; 3],
+    pub depth: f32,
+    pub bbox: [u32; 4],
+    pub cut: f32,
+}
+
+impl Splat2d {
+    pub fn of(g: &Geo) -> Self {
+        Splat2d {
+            xy: g.uv,
+            conic: g.conic,
+            opacity: g.opacity,
+            color: g.color,
+            depth: g.depth,
+            bbox: g.bbox,
+            cut: g.cut,
+        }
+    }
+}
 
 /// What the forward pass keeps of Gaussian `i`: its screen radius (0 = culled) and,
 /// when visible, what the tile kernels need.
