@@ -4,7 +4,7 @@
 //! Gaussians get zero gradients. The test beside it holds it to the one-at-a-time path.
 
 use super::project::{CamSetup, ScreenGrad, intermediates, project_backward};
-use super::project_lanes::{MAX, Row, Rows, geo_lanes};
+use super::project_lanes::{MAX, Row, Rows, geo_lanes, to_rows};
 use super::sh;
 use super::simd::{self, F4, Lanes, Mask};
 use crate::splats::Splats;
@@ -319,18 +319,19 @@ fn backward_block<V: Lanes>(
     .sqrt();
 
     // Back to rows (zero where culled), then to each Gaussian.
-    let mut rows = [[0.0f32; MAX]; 15];
-    let lanes = [
+    let mut lanes = [
         g_p[0], g_p[1], g_p[2], g_ls[0], g_ls[1], g_ls[2], g_rot[0], g_rot[1], g_rot[2], g_rot[3],
         g_logit, sgn, gc[0], gc[1], gc[2],
     ];
-    for k in 0..15 {
-        lanes[k].and(vis).store(&mut rows[k][..]);
+    for v in &mut lanes {
+        *v = v.and(vis);
     }
-    let mut basis = [[0.0f32; MAX]; 16];
-    for k in 0..nc {
-        g.basis[k].and(vis).store(&mut basis[k][..]);
+    let rows = to_rows(lanes);
+    let mut basis = g.basis;
+    for v in &mut basis {
+        *v = v.and(vis);
     }
+    let basis = to_rows(basis);
     for l in 0..n {
         let a = at + l;
         let v = |k: usize| rows[k][l];

@@ -179,51 +179,32 @@ fn project_block<V: Lanes>(
 ) {
     let n = V::N;
     let g = geo_lanes::<V>(&Rows::gather(s, start, n), cam, sh_degree);
-    let (opacity, cut, qnorm, det) = (g.opacity, g.cut, g.qnorm, g.det);
-    let (pc, cov, conic, uv, basis) = (g.pc, g.cov, g.conic, g.uv, g.basis);
     // Back to rows, then culling, box and colour per Gaussian.
-    let (mut o, mut qn, mut dt, mut cu) = ([0.0; MAX], [0.0; MAX], [0.0; MAX], [0.0; MAX]);
-    opacity.store(&mut o[..]);
-    cut.store(&mut cu[..]);
-    qnorm.store(&mut qn[..]);
-    det.store(&mut dt[..]);
-    let mut rows = [[0.0; MAX]; 11];
-    for (k, v) in [
-        pc[0], pc[1], pc[2], cov[0], cov[1], cov[2], conic[0], conic[1], conic[2], uv[0], uv[1],
-    ]
-    .into_iter()
-    .enumerate()
-    {
-        v.store(&mut rows[k][..]);
-    }
-    let [pc, cov, conic, uv] = [[0usize, 1, 2], [3, 4, 5], [6, 7, 8], [9, 10, 10]];
+    let [o, cut, qnorm, det, px, py, pz, c0, c1, c2, q0, q1, q2, u, v] = to_rows([
+        g.opacity, g.cut, g.qnorm, g.det, g.pc[0], g.pc[1], g.pc[2], g.cov[0], g.cov[1], g.cov[2],
+        g.conic[0], g.conic[1], g.conic[2], g.uv[0], g.uv[1],
+    ]);
+    let basis = to_rows(g.basis);
     let nc = sh::num_coeffs(sh_degree);
-    let mut b = [[0.0; MAX]; 16];
-    for k in 0..nc {
-        basis[k].store(&mut b[k][..]);
-    }
     for (l, slot) in out.iter_mut().enumerate().take(n) {
-        let at = |k: usize| rows[k][l];
-        let cv = [at(cov[0]), at(cov[1]), at(cov[2])];
-        let uvl = [at(uv[0]), at(uv[1])];
-        let pcl = [at(pc[0]), at(pc[1]), at(pc[2])];
-        *slot = match screen_extent(o[l], cu[l], qn[l], pcl, dt[l], cv, uvl, cam) {
+        let (pc, cov, uv) = ([px[l], py[l], pz[l]], [c0[l], c1[l], c2[l]], [u[l], v[l]]);
+        *slot = match screen_extent(o[l], cut[l], qnorm[l], pc, det[l], cov, uv, cam) {
             None => (0.0, None),
             Some((bbox, cut, radius)) => {
                 let mut bl = [0.0; 16];
                 for k in 0..nc {
-                    bl[k] = b[k][l];
+                    bl[k] = basis[k][l];
                 }
                 let mut color = sh_colour(s, start + l, &bl, sh_degree);
                 for c in &mut color {
                     *c = c.max(0.0);
                 }
                 let splat = Splat2d {
-                    xy: uvl,
-                    conic: [at(conic[0]), at(conic[1]), at(conic[2])],
+                    xy: uv,
+                    conic: [q0[l], q1[l], q2[l]],
                     opacity: o[l],
                     color,
-                    depth: -pcl[2],
+                    depth: -pc[2],
                     bbox,
                     cut,
                 };
@@ -231,6 +212,16 @@ fn project_block<V: Lanes>(
             }
         };
     }
+}
+
+/// Lane vectors back to rows: lane `l` of vector `k` at `[k][l]`.
+#[inline(always)]
+pub(super) fn to_rows<V: Lanes, const K: usize>(vs: [V; K]) -> [Row; K] {
+    let mut rows = [[0.0; MAX]; K];
+    for k in 0..K {
+        vs[k].store(&mut rows[k][..]);
+    }
+    rows
 }
 
 /// The arithmetic of the projection for one block of rows (Eq. 2).
