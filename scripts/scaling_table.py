@@ -1,12 +1,14 @@
 #!/usr/bin/env python3
 """Print the scaling table of `degs sweep examples/scaling/<axis>.toml` runs.
 
-Usage: scripts/scaling_table.py CACHE [CACHE ...]
+Usage: scripts/scaling_table.py [LABEL=]CACHE [[LABEL=]CACHE ...]
 
 Reads every CACHE/runs/*/run.json (one per experiment), and for each stage its wall
 time (built, so a cached stage shows what building it cost) and peak memory, with the
 scene's pixels, frames and events (the synth stage's report.json) and the warm-up's
-Gaussian count (its report.json). One markdown row per experiment.
+Gaussian count (its report.json). One markdown row per experiment and cache; with
+labels (e.g. `before=C1 after=C2`, the same sweeps run by two binaries) the rows of one
+experiment stand together, labelled.
 """
 import glob
 import json
@@ -25,33 +27,46 @@ def report(entry, cache):
     return {}
 
 
-def main(caches):
+def rows(cache):
+    """(experiment, cells) for every finished experiment of `cache`."""
+    out = []
+    for rj in sorted(glob.glob(os.path.join(cache, "runs", "*", "run.json"))):
+        with open(rj) as fh:
+            run = json.load(fh)
+        stages = {s["stage"]: s for s in run.get("stages", [])}
+        if "deform" not in stages:
+            continue
+        rep = {s: report(stages[s].get("entry") or "", cache) if s in stages else {}
+               for s in STAGES}
+        sy = rep["synth"]
+        cells = [
+            str(sy.get("width", 0) * sy.get("height", 0)),
+            str(sy.get("train_frames", "")),
+            str(sy.get("events", "")),
+            str(rep["gaussians"].get("gaussians", "")),
+        ]
+        cells += ["%.1f" % (stages.get(s, {}).get("built_wall_s") or 0) for s in STAGES]
+        cells.append(" / ".join(
+            str(round((stages.get(s, {}).get("peak_rss_kib") or 0) / 1024)) for s in STAGES))
+        out.append((run.get("experiment", "?"), cells))
+    return out
+
+
+def main(args):
+    labelled = [a.split("=", 1) if "=" in a else ("", a) for a in args]
+    tables = [(label, dict(rows(cache))) for label, cache in labelled]
+    names = []
+    for _, t in tables:
+        names += [n for n in t if n not in names]
     print("| experiment | pixels | train frames | events | Gaussians | "
           + " | ".join(f"{s} s" for s in STAGES)
           + " | peak MiB " + " / ".join(STAGES) + " |")
     print("|---" * (5 + len(STAGES) + 1) + "|")
-    for cache in caches:
-        for rj in sorted(glob.glob(os.path.join(cache, "runs", "*", "run.json"))):
-            with open(rj) as fh:
-                run = json.load(fh)
-            stages = {s["stage"]: s for s in run.get("stages", [])}
-            if "deform" not in stages:
-                continue
-            rep = {s: report(stages[s].get("entry") or "", cache) if s in stages else {}
-                   for s in STAGES}
-            sy = rep["synth"]
-            cells = [
-                run.get("experiment", "?"),
-                str(sy.get("width", 0) * sy.get("height", 0)),
-                str(sy.get("train_frames", "")),
-                str(sy.get("events", "")),
-                str(rep["gaussians"].get("gaussians", "")),
-            ]
-            cells += ["%.1f" % (stages.get(s, {}).get("built_wall_s") or 0) for s in STAGES]
-            cells.append(" / ".join(
-                str(round((stages.get(s, {}).get("peak_rss_kib") or 0) / 1024)) for s in STAGES))
-            print("| " + " | ".join(cells) + " |")
-
+    for name in names:
+        for label, t in tables:
+            if name in t:
+                head = f"{name} ({label})" if label else name
+                print("| " + " | ".join([head] + t[name]) + " |")
 
 if __name__ == "__main__":
     if len(sys.argv) < 2:
