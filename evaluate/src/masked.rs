@@ -6,7 +6,9 @@
 //! - the pixels a moving object covers in the ground truth (`gt/novel/object_NNNN.png`,
 //!   the objects that move by `synth.json` and [`synth::ObjectSpec::moves`]);
 //! - the co-visible pixels, those some train view saw (`gt/novel/covisible_NNNN.png`,
-//!   [`synth::covis`]; the masked PSNR of Gao et al., NeurIPS 2022).
+//!   [`synth::covis`]; the masked PSNR of Gao et al., NeurIPS 2022);
+//! - the co-visible pixels no moving object covers: the still scene from elsewhere, so
+//!   that a loss there is not taken for the objects' (or hidden by their gain).
 
 use anyhow::{Result, bail};
 use scene::evaluation::{MaskFigures, Trajectory};
@@ -211,6 +213,15 @@ pub(crate) fn split_masks(
             let s = pair.scores(mask, cap)?;
             (f.covisible_pixels, f.covisible_psnr, f.covisible_ssim) =
                 (Some(count(mask)), s.map(|s| s.0), s.map(|s| s.1));
+        }
+        if let (Some(cov), Some(mov)) = (&covisible, &moving) {
+            let still: Vec<bool> = cov.iter().zip(mov).map(|(&c, &m)| c && !m).collect();
+            let s = pair.scores(&still, cap)?;
+            (
+                f.covisible_still_pixels,
+                f.covisible_still_psnr,
+                f.covisible_still_ssim,
+            ) = (Some(count(&still)), s.map(|s| s.0), s.map(|s| s.1));
         }
         out.push(f);
     }

@@ -175,6 +175,12 @@ pub fn evaluate(inputs: Inputs, s: &EvalSettings, dir: &Path) -> Result<Metrics>
         ),
         novel_moving_lpips_mean: mean_of(novel_frames.iter().map(|f| f.masks.moving_lpips)),
         novel_covisible_lpips_mean: mean_of(novel_frames.iter().map(|f| f.masks.covisible_lpips)),
+        novel_covisible_still_psnr_mean: mean_of(
+            novel_frames.iter().map(|f| f.masks.covisible_still_psnr),
+        ),
+        novel_covisible_still_ssim_mean: mean_of(
+            novel_frames.iter().map(|f| f.masks.covisible_still_ssim),
+        ),
         novel_ssim_mean: mean(&novel_frames, &|f| f.ssim),
         novel_frames,
         baselines,

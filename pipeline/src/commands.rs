@@ -216,6 +216,12 @@ pub fn execute(command: Command) -> Result<()> {
                     ssim(m.novel_covisible_ssim_mean, m.novel_covisible_lpips_mean)
                 );
             }
+            if let Some(p) = m.novel_covisible_still_psnr_mean {
+                println!(
+                    "  novel views, of those the still ones (no moving object): PSNR {p:.2} dB{}",
+                    ssim(m.novel_covisible_still_ssim_mean, None)
+                );
+            }
             if let Some(t) = &m.trajectory {
                 let all = t.seen_motion_mean.map_or(String::new(), |v| {
                     format!(" (all of them move {v:.3} on average)")

@@ -53,6 +53,12 @@ pub struct Metrics {
     pub novel_moving_lpips_mean: Option<f64>,
     #[serde(default)]
     pub novel_covisible_lpips_mean: Option<f64>,
+    /// PSNR and SSIM over the co-visible pixels no moving object covers: the still
+    /// scene seen from elsewhere, apart from the objects ([`MaskFigures`]).
+    #[serde(default)]
+    pub novel_covisible_still_psnr_mean: Option<f64>,
+    #[serde(default)]
+    pub novel_covisible_still_ssim_mean: Option<f64>,
     /// The render stage's Gaussians against the moving objects' true 3D motion.
     #[serde(default)]
     pub trajectory: Option<Trajectory>,
@@ -144,6 +150,14 @@ pub struct MaskFigures {
     pub covisible_psnr: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub covisible_ssim: Option<f64>,
+    /// The co-visible pixels no moving object covers (both masks needed), and the PSNR
+    /// and SSIM over them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub covisible_still_pixels: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub covisible_still_psnr: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub covisible_still_ssim: Option<f64>,
     /// LPIPS over each mask: the mean of the spatial LPIPS map there
     /// (`lpips::Scored::masked_mean`); None without LPIPS or the mask.
     #[serde(default, skip_serializing_if = "Option::is_none")]

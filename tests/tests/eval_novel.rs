@@ -45,6 +45,23 @@ fn eval_says_when_test_frames_are_train_frames() {
     );
 }
 
+/// The pixel whose value the test changes in novel view `k`: frame 0 the first moving
+/// one, the others the first still one some train view saw.
+fn changed_pixel(scene_dir: &std::path::Path, k: usize, ids: &[u16], moving: &[u16]) -> usize {
+    let (_, _, seen) =
+        synth::gt::read_object_png(scene_dir.join(format!("gt/novel/covisible_{k:04}.png")))
+            .unwrap();
+    (0..ids.len())
+        .position(|p| {
+            if k == 0 {
+                moving.contains(&ids[p])
+            } else {
+                !moving.contains(&ids[p]) && seen[p] != 0
+            }
+        })
+        .unwrap()
+}
+
 /// The novel views' PSNR on moving-object pixels: a render off by `δ` levels in one value
 /// of one moving pixel scores `10·log10(255²·3M/δ²)` over the M moving pixels; one off at
 /// a still pixel leaves it at the cap.
@@ -66,11 +83,9 @@ fn eval_scores_the_novel_views_on_the_pixels_of_moving_objects() {
             synth::gt::read_object_png(scene_dir.join(format!("gt/novel/object_{k:04}.png")))
                 .unwrap();
         let m = ids.iter().filter(|o| moving.contains(o)).count();
-        // Frame 0: one value of a moving pixel; frame 1: one of a still pixel.
-        let pick = ids
-            .iter()
-            .position(|o| moving.contains(o) == (k == 0))
-            .unwrap();
+        // Frame 0: one value of a moving pixel; frame 1: one of a still pixel some train
+        // view saw.
+        let pick = changed_pixel(&scene_dir, k, &ids, &moving);
         let p = g.join(format!("renders/novel/{k:04}.png"));
         let mut img = read_image(&p).unwrap();
         let v = (img.data[pick * 3] * 255.0).round();
@@ -109,6 +124,7 @@ fn eval_scores_the_novel_views_on_the_pixels_of_moving_objects() {
     assert!((mean - (want[0].1 + want[1].1) / 2.0).abs() < 1e-9);
     // The co-visible pixels: the same closed form where the changed value lies among
     // them, the cap where it does not.
+    let mut closed_forms = 0;
     for (k, frame) in novel.iter().enumerate() {
         let (_, _, seen) =
             synth::gt::read_object_png(scene_dir.join(format!("gt/novel/covisible_{k:04}.png")))
@@ -116,10 +132,7 @@ fn eval_scores_the_novel_views_on_the_pixels_of_moving_objects() {
         let (_, _, ids) =
             synth::gt::read_object_png(scene_dir.join(format!("gt/novel/object_{k:04}.png")))
                 .unwrap();
-        let pick = ids
-            .iter()
-            .position(|o| moving.contains(o) == (k == 0))
-            .unwrap();
+        let pick = changed_pixel(&scene_dir, k, &ids, &moving);
         let mc = seen.iter().filter(|&&v| v != 0).count();
         assert!(mc > 0 && mc <= seen.len());
         assert_eq!(frame["covisible_pixels"].as_u64(), Some(mc as u64));
@@ -130,10 +143,29 @@ fn eval_scores_the_novel_views_on_the_pixels_of_moving_objects() {
         };
         let got = frame["covisible_psnr"].as_f64().unwrap();
         assert!((got - want).abs() < 1e-9, "frame {k}: {got} vs {want}");
+        // Of those, the still ones (no moving object in the ground truth): the changed
+        // value counts only where it is still and seen.
+        let still = |p: usize| seen[p] != 0 && !moving.contains(&ids[p]);
+        let ms = (0..seen.len()).filter(|&p| still(p)).count();
+        assert!(ms > 0 && ms < mc, "frame {k}: {ms} of {mc}");
+        assert_eq!(frame["covisible_still_pixels"].as_u64(), Some(ms as u64));
+        let want = if still(pick) {
+            closed_forms += 1;
+            10.0 * (255.0f64.powi(2) * 3.0 * ms as f64 / (delta as f64).powi(2)).log10()
+        } else {
+            100.0
+        };
+        let got = frame["covisible_still_psnr"].as_f64().unwrap();
+        assert!((got - want).abs() < 1e-9, "frame {k}: {got} vs {want}");
     }
+    assert_eq!(
+        closed_forms, 1,
+        "frame 1's changed still pixel is one a train view saw"
+    );
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(out.contains("pixels of moving objects"), "{out}");
     assert!(out.contains("pixels some train view saw"), "{out}");
+    assert!(out.contains("of those the still ones"), "{out}");
     // The sheet: per row the ground truth, the render and |difference| ×4, each panel
     // enlarged to at least 128 px; frame 0's changed value shows in its difference.
     let sheet = read_image(run.join("novel_sheet.png")).unwrap();
