@@ -34,8 +34,8 @@ def rows(cache):
         with open(rj) as fh:
             run = json.load(fh)
         stages = {s["stage"]: s for s in run.get("stages", [])}
-        if "deform" not in stages:
-            continue
+        if stages.get("deform", {}).get("action") not in ("cached", "ran", "rebuilt"):
+            continue  # the joint training has no output (failed, pending, ...): no row
         rep = {s: report(stages[s].get("entry") or "", cache) if s in stages else {}
                for s in STAGES}
         sy = rep["synth"]
@@ -67,6 +67,7 @@ def main(args):
             if name in t:
                 head = f"{name} ({label})" if label else name
                 print("| " + " | ".join([head] + t[name]) + " |")
+
 
 if __name__ == "__main__":
     if len(sys.argv) < 2:

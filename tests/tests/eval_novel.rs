@@ -45,12 +45,10 @@ fn eval_says_when_test_frames_are_train_frames() {
     );
 }
 
-/// The pixel whose value the test changes in novel view `k`: frame 0 the first moving
-/// one, the others the first still one some train view saw.
-fn changed_pixel(scene_dir: &std::path::Path, k: usize, ids: &[u16], moving: &[u16]) -> usize {
-    let (_, _, seen) =
-        synth::gt::read_object_png(scene_dir.join(format!("gt/novel/covisible_{k:04}.png")))
-            .unwrap();
+/// The pixel whose value the test changes in novel view `k` (object ids `ids`, `seen`
+/// its co-visibility mask): frame 0 the first moving one, the others the first still one
+/// some train view saw.
+fn changed_pixel(k: usize, ids: &[u16], seen: &[u16], moving: &[u16]) -> usize {
     (0..ids.len())
         .position(|p| {
             if k == 0 {
@@ -83,9 +81,12 @@ fn eval_scores_the_novel_views_on_the_pixels_of_moving_objects() {
             synth::gt::read_object_png(scene_dir.join(format!("gt/novel/object_{k:04}.png")))
                 .unwrap();
         let m = ids.iter().filter(|o| moving.contains(o)).count();
+        let (_, _, seen) =
+            synth::gt::read_object_png(scene_dir.join(format!("gt/novel/covisible_{k:04}.png")))
+                .unwrap();
         // Frame 0: one value of a moving pixel; frame 1: one of a still pixel some train
         // view saw.
-        let pick = changed_pixel(&scene_dir, k, &ids, &moving);
+        let pick = changed_pixel(k, &ids, &seen, &moving);
         let p = g.join(format!("renders/novel/{k:04}.png"));
         let mut img = read_image(&p).unwrap();
         let v = (img.data[pick * 3] * 255.0).round();
@@ -132,7 +133,7 @@ fn eval_scores_the_novel_views_on_the_pixels_of_moving_objects() {
         let (_, _, ids) =
             synth::gt::read_object_png(scene_dir.join(format!("gt/novel/object_{k:04}.png")))
                 .unwrap();
-        let pick = changed_pixel(&scene_dir, k, &ids, &moving);
+        let pick = changed_pixel(k, &ids, &seen, &moving);
         let mc = seen.iter().filter(|&&v| v != 0).count();
         assert!(mc > 0 && mc <= seen.len());
         assert_eq!(frame["covisible_pixels"].as_u64(), Some(mc as u64));
