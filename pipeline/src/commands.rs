@@ -285,7 +285,18 @@ fn run(experiment: &Path, place: &Where, opts: &RunOptions, quiet: bool) -> Resu
                 .map(|p| p.display().to_string())
                 .unwrap_or_default()
         )),
-        None => Ok(()),
+        None => match record
+            .stages
+            .iter()
+            .find(|s| matches!(s.action, Action::Unavailable | Action::Skipped))
+        {
+            Some(s) => Err(anyhow!(
+                "stage {} could not run: {}",
+                s.stage,
+                s.error.as_deref().unwrap_or("?")
+            )),
+            None => Ok(()),
+        },
     }
 }
 

@@ -418,11 +418,19 @@ fn independent_stages_run_in_parallel_with_j2() {
 }
 
 #[test]
-fn missing_stage_binaries_are_reported_not_fatal() {
+fn missing_stage_binaries_build_the_rest_and_fail_the_run() {
     let f = Fixture::new();
     fs::remove_file(f.stages.join("assoc")).unwrap();
     let exp = f.experiment("a", "");
-    f.run_ok(&exp, &[]);
+    // the stages that can run do, and the run still fails: its result is not there
+    let out = f.degs(&["run", exp.to_str().unwrap()]);
+    assert!(!out.status.success(), "a run without deform exited 0");
+    let err = stderr(&out);
+    assert!(
+        err.contains("stage assoc could not run") && err.contains("not built yet"),
+        "{err}"
+    );
+    assert_eq!(f.record("a")["status"], "incomplete");
     assert_eq!(
         f.actions("a"),
         pairs(&[

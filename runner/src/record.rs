@@ -82,7 +82,7 @@ pub struct RunRecord {
     pub experiment: String,
     pub experiment_file: Option<PathBuf>,
     pub cache_root: PathBuf,
-    /// "running", "ok" or "failed".
+    /// "running", "ok", "failed" or "incomplete" (a requested stage could not run).
     pub status: String,
     pub started_unix: u64,
     pub wall_s: f64,

@@ -163,7 +163,20 @@ pub(crate) fn run_nodes(
         }
     }
     let failed = record.stages.iter().any(|s| s.action == Action::Failed);
-    record.status = if failed { "failed" } else { "ok" }.into();
+    // A requested stage that could not run (no binary, or an input that could not be
+    // made) leaves the run without its result: never "ok".
+    let incomplete = record
+        .stages
+        .iter()
+        .any(|s| matches!(s.action, Action::Unavailable | Action::Skipped));
+    record.status = if failed {
+        "failed"
+    } else if incomplete {
+        "incomplete"
+    } else {
+        "ok"
+    }
+    .into();
     save(&mut record)?;
     Ok(record)
 }
