@@ -13,7 +13,12 @@
 //! `v` and `a` are uncorrelated over it and μ is the centre there.
 //!
 //! Empty [`Splats::motion`] = no trajectories (every centre still, the field alone moves
-//! it). The gradient: `∂μ(t)/∂v = τ·I`, `∂μ(t)/∂a = τ²·I`.
+//! it). The gradient: `∂μ(t)/∂v = τ·I`, `∂μ(t)/∂a = τ²·I`, for the Gaussians that have a
+//! trajectory ([`has_trajectory`]) only: a row of zeros is a still Gaussian and gets no
+//! gradient, so it stays still. Were it trained, every still Gaussian could follow its
+//! own path to fit each train view apart (as the field could): the still background
+//! bends along the recorded path and misregisters from elsewhere (BENCHMARKS.md, "Where
+//! the co-visible novel pixels are lost").
 
 use crate::field::{self, Mlp};
 use crate::splats::Splats;
@@ -39,6 +44,12 @@ pub fn shift(s: &Splats, i: usize, t: f32) -> [f32; 3] {
     };
     let (p1, p2) = powers(t);
     std::array::from_fn(|k| m[k] * p1 + m[3 + k] * p2)
+}
+
+/// Whether a trajectory row `[v; a]` is one: all zeros is a still Gaussian (the init
+/// gives trajectories to the moving tracks' Gaussians only; densification copies rows).
+pub fn has_trajectory(m: &[f32; WIDTH]) -> bool {
+    m.iter().any(|&c| c != 0.0)
 }
 
 /// Move the Gaussians of `out` (those of `s` as rendered, one per Gaussian) along the
@@ -74,7 +85,8 @@ pub fn alive(life: [f32; 2], t: f32) -> bool {
 }
 
 /// Gradient of the trajectory parameters from the rendered centres' gradient `g_means`
-/// at time `t`, into `out` (resized; emptied when `s` has no motion).
+/// at time `t`, into `out` (resized; emptied when `s` has no motion; zero rows for the
+/// still Gaussians, [`has_trajectory`]).
 pub fn backward(s: &Splats, t: f32, g_means: &[[f32; 3]], out: &mut Vec<[f32; WIDTH]>) {
     out.clear();
     if s.motion.is_empty() {
@@ -82,10 +94,11 @@ pub fn backward(s: &Splats, t: f32, g_means: &[[f32; 3]], out: &mut Vec<[f32; WI
     }
     let (p1, p2) = powers(t);
     out.resize(g_means.len(), [0.0; WIDTH]);
-    (out.as_mut_slice(), g_means)
+    (out.as_mut_slice(), g_means, &s.motion)
         .into_par_iter()
         .with_min_len(4096)
-        .for_each(|(o, g)| *o = std::array::from_fn(|k| g[k % 3] * if k < 3 { p1 } else { p2 }));
+        .filter(|(_, _, m)| has_trajectory(m))
+        .for_each(|(o, g, _)| *o = std::array::from_fn(|k| g[k % 3] * if k < 3 { p1 } else { p2 }));
 }
 
 /// `s` deformed to time `t` by `field` and its trajectories (`s` itself without
@@ -122,12 +135,14 @@ pub(crate) fn with_trajectories<'s>(
 }
 
 /// Add a gradient `d` on the rendered centres at time `t` to the canonical centres' and
-/// the trajectories' gradients in `g` only (not through the field).
+/// the trajectories' gradients in `g` only (not through the field; a still Gaussian's
+/// trajectory gets none, [`has_trajectory`]).
 pub fn add_centre_gradient(s: &Splats, t: f32, d: &[[f32; 3]], g: &mut crate::splats::SplatGrads) {
     let (p1, p2) = powers(t);
     for (i, d) in d.iter().enumerate() {
         (0..3).for_each(|k| g.means[i][k] += d[k]);
-        if let Some(m) = g.motion.get_mut(i).filter(|_| !s.motion.is_empty()) {
+        let moves = s.motion.get(i).is_some_and(has_trajectory);
+        if let Some(m) = g.motion.get_mut(i).filter(|_| moves) {
             (0..3).for_each(|k| {
                 m[k] += d[k] * p1;
                 m[3 + k] += d[k] * p2;

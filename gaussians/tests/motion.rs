@@ -91,7 +91,8 @@ fn a_gaussian_renders_only_within_its_life_and_as_before_there() {
 /// Without a field, the trainer's gradient of the trajectories matches central
 /// differences in f64 of `Σ w·rgb` rendered by the f64 reference rasterizer at the
 /// centres `μ + v·τ + a·τ²` (the scene of `raster_grad.rs`: Gaussians a few pixels to
-/// ten wide, so the loss is smooth), every parameter of every Gaussian.
+/// ten wide, so the loss is smooth), every parameter of every Gaussian with a trajectory;
+/// the still ones (rows of zeros) get none.
 #[test]
 fn the_trainer_gradient_of_the_trajectories_matches_finite_differences() {
     use gaussians::raster::reference::{self, Gaussians64};
@@ -100,6 +101,11 @@ fn the_trainer_gradient_of_the_trajectories_matches_finite_differences() {
     let mut splats = raster_common::random_splats(&mut rng, raster_common::SMOOTH);
     let n = splats.len();
     splats.motion = random_motion(n, 4, 0.3);
+    // Every third Gaussian still: a row of zeros, whose trajectory gets no gradient.
+    let still = |i: usize| i % 3 == 1;
+    (0..n)
+        .filter(|&i| still(i))
+        .for_each(|i| splats.motion[i] = [0.0; 6]);
     let s = TrainSettings {
         deform: false,
         ..TrainSettings::default()
@@ -128,6 +134,13 @@ fn the_trainer_gradient_of_the_trajectories_matches_finite_differences() {
     let (mut num, mut den) = (0.0f64, 0.0f64);
     const EPS: f64 = 1e-6;
     for i in 0..n {
+        if still(i) {
+            assert_eq!(
+                g.splats.motion[i], [0.0; 6],
+                "a still Gaussian {i} got a trajectory"
+            );
+            continue;
+        }
         for k in 0..6 {
             let mut m = base.clone();
             m[i][k] += EPS;

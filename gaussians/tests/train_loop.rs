@@ -478,7 +478,9 @@ fn a_tracked_gaussian_is_pulled_to_its_track_in_every_view() {
     for into_field in [true, false] {
         let mut s = random_splats(1, DVec3::ZERO, 0.1, 3);
         s.opacity_logits[0] = -12.0;
-        s.motion = vec![[0.0; 6]];
+        // A tracked Gaussian starts on its lifted trajectory, never a row of zeros (a
+        // still Gaussian's, which no gradient moves).
+        s.motion = vec![[1e-3, 0.0, 0.0, 0.0, 0.0, 0.0]];
         s.track = vec![0];
         let mut settings = TrainSettings {
             iterations: 600,
@@ -520,5 +522,69 @@ fn a_tracked_gaussian_is_pulled_to_its_track_in_every_view() {
             "{:?}",
             t.tracks.last
         );
+    }
+}
+
+/// A still Gaussian (its trajectory a row of zeros) stays still under training, even
+/// where the frames show it moving and a trajectory would fit them better; a moving one
+/// beside it has its trajectory trained. Were the still rows trained, every Gaussian of
+/// the background could follow its own path to fit each train view apart.
+#[test]
+fn training_moves_only_the_gaussians_with_a_trajectory() {
+    let cams = cameras(6);
+    let mut gt = truth();
+    // In the frames every Gaussian moves.
+    gt.motion = (0..gt.len())
+        .map(|i| [0.3, -0.1 * i as f32, 0.2, 0.1, 0.0, -0.1])
+        .collect();
+    let views: Vec<View> = (cams.iter().enumerate())
+        .map(|(k, c)| {
+            let t = k as f32 / 5.0;
+            let mut at = gt.clone();
+            gaussians::motion::advance(&gt, t, &mut at);
+            at.motion.clear();
+            View {
+                camera: *c,
+                time: t,
+                rgb: Additive.render(&at, c, 0, [0.0; 3]).0.rgb,
+            }
+        })
+        .collect();
+    let mut init = gt.clone();
+    let n = init.len();
+    for (i, m) in init.motion.iter_mut().enumerate() {
+        // even: still; odd: a trajectory off the truth
+        *m = if i % 2 == 0 {
+            [0.0; 6]
+        } else {
+            m.map(|v| 0.5 * v)
+        };
+    }
+    let mut settings = TrainSettings {
+        iterations: 200,
+        deform: false,
+        size: gaussians::train::sizing::SizeSettings {
+            tolerance_db: 0.0,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    settings.densify.until_iter = 0;
+    let mut t = Trainer::new(settings, init.clone(), camera_extent(&cams));
+    for _ in 0..200 {
+        t.step(&Additive, &views);
+    }
+    assert_eq!(t.splats.len(), n);
+    for i in 0..n {
+        let (got, was) = (t.splats.motion[i], init.motion[i]);
+        if i % 2 == 0 {
+            assert_eq!(got, [0.0; 6], "still Gaussian {i} was given a trajectory");
+        } else {
+            let moved: f32 = (0..6).map(|k| (got[k] - was[k]).abs()).sum();
+            assert!(
+                moved > 1e-3,
+                "Gaussian {i}'s trajectory was not trained: {got:?}"
+            );
+        }
     }
 }
