@@ -114,8 +114,6 @@ pub struct TrainSettings {
     pub scene_extent: f32,
     pub background: [f32; 3],
     pub seed: u64,
-    /// Evaluate PSNR on a test view every this many iterations (0 = never).
-    pub eval_interval: u32,
 }
 
 impl Default for TrainSettings {
@@ -154,7 +152,6 @@ impl Default for TrainSettings {
             scene_extent: 0.0,
             background: [0.0; 3],
             seed: 0,
-            eval_interval: 0,
         }
     }
 }
