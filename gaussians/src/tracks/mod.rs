@@ -22,128 +22,16 @@ pub mod lift;
 pub mod lk;
 pub mod loss;
 pub mod prior_loss;
+mod settings;
 
 use crate::splats::Splats;
 use glam::{DVec2, DVec3, Vec2};
 pub(crate) use init::{Image, add_moving};
+pub use settings::{AUTO_STRIDE_PIXELS, TrackSettings};
 use lift::{Lifted, Observation};
 use rayon::prelude::*;
 use scene::Camera;
 
-/// Settings of the tracks init (`[tracks]` in `settings.toml`).
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct TrackSettings {
-    /// Half-size of the Lucas–Kanade window, pixels (window `2r + 1`, at most 16).
-    pub radius: u32,
-    /// Pyramid levels (1 = no pyramid).
-    pub levels: u32,
-    /// Smallest eigenvalue of the window's structure tensor per pixel for a trackable
-    /// window (grey levels² per pixel²).
-    pub min_texture: f32,
-    /// A link is kept when tracking it back lands within this many pixels.
-    pub forward_backward: f32,
-    /// A track is a still point when its rays meet within this RMS reprojection error.
-    pub still_pixels: f64,
-    /// A moving track is kept when its trajectory fits within this RMS error.
-    pub moving_pixels: f64,
-    /// Penalty on a trajectory's acceleration, relative to the angular residuals.
-    pub ridge: f64,
-    /// Weight of the track term `L_track` in the warm-up ([`loss`]): each moving track's
-    /// Gaussian is pulled to where its track saw it in every train frame (0 = the tracks
-    /// only start the trajectories).
-    pub weight: f64,
-    /// Residual (pixels) above which `L_track` grows linearly (Huber): a track that
-    /// drifted pulls no harder than this.
-    pub huber_px: f64,
-    /// `L_track`'s gradient also trains the deformation field (else only the tracked
-    /// Gaussians' own centres and trajectories).
-    pub into_field: bool,
-    /// With a depth prior (`scene::depth_prior`): the relative depth error that costs as
-    /// much as one pixel of reprojection error when a moving track is lifted, and a third
-    /// of the disagreement with the prior that makes a track whose rays meet moving
-    /// after all (its 2D motion mimicked a still point's parallax). 0 ignores the prior.
-    pub depth_sigma: f64,
-    /// The acceleration penalty in place of `ridge` for a track with prior depths (with
-    /// them its distance is known: the penalty only keeps the fit well conditioned).
-    pub depth_ridge: f64,
-    /// With a depth prior, drop the initial (stereo) Gaussians that lie off the prior's
-    /// surface in most frames they project into ([`drop_where_prior_disagrees`]). Off:
-    /// measured +0.3 dB on `rigid`'s co-visible novel pixels but −0.4 on its moving ones,
-    /// and −1.3 dB co-visible on `fast` at 4 fps, where the alignment is poorer.
-    pub prior_prunes: bool,
-    /// With a depth prior, the weight of `L_depth` in the warm-up and the joint training
-    /// ([`prior_loss`]): each train view's rendered depth pulled to its aligned prior
-    /// (0 = off). 0.1 measured best of 0.01, 0.1, 0.3 and 1 (BENCHMARKS.md, "The prior in
-    /// the loss").
-    pub depth_weight: f64,
-    /// Event images per frame interval that the tracks are chained through ([`events`]):
-    /// the events carry a window across motion too large for Lucas–Kanade between two
-    /// frames. 0 = the frames alone (also when the scene has no events).
-    pub event_steps: u32,
-    /// Frames per window of the moving tracks' trajectories ([`init`]): a moving track
-    /// that one quadratic holds over most of the recording (seen in ¾ of the frames)
-    /// keeps one Gaussian from the middle frame; the others come from each window's
-    /// middle frame, fitted over the window (and a frame either side) and shown only
-    /// within it. 0 = one trajectory over the recording for every track, from the
-    /// middle frame. 3 measured (BENCHMARKS.md, "Tracks through event images, and
-    /// windows of trajectories").
-    pub window: u32,
-}
-
-impl Default for TrackSettings {
-    fn default() -> Self {
-        TrackSettings {
-            radius: 3,
-            levels: 3,
-            min_texture: 1e-5,
-            forward_backward: 1.0,
-            still_pixels: 1.0,
-            moving_pixels: 2.0,
-            ridge: 10.0,
-            weight: 0.0,
-            huber_px: 1.0,
-            into_field: true,
-            depth_sigma: 0.05,
-            depth_ridge: 1e-3,
-            prior_prunes: false,
-            depth_weight: 0.1,
-            event_steps: 2,
-            window: 3,
-        }
-    }
-}
-
-impl TrackSettings {
-    pub fn validate(&self) -> Result<(), String> {
-        if !(1..=16).contains(&self.radius) || !(1..=8).contains(&self.levels) {
-            return Err("tracks: radius must be 1..=16 and levels 1..=8".into());
-        }
-        if self.event_steps > 32 {
-            return Err("tracks: event_steps must be at most 32".into());
-        }
-        let positive = [
-            self.forward_backward as f64,
-            self.still_pixels,
-            self.moving_pixels,
-        ];
-        if positive.iter().any(|v| !(v.is_finite() && *v > 0.0))
-            || !(self.ridge >= 0.0 && self.min_texture >= 0.0)
-            || !(self.weight.is_finite() && self.weight >= 0.0)
-            || !(self.huber_px.is_finite() && self.huber_px > 0.0)
-            || !(self.depth_sigma.is_finite() && self.depth_sigma >= 0.0)
-            || !(self.depth_ridge.is_finite() && self.depth_ridge >= 0.0)
-            || !(self.depth_weight.is_finite() && self.depth_weight >= 0.0)
-        {
-            return Err(
-                "tracks: thresholds and huber_px must be positive, ridge, min_texture, \
-                 weight, depth_sigma, depth_ridge and depth_weight finite and ≥ 0"
-                    .into(),
-            );
-        }
-        Ok(())
-    }
-}
 
 /// How much nearer (relative) another point within a pixel may be before a stereo point
 /// counts as hidden when the priors are aligned ([`depth::visible_points`]).

@@ -266,7 +266,7 @@ pub(crate) fn initial_splats(
                 Init::Auto | Init::Tracks => scene::depth_prior::load(&scene.root, &scene.train)?,
                 _ => None,
             };
-            let (splats, surface) = match settings.init.resolve(priors.is_some()) {
+            let (splats, surface) = match settings.init.resolve() {
                 Init::Auto | Init::Stereo => {
                     stereo_splats(views, n, near, far, &settings.stereo, settings.seed)
                 }
@@ -292,10 +292,13 @@ pub(crate) fn initial_splats(
                             srgb: scene.train.frames_srgb(),
                             steps: settings.tracks.event_steps as usize,
                         });
+                    let k = &cams[0].intrinsics;
+                    let stride = (settings.tracks)
+                        .stride_for(k.width as usize, k.height as usize);
                     let (table, aligned) = crate::tracks::add_moving(
                         &mut s,
                         &images,
-                        1,
+                        stride,
                         &settings.tracks,
                         priors.as_ref(),
                         source.as_ref(),
@@ -320,11 +323,10 @@ pub(crate) fn initial_splats(
 /// its tracks through event images (`tracks.event_steps` > 0), on a scene with events.
 /// The stage hashes the events into its record's inputs by this same answer.
 pub(crate) fn reads_events(settings: &TrainSettings, scene: &Scene, ply: Option<&Path>) -> bool {
-    let priors = scene::depth_prior::exists(&scene.root);
     ply.is_none()
         && settings.tracks.event_steps > 0
         && scene.train.events.is_some()
-        && settings.init.resolve(priors) == Init::Tracks
+        && settings.init.resolve() == Init::Tracks
 }
 
 /// The scene's events when [`reads_events`] says the init reads them.

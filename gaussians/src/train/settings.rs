@@ -12,8 +12,10 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum Init {
-    /// `tracks` when the scene has depth priors (`depth/depth.json`,
-    /// `scene::depth_prior`), else `stereo`.
+    /// `tracks`: on a scene without moving objects it is the stereo init. (Until the
+    /// twelfth session `stereo` where the scene has no depth priors: the tracks cost the
+    /// still background seen from elsewhere, a bug since fixed, `motion::has_trajectory`;
+    /// BENCHMARKS.md, "Still Gaussians stay still".)
     #[default]
     Auto,
     /// Plane-sweep stereo over the train frames, plus a few random frustum points.
@@ -29,11 +31,10 @@ pub enum Init {
 }
 
 impl Init {
-    /// What `auto` means for a scene with or without depth priors; the others as they are.
-    pub fn resolve(self, has_depth_priors: bool) -> Init {
+    /// What `auto` means; the others as they are.
+    pub fn resolve(self) -> Init {
         match self {
-            Init::Auto if has_depth_priors => Init::Tracks,
-            Init::Auto => Init::Stereo,
+            Init::Auto => Init::Tracks,
             i => i,
         }
     }

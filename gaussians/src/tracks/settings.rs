@@ -1,0 +1,160 @@
+//! The tracks init's settings (`[tracks]` in the warm-up's `settings.toml`).
+
+/// Settings of the tracks init (`[tracks]` in `settings.toml`).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TrackSettings {
+    /// Half-size of the Lucas–Kanade window, pixels (window `2r + 1`, at most 16).
+    pub radius: u32,
+    /// Pyramid levels (1 = no pyramid).
+    pub levels: u32,
+    /// Smallest eigenvalue of the window's structure tensor per pixel for a trackable
+    /// window (grey levels² per pixel²).
+    pub min_texture: f32,
+    /// A link is kept when tracking it back lands within this many pixels.
+    pub forward_backward: f32,
+    /// A track is a still point when its rays meet within this RMS reprojection error.
+    pub still_pixels: f64,
+    /// A moving track is kept when its trajectory fits within this RMS error.
+    pub moving_pixels: f64,
+    /// Penalty on a trajectory's acceleration, relative to the angular residuals.
+    pub ridge: f64,
+    /// Weight of the track term `L_track` in the warm-up ([`super::loss`]): each moving track's
+    /// Gaussian is pulled to where its track saw it in every train frame (0 = the tracks
+    /// only start the trajectories).
+    pub weight: f64,
+    /// Residual (pixels) above which `L_track` grows linearly (Huber): a track that
+    /// drifted pulls no harder than this.
+    pub huber_px: f64,
+    /// `L_track`'s gradient also trains the deformation field (else only the tracked
+    /// Gaussians' own centres and trajectories).
+    pub into_field: bool,
+    /// With a depth prior (`scene::depth_prior`): the relative depth error that costs as
+    /// much as one pixel of reprojection error when a moving track is lifted, and a third
+    /// of the disagreement with the prior that makes a track whose rays meet moving
+    /// after all (its 2D motion mimicked a still point's parallax). 0 ignores the prior.
+    pub depth_sigma: f64,
+    /// The acceleration penalty in place of `ridge` for a track with prior depths (with
+    /// them its distance is known: the penalty only keeps the fit well conditioned).
+    pub depth_ridge: f64,
+    /// With a depth prior, drop the initial (stereo) Gaussians that lie off the prior's
+    /// surface in most frames they project into ([`super::drop_where_prior_disagrees`]). Off:
+    /// measured +0.3 dB on `rigid`'s co-visible novel pixels but −0.4 on its moving ones,
+    /// and −1.3 dB co-visible on `fast` at 4 fps, where the alignment is poorer.
+    pub prior_prunes: bool,
+    /// With a depth prior, the weight of `L_depth` in the warm-up and the joint training
+    /// ([`super::prior_loss`]): each train view's rendered depth pulled to its aligned prior
+    /// (0 = off). 0.1 measured best of 0.01, 0.1, 0.3 and 1 (BENCHMARKS.md, "The prior in
+    /// the loss").
+    pub depth_weight: f64,
+    /// Event images per frame interval that the tracks are chained through ([`super::events`]):
+    /// the events carry a window across motion too large for Lucas–Kanade between two
+    /// frames. 0 = the frames alone (also when the scene has no events).
+    pub event_steps: u32,
+    /// Frames per window of the moving tracks' trajectories ([`super::init`]): a moving track
+    /// that one quadratic holds over most of the recording (seen in ¾ of the frames)
+    /// keeps one Gaussian from the middle frame; the others come from each window's
+    /// middle frame, fitted over the window (and a frame either side) and shown only
+    /// within it. 0 = one trajectory over the recording for every track, from the
+    /// middle frame. 3 measured (BENCHMARKS.md, "Tracks through event images, and
+    /// windows of trajectories").
+    pub window: u32,
+    /// Every this many pixels (in x and in y) a track starts in a reference frame, and
+    /// a moving track's Gaussian covers that footprint. 0 = automatic: 1 up to
+    /// [`AUTO_STRIDE_PIXELS`] pixels a frame, else the smallest stride that starts at most
+    /// that many ([`TrackSettings::stride_for`]): the init's cost grows with the tracks.
+    pub stride: u32,
+}
+
+/// Tracked pixels per reference frame the automatic stride keeps to (128²).
+pub const AUTO_STRIDE_PIXELS: usize = 128 * 128;
+
+impl Default for TrackSettings {
+    fn default() -> Self {
+        TrackSettings {
+            radius: 3,
+            levels: 3,
+            min_texture: 1e-5,
+            forward_backward: 1.0,
+            still_pixels: 1.0,
+            moving_pixels: 2.0,
+            ridge: 10.0,
+            weight: 0.0,
+            huber_px: 1.0,
+            into_field: true,
+            depth_sigma: 0.05,
+            depth_ridge: 1e-3,
+            prior_prunes: false,
+            depth_weight: 0.1,
+            event_steps: 2,
+            window: 3,
+            stride: 0,
+        }
+    }
+}
+
+impl TrackSettings {
+    /// The stride for frames of `width × height` pixels: `stride`, or when 0 the
+    /// smallest `s` with `⌈w/s⌉·⌈h/s⌉ ≤` [`AUTO_STRIDE_PIXELS`].
+    pub fn stride_for(&self, width: usize, height: usize) -> usize {
+        if self.stride > 0 {
+            return self.stride as usize;
+        }
+        (1..)
+            .find(|&s| width.div_ceil(s) * height.div_ceil(s) <= AUTO_STRIDE_PIXELS)
+            .unwrap_or(1)
+    }
+
+    pub fn validate(&self) -> Result<(), String> {
+        if self.stride > 64 {
+            return Err(format!("tracks: stride = {} must be at most 64", self.stride));
+        }
+        if !(1..=16).contains(&self.radius) || !(1..=8).contains(&self.levels) {
+            return Err("tracks: radius must be 1..=16 and levels 1..=8".into());
+        }
+        if self.event_steps > 32 {
+            return Err("tracks: event_steps must be at most 32".into());
+        }
+        let positive = [
+            self.forward_backward as f64,
+            self.still_pixels,
+            self.moving_pixels,
+        ];
+        if positive.iter().any(|v| !(v.is_finite() && *v > 0.0))
+            || !(self.ridge >= 0.0 && self.min_texture >= 0.0)
+            || !(self.weight.is_finite() && self.weight >= 0.0)
+            || !(self.huber_px.is_finite() && self.huber_px > 0.0)
+            || !(self.depth_sigma.is_finite() && self.depth_sigma >= 0.0)
+            || !(self.depth_ridge.is_finite() && self.depth_ridge >= 0.0)
+            || !(self.depth_weight.is_finite() && self.depth_weight >= 0.0)
+        {
+            return Err(
+                "tracks: thresholds and huber_px must be positive, ridge, min_texture, \
+                 weight, depth_sigma, depth_ridge and depth_weight finite and ≥ 0"
+                    .into(),
+            );
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::TrackSettings;
+
+    #[test]
+    fn the_automatic_stride_keeps_to_128_squared_tracked_pixels() {
+        let st = TrackSettings::default();
+        // ⌈w/s⌉·⌈h/s⌉ ≤ 16 384, worked by hand
+        assert_eq!(st.stride_for(96, 96), 1);
+        assert_eq!(st.stride_for(128, 128), 1);
+        assert_eq!(st.stride_for(129, 128), 2); // 129·128 > 16 384, 65·64 fits
+        assert_eq!(st.stride_for(346, 260), 3); // 173·130 = 22 490; 116·87 = 10 092
+        assert_eq!(st.stride_for(640, 480), 5); // 160·120 = 19 200; 128·96 = 12 288
+        let fixed = TrackSettings {
+            stride: 2,
+            ..Default::default()
+        };
+        assert_eq!(fixed.stride_for(640, 480), 2);
+    }
+}
