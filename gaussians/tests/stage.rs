@@ -198,8 +198,20 @@ fn trains_writes_every_output_and_reloads_identically() {
     assert_eq!(info["gaussian_cap_before_sizing"], 3200);
     assert_eq!(report["sizing"]["gaussian_cap_before"], 3200);
 
-    // the saved model renders exactly as the trained one
-    let back = Model::load(&out).unwrap();
+    // the saved model renders exactly as the trained one; the tracks' ids (the moving
+    // tracks' Gaussians of the default init) lie beside it, in the file the joint
+    // training reads with their table
+    let mut back = Model::load(&out).unwrap();
+    let tracks = out.join(gaussians::tracks::file::TRACKS_FILE);
+    if o.model.splats.track.is_empty() {
+        assert!(!tracks.exists());
+    } else {
+        let (ids, table) =
+            gaussians::tracks::file::read(&tracks, o.model.splats.len(), sc.train.frames.len())
+                .unwrap();
+        assert!(!table.is_empty());
+        back.splats.track = ids;
+    }
     assert_eq!(back.splats, o.model.splats);
     for f in &sc.test.frames {
         let cam = sc.camera(f);

@@ -146,6 +146,13 @@ pub(crate) fn add_moving(
         }
         table.push(l.seen);
     }
+    if table.is_empty() {
+        // No moving track: the stereo init as it is, without columns of still rows
+        // (a model with none saves none, `Splats::track`).
+        s.motion.clear();
+        s.track.clear();
+        s.life.clear();
+    }
     (table, aligned)
 }
 

@@ -27,11 +27,10 @@ mod settings;
 use crate::splats::Splats;
 use glam::{DVec2, DVec3, Vec2};
 pub(crate) use init::{Image, add_moving};
-pub use settings::{AUTO_STRIDE_PIXELS, TrackSettings};
 use lift::{Lifted, Observation};
 use rayon::prelude::*;
 use scene::Camera;
-
+pub use settings::{AUTO_STRIDE_PIXELS, TrackSettings};
 
 /// How much nearer (relative) another point within a pixel may be before a stereo point
 /// counts as hidden when the priors are aligned ([`depth::visible_points`]).

@@ -107,7 +107,10 @@ impl TrackSettings {
 
     pub fn validate(&self) -> Result<(), String> {
         if self.stride > 64 {
-            return Err(format!("tracks: stride = {} must be at most 64", self.stride));
+            return Err(format!(
+                "tracks: stride = {} must be at most 64",
+                self.stride
+            ));
         }
         if !(1..=16).contains(&self.radius) || !(1..=8).contains(&self.levels) {
             return Err("tracks: radius must be 1..=16 and levels 1..=8".into());

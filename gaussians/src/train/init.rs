@@ -293,8 +293,7 @@ pub(crate) fn initial_splats(
                             steps: settings.tracks.event_steps as usize,
                         });
                     let k = &cams[0].intrinsics;
-                    let stride = (settings.tracks)
-                        .stride_for(k.width as usize, k.height as usize);
+                    let stride = (settings.tracks).stride_for(k.width as usize, k.height as usize);
                     let (table, aligned) = crate::tracks::add_moving(
                         &mut s,
                         &images,
