@@ -17,8 +17,8 @@
 //! trajectory ([`has_trajectory`]) only: a row of zeros is a still Gaussian and gets no
 //! gradient, so it stays still. Were it trained, every still Gaussian could follow its
 //! own path to fit each train view apart (as the field could): the still background
-//! bends along the recorded path and misregisters from elsewhere (BENCHMARKS.md, "Where
-//! the co-visible novel pixels are lost").
+//! bends along the recorded path and misregisters from elsewhere (BENCHMARKS.md, "Still
+//! Gaussians stay still").
 
 use crate::field::{self, Mlp};
 use crate::splats::Splats;

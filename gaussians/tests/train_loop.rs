@@ -458,6 +458,21 @@ fn the_split_bakes_a_constant_shift_and_keeps_moving_gaussians_dynamic() {
 /// `L_track` through the training step: a faint Gaussian (no photometric pull to speak
 /// of) whose track moves across the views ends up where its track saw it in each view,
 /// its trajectory learning the motion its canonical centre cannot give.
+/// `iterations` steps on the Gaussians as given: no field, no densification, no sizing.
+fn fixed_gaussians(iterations: u32) -> TrainSettings {
+    let mut s = TrainSettings {
+        iterations,
+        deform: false,
+        size: gaussians::train::sizing::SizeSettings {
+            tolerance_db: 0.0,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    s.densify.until_iter = 0;
+    s
+}
+
 #[test]
 fn a_tracked_gaussian_is_pulled_to_its_track_in_every_view() {
     use gaussians::tracks::loss::TrackTerm;
@@ -483,17 +498,10 @@ fn a_tracked_gaussian_is_pulled_to_its_track_in_every_view() {
         s.motion = vec![[1e-3, 0.0, 0.0, 0.0, 0.0, 0.0]];
         s.track = vec![0];
         let mut settings = TrainSettings {
-            iterations: 600,
-            deform: false,
-            size: gaussians::train::sizing::SizeSettings {
-                tolerance_db: 0.0,
-                ..Default::default()
-            },
             position_lr_init: 0.01,
             position_lr_final: 0.001,
-            ..Default::default()
+            ..fixed_gaussians(600)
         };
-        settings.densify.until_iter = 0;
         settings.tracks.weight = 1.0;
         settings.tracks.into_field = into_field;
         let error = |t: &Trainer| {
@@ -560,17 +568,7 @@ fn training_moves_only_the_gaussians_with_a_trajectory() {
             m.map(|v| 0.5 * v)
         };
     }
-    let mut settings = TrainSettings {
-        iterations: 200,
-        deform: false,
-        size: gaussians::train::sizing::SizeSettings {
-            tolerance_db: 0.0,
-            ..Default::default()
-        },
-        ..Default::default()
-    };
-    settings.densify.until_iter = 0;
-    let mut t = Trainer::new(settings, init.clone(), camera_extent(&cams));
+    let mut t = Trainer::new(fixed_gaussians(200), init.clone(), camera_extent(&cams));
     for _ in 0..200 {
         t.step(&Additive, &views);
     }

@@ -285,11 +285,7 @@ fn run(experiment: &Path, place: &Where, opts: &RunOptions, quiet: bool) -> Resu
                 .map(|p| p.display().to_string())
                 .unwrap_or_default()
         )),
-        None => match record
-            .stages
-            .iter()
-            .find(|s| matches!(s.action, Action::Unavailable | Action::Skipped))
-        {
+        None => match record.stages.iter().find(|s| s.action.could_not_run()) {
             Some(s) => Err(anyhow!(
                 "stage {} could not run: {}",
                 s.stage,

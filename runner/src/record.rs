@@ -40,6 +40,10 @@ impl Action {
             Action::Pending => "pending",
         }
     }
+    /// A requested stage that could not run: no binary, or an input not made.
+    pub fn could_not_run(self) -> bool {
+        matches!(self, Action::Unavailable | Action::Skipped)
+    }
     /// The stage's output exists after the run.
     pub fn has_output(self) -> bool {
         matches!(self, Action::Cached | Action::Ran | Action::Rebuilt)

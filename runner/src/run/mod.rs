@@ -165,10 +165,7 @@ pub(crate) fn run_nodes(
     let failed = record.stages.iter().any(|s| s.action == Action::Failed);
     // A requested stage that could not run (no binary, or an input that could not be
     // made) leaves the run without its result: never "ok".
-    let incomplete = record
-        .stages
-        .iter()
-        .any(|s| matches!(s.action, Action::Unavailable | Action::Skipped));
+    let incomplete = record.stages.iter().any(|s| s.action.could_not_run());
     record.status = if failed {
         "failed"
     } else if incomplete {
