@@ -187,7 +187,7 @@ fn each_contrast_mode_runs_through_the_trainer() {
 
 /// The trainer's rebinding (on the deformed Gaussians it holds) and the `assoc` stage on
 /// the model the joint training saved (its field moved by the training) bind the same
-/// events to the same Gaussians.
+/// events to the same Gaussians; and none to a Gaussian outside its life.
 #[test]
 fn rebinding_agrees_with_the_assoc_stage_on_the_deformed_model() {
     use deform::inputs::Inputs;
@@ -247,6 +247,50 @@ fn rebinding_agrees_with_the_assoc_stage_on_the_deformed_model() {
         bound += b.bound();
     }
     assert!(bound > 0, "nothing bound: the comparison is empty");
+
+    // Lives (`Splats::life`): every other Gaussian exists from the recording's middle
+    // on. The rebinding binds no event to one outside its life (it is not drawn then),
+    // where, alive, some of them were bound at those frames above.
+    let n = tr.inner.splats.len();
+    let late = |g: usize| g.is_multiple_of(2);
+    let was_bound: Vec<Vec<bool>> = (tr.bindings.iter())
+        .map(|b| (0..n).map(|g| !b.of(g).0.is_empty()).collect())
+        .collect();
+    tr.inner.splats.motion = vec![[0.0; 6]; n];
+    tr.inner.splats.life = (0..n)
+        .map(|g| {
+            if late(g) {
+                [0.5, f32::MAX]
+            } else {
+                gaussians::splats::ALWAYS
+            }
+        })
+        .collect();
+    tr.rebind(&gaussians::TileRasterizer, &d);
+    let (mut dead_before, mut alive_after) = (0, 0);
+    for (i, (b, was)) in tr.bindings.iter().zip(&was_bound).enumerate() {
+        let t = d.views[i].time;
+        for g in (0..n).filter(|&g| late(g)) {
+            let now = !b.of(g).0.is_empty();
+            if t < 0.5 {
+                assert!(
+                    !now,
+                    "frame {i} (t = {t}): Gaussian {g} bound outside its life"
+                );
+                dead_before += usize::from(was[g]);
+            } else {
+                alive_after += usize::from(now);
+            }
+        }
+    }
+    assert!(
+        dead_before > 0,
+        "no Gaussian outside its life was bound when alive"
+    );
+    assert!(
+        alive_after > 0,
+        "the Gaussians within their lives bind nothing"
+    );
 }
 
 fn copy_dir(from: &std::path::Path, to: &std::path::Path) {
