@@ -1,0 +1,59 @@
+//! Rebinding during the joint training (§3.3): events bound anew to the Gaussians as
+//! they are now, by the `assoc` library with the settings' association parameters.
+
+use super::JointTrainer;
+use crate::inputs::Inputs;
+use gaussians::{Rasterizer, TileRasterizer};
+use std::time::Instant;
+
+impl JointTrainer {
+    /// Bind events to the current Gaussians at every train frame (§3.3, the `assoc`
+    /// library with the settings' association parameters).
+    pub fn rebind(&mut self, r: &TileRasterizer, d: &Inputs) {
+        let clock = Instant::now();
+        let s = &self.settings.assoc;
+        let mut out = Vec::with_capacity(d.views.len());
+        for (i, v) in d.views.iter().enumerate() {
+            let (splats, _) = self.inner.deformed(v.time);
+            let (image, _) = r.render(
+                &splats,
+                &v.camera,
+                self.inner.sh_degree(),
+                self.inner.settings.background,
+            );
+            let depth = image.normalised_depth();
+            let alpha: Vec<f32> = depth.iter().map(|&z| f32::from(z > 0.0)).collect();
+            let t0 = d.times[i];
+            let window = d.events.window(t0 - s.delta_t, (t0 + s.delta_t).next_up());
+            // Events at hot pixels or in bursts are not bound (their indices mapped back).
+            let kept = d.rate_outliers.kept_events(&window);
+            let events = kept.as_ref().map_or(window, |(k, _)| k.as_slice());
+            // A Gaussian outside its life (`Splats::life`) is not drawn then: no events
+            // bind to it, as in the `assoc` stage (its extrapolated trajectory would take
+            // the events of whatever it passes over).
+            let life = &self.inner.splats.life;
+            let alive: Vec<usize> = (0..splats.len())
+                .filter(|&g| {
+                    life.get(g)
+                        .is_none_or(|l| gaussians::motion::alive(*l, v.time))
+                })
+                .collect();
+            let centres: Vec<[f32; 3]> = alive.iter().map(|&g| splats.means[g]).collect();
+            let b = assoc::associate_frame(&v.camera, &depth, &alpha, &events, &centres, t0, s)
+                .map(|(mut b, _)| {
+                    if let Some((_, index)) = &kept {
+                        b.events.iter_mut().for_each(|e| *e = index[*e as usize]);
+                    }
+                    b.spread(&alive, splats.len())
+                })
+                .unwrap_or_else(|_| assoc::Bindings {
+                    offsets: vec![0; splats.len() + 1],
+                    ..Default::default()
+                });
+            out.push(b);
+        }
+        self.bindings = out;
+        self.rebinds += 1;
+        self.timings.rebind += clock.elapsed().as_secs_f64();
+    }
+}
