@@ -133,3 +133,27 @@ pub fn associate_frame(
     };
     Ok((bindings, stats))
 }
+
+/// [`associate_frame`] over the Gaussians alive at normalised time `t` only (`life`:
+/// one `[from, to)` per Gaussian, empty = all alive, `Splats::life`): a Gaussian outside
+/// its life is not drawn then, so no event binds to it (its extrapolated trajectory
+/// would take the events of whatever it passes over). The bindings cover every centre,
+/// the others with empty ranges.
+#[allow(clippy::too_many_arguments)]
+pub fn associate_alive(
+    camera: &Camera,
+    depth: &[f32],
+    alpha: &[f32],
+    window: &EventSlice<'_>,
+    centres: &[[f32; 3]],
+    life: &[[f32; 2]],
+    (t, t0): (f32, f64),
+    settings: &AssocSettings,
+) -> Result<(Bindings, FrameStats), FrameError> {
+    let alive: Vec<usize> = (0..centres.len())
+        .filter(|&g| life.get(g).is_none_or(|l| gaussians::motion::alive(*l, t)))
+        .collect();
+    let some: Vec<[f32; 3]> = alive.iter().map(|&g| centres[g]).collect();
+    let (b, stats) = associate_frame(camera, depth, alpha, window, &some, t0, settings)?;
+    Ok((b.spread(&alive, centres.len()), stats))
+}

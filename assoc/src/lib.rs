@@ -14,6 +14,6 @@ pub mod unproject;
 
 pub use bind::{Bindings, bind_nearest, footprint_radii};
 pub use file::{FrameBindings, read_assoc, read_assoc_for, write_assoc};
-pub use frame::{FrameError, FrameStats, associate_frame};
+pub use frame::{FrameError, FrameStats, associate_alive, associate_frame};
 pub use settings::AssocSettings;
 pub use unproject::{LiftedEvents, lift_events};

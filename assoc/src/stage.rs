@@ -12,7 +12,7 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use crate::frame::{FrameStats, associate_frame};
+use crate::frame::{FrameStats, associate_alive};
 use crate::{AssocSettings, Bindings, FrameBindings, write_assoc};
 use gaussians::model::Model;
 use scene::atomic::{AtomicDir, OutputRule, write_json_atomic};
@@ -103,16 +103,17 @@ pub fn run(
         let t = frame.time as f32;
         let splats = model.at(t);
         // A Gaussian outside its life (`Splats::life`) is not drawn then: no events bind.
-        let life = &model.splats.life;
-        let alive: Vec<usize> = (0..splats.len())
-            .filter(|&g| life.get(g).is_none_or(|l| gaussians::motion::alive(*l, t)))
-            .collect();
-        let centres: Vec<[f32; 3]> = alive.iter().map(|&g| splats.means[g]).collect();
-        let (bindings, s) = associate_frame(
-            &camera, &depth, &alpha, &window, &centres, t0, settings,
+        let (bindings, s) = associate_alive(
+            &camera,
+            &depth,
+            &alpha,
+            &window,
+            &splats.means,
+            &model.splats.life,
+            (t, t0),
+            settings,
         )
         .map_err(|e| Error::invalid(&events_file, format!("frame {i} (t0 = {t0} s): {e}")))?;
-        let bindings = bindings.spread(&alive, splats.len());
         phases.start("preview");
         let image = read_image(scene.image_path(frame))?;
         let preview = preview_image(&image, &bindings, &window);

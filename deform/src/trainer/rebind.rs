@@ -28,28 +28,27 @@ impl JointTrainer {
             // Events at hot pixels or in bursts are not bound (their indices mapped back).
             let kept = d.rate_outliers.kept_events(&window);
             let events = kept.as_ref().map_or(window, |(k, _)| k.as_slice());
-            // A Gaussian outside its life (`Splats::life`) is not drawn then: no events
-            // bind to it, as in the `assoc` stage (its extrapolated trajectory would take
-            // the events of whatever it passes over).
             let life = &self.inner.splats.life;
-            let alive: Vec<usize> = (0..splats.len())
-                .filter(|&g| {
-                    life.get(g)
-                        .is_none_or(|l| gaussians::motion::alive(*l, v.time))
-                })
-                .collect();
-            let centres: Vec<[f32; 3]> = alive.iter().map(|&g| splats.means[g]).collect();
-            let b = assoc::associate_frame(&v.camera, &depth, &alpha, &events, &centres, t0, s)
-                .map(|(mut b, _)| {
-                    if let Some((_, index)) = &kept {
-                        b.events.iter_mut().for_each(|e| *e = index[*e as usize]);
-                    }
-                    b.spread(&alive, splats.len())
-                })
-                .unwrap_or_else(|_| assoc::Bindings {
-                    offsets: vec![0; splats.len() + 1],
-                    ..Default::default()
-                });
+            let b = assoc::associate_alive(
+                &v.camera,
+                &depth,
+                &alpha,
+                &events,
+                &splats.means,
+                life,
+                (v.time, t0),
+                s,
+            )
+            .map(|(mut b, _)| {
+                if let Some((_, index)) = &kept {
+                    b.events.iter_mut().for_each(|e| *e = index[*e as usize]);
+                }
+                b
+            })
+            .unwrap_or_else(|_| assoc::Bindings {
+                offsets: vec![0; splats.len() + 1],
+                ..Default::default()
+            });
             out.push(b);
         }
         self.bindings = out;
