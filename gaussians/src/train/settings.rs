@@ -64,7 +64,9 @@ pub struct TrainSettings {
     pub dynamic_only: bool,
     /// Static/dynamic split: Gaussians the field moves by at most this many pixels in
     /// the train views over the whole recording are flagged static (they keep their
-    /// canonical parameters) and `dynamic_only` is switched on (0 = no split).
+    /// canonical parameters) and `dynamic_only` is switched on (0 = no split). 1 px by
+    /// default: sub-pixel motion is the field fitting each train view on its own, which
+    /// unpins the camera at the times between them (DESIGN.md, "Static/dynamic split").
     pub static_tolerance_px: f32,
     /// When the split is made: this fraction of the way through the field phase.
     pub static_split_at: f32,
@@ -126,7 +128,7 @@ impl Default for TrainSettings {
             coarse_min_pixels: 65_536,
             deform: true,
             dynamic_only: false,
-            static_tolerance_px: 0.0,
+            static_tolerance_px: 1.0,
             static_split_at: 0.75,
             field: FieldSettings::default(),
             rigidity: RigiditySettings::default(),
