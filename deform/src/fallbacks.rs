@@ -66,6 +66,9 @@ pub struct Fallbacks {
     pub bindings_dropped_disagreeing: u64,
     /// … because they are at a hot pixel or in a burst bin.
     pub bindings_dropped_rate_outliers: u64,
+    /// Rebindings of a train frame that found no Gaussian alive there (every one outside
+    /// its life): that frame's `L_motion` had no bindings until the next rebinding.
+    pub rebind_frames_unbound: u64,
     /// Hot pixels: masked out of every pseudo image, their events out of `L_motion`.
     pub hot_pixels: usize,
     /// Events at the hot pixels.

@@ -291,6 +291,26 @@ fn rebinding_agrees_with_the_assoc_stage_on_the_deformed_model() {
         alive_after > 0,
         "the Gaussians within their lives bind nothing"
     );
+    assert_eq!(tr.fallbacks.rebind_frames_unbound, 0);
+
+    // Every Gaussian born at the middle: the frames before it have nothing to bind, and
+    // the report counts each of them (once per rebinding) instead of hiding it.
+    tr.inner.splats.life = vec![[0.5, f32::MAX]; n];
+    tr.rebind(&gaussians::TileRasterizer, &d);
+    let early = d.views.iter().filter(|v| v.time < 0.5).count();
+    assert!(
+        early > 0 && early < d.views.len(),
+        "{early} frames before the middle"
+    );
+    assert_eq!(tr.fallbacks.rebind_frames_unbound, early as u64);
+    for (i, b) in tr
+        .bindings
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| d.views[*i].time < 0.5)
+    {
+        assert_eq!(b.bound(), 0, "frame {i}: bound with no Gaussian alive");
+    }
 }
 
 fn copy_dir(from: &std::path::Path, to: &std::path::Path) {

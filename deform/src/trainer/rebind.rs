@@ -45,9 +45,18 @@ impl JointTrainer {
                 }
                 b
             })
-            .unwrap_or_else(|_| assoc::Bindings {
-                offsets: vec![0; splats.len() + 1],
-                ..Default::default()
+            .unwrap_or_else(|e| match e {
+                // Every Gaussian outside its life at this frame: nothing to bind, counted.
+                assoc::FrameError::NoGaussians => {
+                    self.fallbacks.rebind_frames_unbound += 1;
+                    assoc::Bindings {
+                        offsets: vec![0; splats.len() + 1],
+                        ..Default::default()
+                    }
+                }
+                // The trainer renders at the camera's size with validated settings and
+                // events checked against the sensor when read: a bug, not a recording's.
+                e => panic!("rebinding train frame {i} (t0 = {t0} s): {e}"),
             });
             out.push(b);
         }
