@@ -208,6 +208,9 @@ pub(crate) fn split_masks(
             if let Some(d) = depth {
                 f.moving_depth_error = depth_error(&d, &gt_depth, mask)?;
             }
+            let still: Vec<bool> = mask.iter().map(|m| !m).collect();
+            (f.still_pixels, f.still_psnr) =
+                (Some(count(&still)), pair.scores(&still, cap)?.map(|s| s.0));
         }
         if let Some(mask) = &covisible {
             let s = pair.scores(mask, cap)?;

@@ -114,6 +114,7 @@ pub fn evaluate(inputs: Inputs, s: &EvalSettings, dir: &Path) -> Result<Metrics>
             let m = split_masks(inputs.scene, "test", pairs, None, cap)?;
             if let Some(score) = baseline_score(b, name) {
                 score.moving_psnr_mean = mean_of(m.iter().map(|f| f.moving_psnr));
+                score.still_psnr_mean = mean_of(m.iter().map(|f| f.still_psnr));
             }
         }
     }
@@ -126,18 +127,21 @@ pub fn evaluate(inputs: Inputs, s: &EvalSettings, dir: &Path) -> Result<Metrics>
             Ok((net, mut scores)) => {
                 let base_scores = scores.split_off(2);
                 let novel_scores = scores.pop().unwrap_or_default();
-                for (f, d) in frames.iter_mut().zip(scores.concat()) {
-                    (f.lpips, f.masks.moving_lpips) = (Some(d.0), d.1);
+                for (f, d) in frames.iter_mut().zip(scores.into_iter().flatten()) {
+                    (f.lpips, f.masks.moving_lpips) = (Some(d.whole), d.moving);
+                    f.masks.still_lpips = d.still;
                 }
                 for (f, d) in novel_frames.iter_mut().zip(novel_scores) {
-                    f.lpips = Some(d.0);
-                    (f.masks.moving_lpips, f.masks.covisible_lpips) = (d.1, d.2);
+                    f.lpips = Some(d.whole);
+                    (f.masks.moving_lpips, f.masks.covisible_lpips) = (d.moving, d.covisible);
+                    f.masks.still_lpips = d.still;
                 }
                 if let Some(b) = baselines.as_mut() {
                     for ((name, _), sc) in base_pairs.iter().zip(base_scores) {
                         if let Some(score) = baseline_score(b, name) {
-                            score.lpips_mean = mean_all(sc.iter().map(|d| Some(d.0)));
-                            score.moving_lpips_mean = mean_of(sc.iter().map(|d| d.1));
+                            score.lpips_mean = mean_all(sc.iter().map(|d| Some(d.whole)));
+                            score.moving_lpips_mean = mean_of(sc.iter().map(|d| d.moving));
+                            score.still_lpips_mean = mean_of(sc.iter().map(|d| d.still));
                         }
                     }
                 }
@@ -159,6 +163,8 @@ pub fn evaluate(inputs: Inputs, s: &EvalSettings, dir: &Path) -> Result<Metrics>
         novel_lpips_mean: lpips_mean(&novel_frames),
         moving_psnr_mean: mean_of(frames.iter().map(|f| f.masks.moving_psnr)),
         moving_lpips_mean: mean_of(frames.iter().map(|f| f.masks.moving_lpips)),
+        still_psnr_mean: mean_of(frames.iter().map(|f| f.masks.still_psnr)),
+        still_lpips_mean: mean_of(frames.iter().map(|f| f.masks.still_lpips)),
         test_sheet,
         lpips_net,
         lpips_note,
@@ -225,11 +231,18 @@ fn baseline_score<'a>(b: &'a mut BaselineFigures, name: &str) -> Option<&'a mut 
     }
 }
 
-/// LPIPS of each `(split, pairs)` set, per pair its distance and its mean over the
-/// view's moving-object and co-visible masks (`gt/SPLIT/…`; None where the scene lacks
-/// them); `Ok(Err(why))` when LPIPS cannot be had. `Err` only for a mask that cannot be
-/// read.
-type Lpipsed = Vec<Vec<(f64, Option<f64>, Option<f64>)>>;
+/// One pair's LPIPS: the whole image's, and the map's mean over the view's moving-object,
+/// co-visible and still (no moving object) pixels (None where the scene lacks the mask).
+struct PairLpips {
+    whole: f64,
+    moving: Option<f64>,
+    covisible: Option<f64>,
+    still: Option<f64>,
+}
+
+/// LPIPS of each `(split, pairs)` set, per pair ([`PairLpips`]; masks `gt/SPLIT/…`);
+/// `Ok(Err(why))` when LPIPS cannot be had. `Err` only for a mask that cannot be read.
+type Lpipsed = Vec<Vec<PairLpips>>;
 fn lpips_sets(
     sets: &[(&str, Vec<(&Path, &Path)>)],
     how: LpipsUse,
@@ -246,12 +259,14 @@ fn lpips_sets(
         let mut figures = Vec::with_capacity(set.len());
         for (k, d) in set.into_iter().enumerate() {
             let masks = crate::masked::ViewMasks::read(&scene.root, split, k, &ids)?;
-            let masked = |m: Option<Vec<bool>>| m.map(|m| d.masked_mean(&m)).transpose();
-            figures.push((
-                d.distance,
-                masked(masks.moving)?.flatten(),
-                masked(masks.covisible)?.flatten(),
-            ));
+            let masked = |m: Option<&Vec<bool>>| m.map(|m| d.masked_mean(m)).transpose();
+            let still = (masks.moving.as_ref()).map(|m| m.iter().map(|v| !v).collect());
+            figures.push(PairLpips {
+                whole: d.distance,
+                moving: masked(masks.moving.as_ref())?.flatten(),
+                covisible: masked(masks.covisible.as_ref())?.flatten(),
+                still: masked(still.as_ref())?.flatten(),
+            });
         }
         out.push(figures);
     }

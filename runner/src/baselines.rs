@@ -2,6 +2,9 @@
 //! train frame, the linear blend of the two neighbouring train frames and the two-sided
 //! event pseudo image score on the test frames (the `evaluate` stage computes them).
 //!
+//! Each row: the whole image, the pixels a moving object covers and the others (the
+//! still scene), where the scene has the moving objects' masks.
+//!
 //! They predict the recorded camera's image at a time; none can render a new
 //! viewpoint, so the novel views have no baseline figures.
 
@@ -25,20 +28,22 @@ pub(crate) fn format_block(
     };
     let row = |label: &str, f: Figures| match f {
         Some(s) => format!(
-            "  {label:<32} {:>8.2} {:>7.4} {} {} {}\n",
+            "  {label:<32} {:>8.2} {:>7.4} {} {} {} {} {}\n",
             s.psnr_mean,
             s.ssim_mean,
             opt(s.lpips_mean, 7, 4),
             opt(s.moving_psnr_mean, 9, 2),
-            opt(s.moving_lpips_mean, 10, 4)
+            opt(s.moving_lpips_mean, 10, 4),
+            opt(s.still_psnr_mean, 8, 2),
+            opt(s.still_lpips_mean, 9, 4)
         ),
         None => format!("  {label:<32} {:>8} {:>7}\n", "-", "-"),
     };
     let of = |s: &Score| Some(*s);
     let head = |title: &str| {
         format!(
-            "{title:<34} {:>8} {:>7} {:>7} {:>9} {:>10}\n",
-            "PSNR dB", "SSIM", "LPIPS", "moving dB", "mov. LPIPS"
+            "{title:<34} {:>8} {:>7} {:>7} {:>9} {:>10} {:>8} {:>9}\n",
+            "PSNR dB", "SSIM", "LPIPS", "moving dB", "mov. LPIPS", "still dB", "st. LPIPS"
         )
     };
     let model = format!("model ({model} renders)");
@@ -77,6 +82,8 @@ mod tests {
                 ssim_mean: 0.6,
                 lpips_mean: Some(0.25),
                 moving_psnr_mean: Some(15.125),
+                still_psnr_mean: Some(21.5),
+                still_lpips_mean: Some(0.0625),
                 ..Score::default()
             },
             blend: Score {
@@ -99,18 +106,24 @@ mod tests {
         assert_eq!(
             cols(lines[1]),
             [
-                "model", "(deform", "renders)", "24.00", "0.8000", "-", "-", "-"
+                "model", "(deform", "renders)", "24.00", "0.8000", "-", "-", "-", "-", "-"
             ]
         );
         assert_eq!(
             cols(lines[2])[3..],
-            ["20.50", "0.6000", "0.2500", "15.12", "-"]
+            ["20.50", "0.6000", "0.2500", "15.12", "-", "21.50", "0.0625"]
         );
-        assert_eq!(cols(lines[3])[2..], ["100.00", "1.0000", "-", "-", "-"]);
+        assert_eq!(
+            cols(lines[3])[2..],
+            ["100.00", "1.0000", "-", "-", "-", "-", "-"]
+        );
         assert!(lines[4].contains("no events"), "{text}");
         assert_eq!(lines[5], "  2D baselines: computed from the scene");
         assert!(lines[6].starts_with("novel views"), "{text}");
-        assert_eq!(cols(lines[7])[3..], ["19.50", "0.7000", "-", "-", "-"]);
+        assert_eq!(
+            cols(lines[7])[3..],
+            ["19.50", "0.7000", "-", "-", "-", "-", "-"]
+        );
         assert!(lines[8].contains("cannot render a new viewpoint"), "{text}");
         let none = format_block("gaussians", None, None, Err("no test frames"));
         assert_eq!(

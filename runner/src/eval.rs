@@ -155,16 +155,18 @@ fn copy_baselines(from: &Path, to: &Path) -> Result<()> {
 /// What `degs eval` prints under its table: the model's figures on the test frames
 /// beside the 2D baselines', and on the novel views.
 pub fn baseline_block(m: &Metrics) -> String {
-    let both =
-        |p: Option<f64>, s: Option<f64>, l: Option<f64>, mp: Option<f64>, ml: Option<f64>| {
-            p.zip(s).map(|(psnr_mean, ssim_mean)| Score {
-                psnr_mean,
-                ssim_mean,
-                lpips_mean: l,
-                moving_psnr_mean: mp,
-                moving_lpips_mean: ml,
-            })
-        };
+    let both = |p: Option<f64>, s: Option<f64>, l: Option<f64>, moving, still| {
+        let ((mp, ml), (sp, sl)) = (moving, still);
+        p.zip(s).map(|(psnr_mean, ssim_mean)| Score {
+            psnr_mean,
+            ssim_mean,
+            lpips_mean: l,
+            moving_psnr_mean: mp,
+            moving_lpips_mean: ml,
+            still_psnr_mean: sp,
+            still_lpips_mean: sl,
+        })
+    };
     let baselines = m
         .baselines
         .as_ref()
@@ -175,15 +177,15 @@ pub fn baseline_block(m: &Metrics) -> String {
             m.psnr_mean,
             m.ssim_mean,
             m.lpips_mean,
-            m.moving_psnr_mean,
-            m.moving_lpips_mean,
+            (m.moving_psnr_mean, m.moving_lpips_mean),
+            (m.still_psnr_mean, m.still_lpips_mean),
         ),
         both(
             m.novel_psnr_mean,
             m.novel_ssim_mean,
             m.novel_lpips_mean,
-            m.novel_moving_psnr_mean,
-            m.novel_moving_lpips_mean,
+            (m.novel_moving_psnr_mean, m.novel_moving_lpips_mean),
+            (None, None),
         ),
         baselines,
     )

@@ -74,6 +74,11 @@ pub struct Metrics {
     pub moving_psnr_mean: Option<f64>,
     #[serde(default)]
     pub moving_lpips_mean: Option<f64>,
+    /// The same over the pixels no moving object covers (the still scene).
+    #[serde(default)]
+    pub still_psnr_mean: Option<f64>,
+    #[serde(default)]
+    pub still_lpips_mean: Option<f64>,
     /// The test frames beside the model's renders and the 2D baselines
     /// (`test_sheet.png`), when written.
     #[serde(default)]
@@ -158,12 +163,21 @@ pub struct MaskFigures {
     pub covisible_still_psnr: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub covisible_still_ssim: Option<f64>,
+    /// The pixels no moving object covers (the moving mask's complement), and the PSNR
+    /// over them: the still scene, where a model that draws a moving object too wide or
+    /// twice loses what its gain on the object hides in the whole image.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub still_pixels: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub still_psnr: Option<f64>,
     /// LPIPS over each mask: the mean of the spatial LPIPS map there
     /// (`lpips::Scored::masked_mean`); None without LPIPS or the mask.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub moving_lpips: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub covisible_lpips: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub still_lpips: Option<f64>,
 }
 
 /// The render stage's figures of its Gaussians' motion against the moving objects' true
@@ -197,6 +211,11 @@ pub struct Score {
     /// LPIPS over the same pixels.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub moving_lpips_mean: Option<f64>,
+    /// PSNR and LPIPS over the pixels no moving object covers.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub still_psnr_mean: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub still_lpips_mean: Option<f64>,
 }
 
 /// The three 2D baselines (nearest train frame, linear blend, two-sided event pseudo

@@ -141,7 +141,7 @@ fn eval_and_compare_report_known_errors() {
     let run_dir = root.join("runs/a");
     let moving = moving_ids(&scene_dir);
     let level = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as f64;
-    let (mut whole, mut on_moving) = (0.0, 0.0);
+    let (mut whole, mut on_moving, mut on_still) = (0.0, 0.0, 0.0);
     for (k, f) in scene.test.frames.iter().enumerate() {
         let img = read_image(run_dir.join(format!("baselines/blend/{k:04}.png"))).unwrap();
         let target = read_image(scene.image_path(f)).unwrap();
@@ -161,6 +161,7 @@ fn eval_and_compare_report_known_errors() {
         let psnr = |mse: f64| 10.0 * (255.0f64.powi(2) / mse).log10();
         whole += psnr(all / img.data.len() as f64);
         on_moving += psnr(mv / n as f64);
+        on_still += psnr((all - mv) / (img.data.len() - n) as f64);
     }
     let frames = scene.test.frames.len() as f64;
     assert!(
@@ -171,6 +172,16 @@ fn eval_and_compare_report_known_errors() {
     assert!(
         (got - on_moving / frames).abs() < 1e-9,
         "{got} vs {on_moving}"
+    );
+    // and on the others (the still scene), whose error the moving pixels' hides
+    let got = b["blend"]["still_psnr_mean"].as_f64().unwrap();
+    assert!(
+        (got - on_still / frames).abs() < 1e-9,
+        "{got} vs {on_still}"
+    );
+    assert!(
+        m["still_psnr_mean"].as_f64().is_some(),
+        "the model's still pixels"
     );
     // The model's exact frame (frame 0) scores the cap on its moving pixels too.
     assert_eq!(m["frames"][0]["moving_psnr"].as_f64(), Some(100.0));
@@ -487,7 +498,7 @@ fn eval_reports_lpips_beside_psnr_when_the_weights_are_there() {
     let net = lpips::Lpips::load_cached(lpips::Variant::Vgg).unwrap();
     let scene = Scene::open(&scene_dir).unwrap();
     let moving_objects = moving_ids(&scene_dir);
-    let (mut whole, mut moving) = (0.0, 0.0);
+    let (mut whole, mut moving, mut still) = (0.0, 0.0, 0.0);
     for (k, f) in scene.test.frames.iter().enumerate() {
         let a = read_image(scene.image_path(f)).unwrap();
         let b = read_image(run.join(format!("baselines/blend/{k:04}.png"))).unwrap();
@@ -498,6 +509,8 @@ fn eval_reports_lpips_beside_psnr_when_the_weights_are_there() {
         let mask: Vec<bool> = ids.iter().map(|o| moving_objects.contains(o)).collect();
         whole += d.distance;
         moving += d.masked_mean(&mask).unwrap().unwrap();
+        let others: Vec<bool> = mask.iter().map(|m| !m).collect();
+        still += d.masked_mean(&others).unwrap().unwrap();
     }
     let n = scene.test.frames.len() as f64;
     let blend = &m["baselines"]["blend"];
@@ -505,6 +518,8 @@ fn eval_reports_lpips_beside_psnr_when_the_weights_are_there() {
     assert!((got - whole / n).abs() < 1e-9, "{got} vs {}", whole / n);
     let got = blend["moving_lpips_mean"].as_f64().unwrap();
     assert!((got - moving / n).abs() < 1e-9, "{got} vs {}", moving / n);
+    let got = blend["still_lpips_mean"].as_f64().unwrap();
+    assert!((got - still / n).abs() < 1e-9, "{got} vs {}", still / n);
     // Off: no LPIPS, and the note says so.
     let o = degs(&["eval", run.to_str().unwrap()]);
     assert!(o.status.success());
