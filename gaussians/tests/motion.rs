@@ -88,6 +88,69 @@ fn a_gaussian_renders_only_within_its_life_and_as_before_there() {
     }
 }
 
+/// The life clock of a train view: uniform over one frame interval either side (the
+/// intervals on each side may differ), none past the recording's ends; so with the
+/// windows' lives ending midway between frames a window's edge frame reads the next
+/// window's lives a quarter of the time and an inner frame never.
+#[test]
+fn the_life_clock_spans_a_frame_interval_either_side() {
+    let (t, prev, next) = (0.3f32, 0.25f32, 0.4f32);
+    let clock = |u: f32| motion::life_clock(t, Some(prev), Some(next), u);
+    assert!((clock(0.0) - prev).abs() < 1e-6);
+    assert!((clock(0.5) - t).abs() < 1e-6);
+    assert!((clock(0.25) - (t - 0.5 * (t - prev))).abs() < 1e-6);
+    assert!((clock(0.75) - (t + 0.5 * (next - t))).abs() < 1e-6);
+    assert!((clock(1.0) - next).abs() < 1e-6);
+    assert_eq!(motion::life_clock(t, None, None, 0.1), t);
+    // A frame at a life's end (midway to the next frame): the share of uniform draws
+    // that reads the next window's lives, counted over a fine grid.
+    let edge = 0.5 * (t + next);
+    let n = 100_000;
+    let past = (0..n)
+        .filter(|&i| clock((i as f32 + 0.5) / n as f32) >= edge)
+        .count();
+    assert!(
+        (past as f64 / n as f64 - 0.25).abs() < 1e-3,
+        "{past} of {n}"
+    );
+    // A frame one and a half intervals from either end of its window never crosses.
+    let inner = |u: f32| motion::life_clock(0.35, Some(0.3), Some(0.4), u);
+    assert!((0..n).all(|i| {
+        let l = inner((i as f32 + 0.5) / n as f32);
+        (0.275..0.425).contains(&l)
+    }));
+}
+
+/// A view drawn with the lives read at another time: the centres where `t` puts them,
+/// the Gaussians shown those alive at `life_t`.
+#[test]
+fn advance_living_reads_the_lives_at_its_own_time() {
+    let mut s = gaussians::Splats::default();
+    for x in [-0.3f32, 0.3] {
+        s.push(gaussians::Gaussian::isotropic(
+            [x, 0.0, -3.0],
+            -2.0,
+            2.0,
+            [0.5; 3],
+        ));
+    }
+    s.motion = vec![[0.0; 6], [1.0, 0.0, 0.0, 0.0, 0.0, 0.0]];
+    s.life = vec![[0.0, 0.5], [0.5, 1.0]];
+    let mut out = s.clone();
+    motion::advance_living(&s, 0.4, 0.6, &mut out);
+    let hidden = |o: &gaussians::Splats, i: usize| o.opacity_logits[i] < -30.0;
+    assert!(hidden(&out, 0) && !hidden(&out, 1));
+    assert!(
+        (out.means[1][0] - (0.3 + (0.4 - T0))).abs() < 1e-6,
+        "{:?}",
+        out.means[1]
+    );
+    let mut same = s.clone();
+    motion::advance(&s, 0.4, &mut same);
+    assert!(!hidden(&same, 0) && hidden(&same, 1));
+    assert_eq!(same.means, out.means);
+}
+
 /// Without a field, the trainer's gradient of the trajectories matches central
 /// differences in f64 of `Σ w·rgb` rendered by the f64 reference rasterizer at the
 /// centres `μ + v·τ + a·τ²` (the scene of `raster_grad.rs`: Gaussians a few pixels to

@@ -405,7 +405,8 @@ impl JointTrainer {
         let i = self.inner.next_view(d.views.len());
         let view = &d.views[i];
         self.inner.resolve_cap(view.rgb.len() / 3);
-        let rv = self.inner.render_view(r, &view.camera, view.time);
+        let life_t = self.inner.life_time(&d.views, i);
+        let rv = (self.inner).render_view_living(r, &view.camera, view.time, life_t);
         let (l_rgb, grad) = self.inner.rgb_loss(&rv.image, &view.rgb);
         let psnr = psnr_u8(&rv.image.rgb, &view.rgb).min(PSNR_CAP);
         self.timings.rgb += clock.elapsed().as_secs_f64();

@@ -186,6 +186,20 @@ impl Trainer {
     where
         R::State: Send + 'static,
     {
+        self.render_view_living(r, camera, t, t)
+    }
+
+    /// [`Self::render_view`] with the lives read at `life_t` ([`crate::motion::life_clock`]).
+    pub fn render_view_living<R: Rasterizer>(
+        &self,
+        r: &R,
+        camera: &Camera,
+        t: f32,
+        life_t: f32,
+    ) -> ViewRender<R::State>
+    where
+        R::State: Send + 'static,
+    {
         let old = self.spare.lock().take_view::<R::State>();
         let (mut deformed, old_deltas, reuse) = match old {
             Some(v) => (v.deformed, v.deltas, Some((v.image, v.state))),
@@ -208,7 +222,7 @@ impl Trainer {
             deformed.clone_from(&self.splats);
             None
         };
-        crate::motion::advance(&self.splats, t, &mut deformed);
+        crate::motion::advance_living(&self.splats, t, life_t, &mut deformed);
         let (image, state) = r.render_reusing(
             &deformed,
             camera,
@@ -343,13 +357,14 @@ impl Trainer {
         self.resolve_cap(views[0].pixels());
         self.probe_field_if_due(r, views);
         let k = self.next_view(views.len());
+        let life_t = self.life_time(views, k);
         let (view, field_on) = (&views[k], self.field_on());
         let target = if self.coarse_views(views) {
             &self.coarse[k]
         } else {
             view
         };
-        let rendered = self.render_view(r, &target.camera, target.time);
+        let rendered = self.render_view_living(r, &target.camera, target.time, life_t);
         let (loss, grad) = self.rgb_loss(&rendered.image, &target.rgb);
         let psnr = metrics::psnr_u8(&rendered.image.rgb, &target.rgb);
         let mut tracks = std::mem::take(&mut self.tracks);
@@ -382,6 +397,20 @@ impl Trainer {
             field_on,
             prior_error,
         }
+    }
+
+    /// When train view `k` of `views` (in time order) reads the Gaussians' lives: its
+    /// own time, or with `tracks.life_jitter` and windowed copies a random time up to a
+    /// frame interval away ([`crate::motion::life_clock`]).
+    pub fn life_time(&mut self, views: &[View], k: usize) -> f32 {
+        let t = views[k].time;
+        if !self.settings.tracks.life_jitter || self.splats.life.is_empty() {
+            return t;
+        }
+        let prev = (k.checked_sub(1).map(|j| views[j].time)).filter(|&p| p < t);
+        let next = (views.get(k + 1).map(|v| v.time)).filter(|&n| n > t);
+        let unit: f32 = rand::RngExt::random(&mut self.rng);
+        crate::motion::life_clock(t, prev, next, unit)
     }
 
     /// The model as it renders now: its field while on, at the SH degree in use.
