@@ -179,67 +179,6 @@ impl Trainer {
             .0
     }
 
-    /// Render the current model (deformed to `t` when the field is on) at `camera`,
-    /// keeping what [`Self::view_backward`] needs (in the buffers of the last view given
-    /// to [`Self::recycle_view`], if any).
-    pub fn render_view<R: Rasterizer>(&self, r: &R, camera: &Camera, t: f32) -> ViewRender<R::State>
-    where
-        R::State: Send + 'static,
-    {
-        self.render_view_living(r, camera, t, t)
-    }
-
-    /// [`Self::render_view`] with the lives read at `life_t` ([`crate::motion::life_clock`]).
-    pub fn render_view_living<R: Rasterizer>(
-        &self,
-        r: &R,
-        camera: &Camera,
-        t: f32,
-        life_t: f32,
-    ) -> ViewRender<R::State>
-    where
-        R::State: Send + 'static,
-    {
-        let old = self.spare.lock().take_view::<R::State>();
-        let (mut deformed, old_deltas, reuse) = match old {
-            Some(v) => (v.deformed, v.deltas, Some((v.image, v.state))),
-            None => (Splats::default(), None, None),
-        };
-        let deltas = if self.field_on() {
-            let (mut d, mut cache) = old_deltas.unwrap_or_default();
-            field::splat_deltas_into(
-                &self.field,
-                &self.splats,
-                t,
-                self.settings.dynamic_only,
-                &mut self.spare.lock().field,
-                &mut d,
-                &mut cache,
-            );
-            field::deform_splats_into(&self.splats, &d, &mut deformed);
-            Some((d, cache))
-        } else {
-            deformed.clone_from(&self.splats);
-            None
-        };
-        crate::motion::advance_living(&self.splats, t, life_t, &mut deformed);
-        let (image, state) = r.render_reusing(
-            &deformed,
-            camera,
-            self.sh_degree(),
-            self.settings.background,
-            reuse,
-        );
-        ViewRender {
-            image,
-            camera: *camera,
-            time: t,
-            deformed,
-            deltas,
-            state,
-        }
-    }
-
     /// Gradients of a loss on a rendered view, from `∂L/∂rgb` (planar), `∂L/∂depth` and
     /// `∂L/∂alpha` where given (`d_planes`) and optionally `∂L/∂(rendered centres)` (from
     /// a loss on the deformed centres themselves, one per Gaussian), taken back through
@@ -397,20 +336,6 @@ impl Trainer {
             field_on,
             prior_error,
         }
-    }
-
-    /// When train view `k` of `views` (in time order) reads the Gaussians' lives: its
-    /// own time, or with `tracks.life_jitter` and windowed copies a random time up to a
-    /// frame interval away ([`crate::motion::life_clock`]).
-    pub fn life_time(&mut self, views: &[View], k: usize) -> f32 {
-        let t = views[k].time;
-        if !self.settings.tracks.life_jitter || self.splats.life.is_empty() {
-            return t;
-        }
-        let prev = (k.checked_sub(1).map(|j| views[j].time)).filter(|&p| p < t);
-        let next = (views.get(k + 1).map(|v| v.time)).filter(|&n| n > t);
-        let unit: f32 = rand::RngExt::random(&mut self.rng);
-        crate::motion::life_clock(t, prev, next, unit)
     }
 
     /// The model as it renders now: its field while on, at the SH degree in use.
