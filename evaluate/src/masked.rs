@@ -82,6 +82,11 @@ impl ViewMasks {
     }
 }
 
+/// The pixels no moving object covers: the complement of a moving mask.
+pub(crate) fn still_of(moving: &[bool]) -> Vec<bool> {
+    moving.iter().map(|m| !m).collect()
+}
+
 /// A novel view and its render, read once, with their per-pixel SSIM map
 /// ([`scene::metrics::ssim_map_u8`]), to score on any number of masks.
 struct Pair {
@@ -208,7 +213,7 @@ pub(crate) fn split_masks(
             if let Some(d) = depth {
                 f.moving_depth_error = depth_error(&d, &gt_depth, mask)?;
             }
-            let still: Vec<bool> = mask.iter().map(|m| !m).collect();
+            let still = still_of(mask);
             (f.still_pixels, f.still_psnr) =
                 (Some(count(&still)), pair.scores(&still, cap)?.map(|s| s.0));
         }

@@ -260,7 +260,7 @@ fn lpips_sets(
         for (k, d) in set.into_iter().enumerate() {
             let masks = crate::masked::ViewMasks::read(&scene.root, split, k, &ids)?;
             let masked = |m: Option<&Vec<bool>>| m.map(|m| d.masked_mean(m)).transpose();
-            let still = (masks.moving.as_ref()).map(|m| m.iter().map(|v| !v).collect());
+            let still = masks.moving.as_deref().map(crate::masked::still_of);
             figures.push(PairLpips {
                 whole: d.distance,
                 moving: masked(masks.moving.as_ref())?.flatten(),

@@ -20,6 +20,20 @@ fn random_motion(n: usize, seed: u64, scale: f32) -> Vec<[f32; 6]> {
         .collect()
 }
 
+/// Two Gaussians side by side in front of the default camera, of colour `sh_dc`.
+fn side_by_side(sh_dc: [f32; 3]) -> gaussians::Splats {
+    let mut s = gaussians::Splats::default();
+    for x in [-0.3f32, 0.3] {
+        s.push(gaussians::Gaussian::isotropic(
+            [x, 0.0, -3.0],
+            -2.0,
+            2.0,
+            sh_dc,
+        ));
+    }
+    s
+}
+
 #[test]
 fn a_centre_follows_its_quadratic_path() {
     let mut s = random_splats(50, glam::DVec3::ZERO, 0.5, 1);
@@ -53,15 +67,7 @@ fn a_gaussian_renders_only_within_its_life_and_as_before_there() {
         intrinsics: scene::Intrinsics::from_fov_x(32, 32, 1.0),
         cam_to_world: scene::Pose::default(),
     };
-    let mut both = gaussians::Splats::default();
-    for x in [-0.3f32, 0.3] {
-        both.push(gaussians::Gaussian::isotropic(
-            [x, 0.0, -3.0],
-            -2.0,
-            2.0,
-            [0.8, 0.1, -0.5],
-        ));
-    }
+    let both = side_by_side([0.8, 0.1, -0.5]);
     let mut first = gaussians::Splats::default();
     first.push(both.get(0));
     let mut lived = both.clone();
@@ -125,15 +131,7 @@ fn the_life_clock_spans_a_frame_interval_either_side() {
 /// the Gaussians shown those alive at `life_t`.
 #[test]
 fn advance_living_reads_the_lives_at_its_own_time() {
-    let mut s = gaussians::Splats::default();
-    for x in [-0.3f32, 0.3] {
-        s.push(gaussians::Gaussian::isotropic(
-            [x, 0.0, -3.0],
-            -2.0,
-            2.0,
-            [0.5; 3],
-        ));
-    }
+    let mut s = side_by_side([0.5; 3]);
     s.motion = vec![[0.0; 6], [1.0, 0.0, 0.0, 0.0, 0.0, 0.0]];
     s.life = vec![[0.0, 0.5], [0.5, 1.0]];
     let mut out = s.clone();
