@@ -60,7 +60,7 @@ pub fn advance(s: &Splats, t: f32, out: &mut Splats) {
 }
 
 /// [`advance`] with the lives read at `life_t` instead of `t` (the centres at `t`): a
-/// train view drawn with the copies of a neighbouring window ([`life_clock`]).
+/// train view drawn with the copies of a neighbouring window ([`life_clock_shared`]).
 pub fn advance_living(s: &Splats, t: f32, life_t: f32, out: &mut Splats) {
     if !s.motion.is_empty() {
         assert_eq!(s.motion.len(), out.len(), "motion: one row per Gaussian");
@@ -85,22 +85,15 @@ pub fn advance_living(s: &Splats, t: f32, life_t: f32, out: &mut Splats) {
 /// through unchanged (and is zero for a hidden Gaussian).
 const HIDDEN_LOGIT: f32 = -40.0;
 
-/// The time at which a train view at `t` reads the lives (`prev`, `next`: the times of
-/// the train frames before and after it, None at the recording's ends): `t + u·gap`,
-/// `u` uniform in [−1, 1) (`unit` = `(u + 1)/2`), `gap` the distance to the
-/// neighbouring frame on that side (0 past an end). The windows'
-/// lives end midway between frames (`tracks::init::windows`), so a frame at a window's
-/// edge is drawn by the next window's copies when `u·gap` passes that midpoint (a
-/// quarter of its views) and an inner frame never is: each window is trained on its
-/// context frames, and a time near a life's end lies between trained frames.
-pub fn life_clock(t: f32, prev: Option<f32>, next: Option<f32>, unit: f32) -> f32 {
-    let u = 2.0 * unit.clamp(0.0, 1.0) - 1.0;
-    let gap = if u < 0.0 {
-        prev.map_or(0.0, |p| t - p)
-    } else {
-        next.map_or(0.0, |n| n - t)
-    };
-    t + u * gap
+/// The time at which a train view at `t` reads the lives when the windows hand over at
+/// shared frames (`tracks.handover = "frame"`): midway to the previous frame
+/// `prev` when `unit < ½` (the earlier window's copies, whose life ends at `t`), else
+/// `t`. At a frame inside a window both times lie in the same lives.
+pub fn life_clock_shared(t: f32, prev: Option<f32>, unit: f32) -> f32 {
+    match prev {
+        Some(p) if unit < 0.5 => 0.5 * (p + t),
+        _ => t,
+    }
 }
 
 /// Whether a Gaussian of life `[from, to)` exists at time `t`.

@@ -94,37 +94,39 @@ fn a_gaussian_renders_only_within_its_life_and_as_before_there() {
     }
 }
 
-/// The life clock of a train view: uniform over one frame interval either side (the
-/// intervals on each side may differ), none past the recording's ends; so with the
-/// windows' lives ending midway between frames a window's edge frame reads the next
-/// window's lives a quarter of the time and an inner frame never.
+/// With windows sharing their end frames (`handover = "frame"`): a shared frame is drawn
+/// by either window's copies, half of its views each, and the windows hold every frame
+/// (by `windows`, whose lives end exactly at the shared frame).
 #[test]
-fn the_life_clock_spans_a_frame_interval_either_side() {
-    let (t, prev, next) = (0.3f32, 0.25f32, 0.4f32);
-    let clock = |u: f32| motion::life_clock(t, Some(prev), Some(next), u);
-    assert!((clock(0.0) - prev).abs() < 1e-6);
-    assert!((clock(0.5) - t).abs() < 1e-6);
-    assert!((clock(0.25) - (t - 0.5 * (t - prev))).abs() < 1e-6);
-    assert!((clock(0.75) - (t + 0.5 * (next - t))).abs() < 1e-6);
-    assert!((clock(1.0) - next).abs() < 1e-6);
-    assert_eq!(motion::life_clock(t, None, None, 0.1), t);
-    // A frame at a life's end (midway to the next frame): the share of uniform draws
-    // that reads the next window's lives, counted over a fine grid.
-    let edge = 0.5 * (t + next);
+fn the_shared_frame_clock_draws_either_window_half_the_time() {
+    use gaussians::tracks::{Handover, init::windows};
+    let times = [0.0, 0.2, 0.4, 0.6, 0.8, 1.0];
+    let w = windows(&times, 3, Handover::Frame);
     let n = 100_000;
-    let past = (0..n)
-        .filter(|&i| clock((i as f32 + 0.5) / n as f32) >= edge)
-        .count();
-    assert!(
-        (past as f64 / n as f64 - 0.25).abs() < 1e-3,
-        "{past} of {n}"
-    );
-    // A frame one and a half intervals from either end of its window never crosses.
-    let inner = |u: f32| motion::life_clock(0.35, Some(0.3), Some(0.4), u);
-    assert!((0..n).all(|i| {
-        let l = inner((i as f32 + 0.5) / n as f32);
-        (0.275..0.425).contains(&l)
-    }));
+    for k in 0..times.len() {
+        let t = times[k] as f32;
+        let prev = k.checked_sub(1).map(|j| times[j] as f32);
+        let mut drawn = vec![0usize; w.len()];
+        for i in 0..n {
+            let l = motion::life_clock_shared(t, prev, (i as f32 + 0.5) / n as f32);
+            let alive: Vec<usize> = (0..w.len())
+                .filter(|&j| motion::alive(w[j].life, l))
+                .collect();
+            assert_eq!(alive.len(), 1, "frame {k}: one window alive at {l}");
+            assert!(
+                w[alive[0]].frames.contains(&k),
+                "frame {k} drawn by {:?}",
+                w[alive[0]]
+            );
+            drawn[alive[0]] += 1;
+        }
+        let shared = w.iter().filter(|x| x.frames.contains(&k)).count() == 2;
+        let most = *drawn.iter().max().unwrap() as f64 / n as f64;
+        assert!(
+            (most - if shared { 0.5 } else { 1.0 }).abs() < 1e-3,
+            "frame {k}: {drawn:?}"
+        );
+    }
 }
 
 /// A view drawn with the lives read at another time: the centres where `t` puts them,

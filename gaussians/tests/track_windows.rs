@@ -7,7 +7,7 @@ use gaussians::splats::ALWAYS;
 use gaussians::tracks::init::windows;
 use gaussians::tracks::lift::Lifted;
 use gaussians::tracks::lk::{Grey, Pyramid};
-use gaussians::tracks::{Frame, TrackSettings, lift_track};
+use gaussians::tracks::{Frame, Handover, TrackSettings, lift_track};
 use glam::{DVec2, Vec2};
 
 #[test]
@@ -15,7 +15,7 @@ fn the_lives_tile_time_and_each_frame_lies_in_its_own() {
     for n in [2usize, 5, 9, 21] {
         let times: Vec<f64> = (0..n).map(|k| k as f64 / (n - 1) as f64).collect();
         for size in 1..=5 {
-            let w = windows(&times, size);
+            let w = windows(&times, size, Handover::Midway);
             assert_eq!(w.len(), n.div_ceil(size), "n {n}, size {size}");
             assert_eq!(w[0].life[0], ALWAYS[0]);
             assert_eq!(w.last().unwrap().life[1], ALWAYS[1]);
@@ -36,6 +36,45 @@ fn the_lives_tile_time_and_each_frame_lies_in_its_own() {
             }
         }
     }
+}
+
+#[test]
+fn windows_that_share_their_end_frames_hand_over_at_them() {
+    // `handover = "frame"`: each window starts at the previous one's last frame and
+    // lives from its first frame's time to its last's, so every frame but a shared one
+    // lies in the life of exactly one window that holds it, and a shared frame ends one
+    // life and starts the next. Counted here: ⌈(n − 1)/(size − 1)⌉ windows.
+    for n in [2usize, 5, 9, 20, 21] {
+        let times: Vec<f64> = (0..n)
+            .map(|k| (k as f64 / (n - 1) as f64).powf(1.3))
+            .collect();
+        for size in 2..=5 {
+            let w = windows(&times, size, Handover::Frame);
+            assert_eq!(w.len(), (n - 1).div_ceil(size - 1), "n {n}, size {size}");
+            assert_eq!((w[0].frames.start, w[0].life[0]), (0, ALWAYS[0]));
+            assert_eq!(w.last().unwrap().life[1], ALWAYS[1]);
+            assert_eq!(w.last().unwrap().frames.end, n);
+            for (a, b) in w.iter().zip(w.iter().skip(1)) {
+                assert_eq!(a.frames.end - 1, b.frames.start, "n {n}, size {size}");
+                assert_eq!(a.life[1], b.life[0]);
+                assert_eq!(a.life[1], times[b.frames.start] as f32);
+            }
+            for x in &w {
+                assert!(x.frames.len() >= 2 && x.frames.len() <= size, "{x:?}");
+                assert!(x.frames.contains(&x.reference));
+                assert_eq!(x.context.start, x.frames.start.saturating_sub(1));
+                for k in x.frames.clone() {
+                    let t = times[k] as f32;
+                    let last = k + 1 == x.frames.end && x.frames.end < n;
+                    assert_eq!(t >= x.life[0] && t < x.life[1], !last, "frame {k} in {x:?}");
+                }
+            }
+        }
+    }
+    // The lives, by hand: 5 frames 0, ¼, ½, ¾, 1 in windows of 3.
+    let w = windows(&[0.0, 0.25, 0.5, 0.75, 1.0], 3, Handover::Frame);
+    let lives: Vec<_> = w.iter().map(|x| (x.frames.clone(), x.life)).collect();
+    assert_eq!(lives, [(0..3, [ALWAYS[0], 0.5]), (2..5, [0.5, ALWAYS[1]])]);
 }
 
 #[test]
@@ -69,7 +108,7 @@ fn a_window_holds_a_fast_turn_that_one_quadratic_over_the_recording_cannot() {
         })
         .collect();
     let normalised: Vec<f64> = times.iter().map(|&t| norm(t)).collect();
-    let win = windows(&normalised, 3);
+    let win = windows(&normalised, 3, Handover::Midway);
     let mid = times.len() / 2;
     let w = win.iter().find(|w| w.frames.contains(&mid)).unwrap();
     let st = TrackSettings::default();

@@ -4,8 +4,9 @@
 
 use super::lift::Lifted;
 use super::{
-    Frame, LiftedTrack, RawTrack, TrackSettings, align_priors, depth, drop_where_prior_disagrees,
-    events, lift_raw, lift_track, lk, loss, raw_tracks, raw_tracks_within,
+    Frame, Handover, LiftedTrack, RawTrack, TrackSettings, align_priors, depth,
+    drop_where_prior_disagrees, events, lift_raw, lift_track, lk, loss, raw_tracks,
+    raw_tracks_within,
 };
 use crate::splats::{ALWAYS, Gaussian, Splats};
 use scene::Camera;
@@ -165,32 +166,47 @@ pub struct Window {
     pub reference: usize,
     /// The frames its trajectories are fitted to: its own and one either side.
     pub context: std::ops::Range<usize>,
-    /// The normalised time span its Gaussians live in, `[from, to)`: from midway to the
-    /// previous window's last frame to midway to the next one's first, open at the
-    /// recording's ends (so that the lives tile time: one copy of an object at any time).
+    /// The normalised time span its Gaussians live in, `[from, to)`, open at the
+    /// recording's ends; the lives tile time (one copy of an object at any time). With
+    /// [`Handover::Midway`] from midway to the previous window's last frame to midway to
+    /// the next one's first; with [`Handover::Frame`] from its first frame to its last
+    /// (which is the next window's first).
     pub life: [f32; 2],
 }
 
 /// The windows of `size` consecutive frames (the last may be shorter) over frames at
-/// normalised `times`.
-pub fn windows(times: &[f64], size: usize) -> Vec<Window> {
+/// normalised `times`: one after another ([`Handover::Midway`]), or each starting at
+/// the previous one's last frame ([`Handover::Frame`], `size` at least 2).
+pub fn windows(times: &[f64], size: usize, handover: Handover) -> Vec<Window> {
     let n = times.len();
-    let edge = |k: usize| (0.5 * (times[k - 1] + times[k])) as f32;
-    (0..n)
-        .step_by(size.max(1))
-        .map(|a| {
-            let b = (a + size.max(1)).min(n);
-            Window {
-                frames: a..b,
-                reference: (a + b).div_ceil(2) - 1,
-                context: a.saturating_sub(1)..(b + 1).min(n),
-                life: [
-                    if a == 0 { ALWAYS[0] } else { edge(a) },
-                    if b == n { ALWAYS[1] } else { edge(b) },
-                ],
-            }
-        })
-        .collect()
+    let (size, step, edge): (usize, usize, &dyn Fn(usize) -> f32) = match handover {
+        Handover::Midway => (size.max(1), size.max(1), &|b| {
+            (0.5 * (times[b - 1] + times[b])) as f32
+        }),
+        Handover::Frame => (size.max(2), size.max(2) - 1, &|b| times[b - 1] as f32),
+    };
+    let mut out = Vec::new();
+    if n == 0 {
+        return out;
+    }
+    let mut a = 0;
+    loop {
+        let b = (a + size).min(n);
+        out.push(Window {
+            frames: a..b,
+            reference: (a + b).div_ceil(2) - 1,
+            context: a.saturating_sub(1)..(b + 1).min(n),
+            life: [
+                out.last().map_or(ALWAYS[0], |w: &Window| w.life[1]),
+                if b == n { ALWAYS[1] } else { edge(b) },
+            ],
+        });
+        a += step;
+        if b == n {
+            break;
+        }
+    }
+    out
 }
 
 /// The moving tracks of each window of `st.window` frames ([`windows`]), from its
@@ -209,7 +225,7 @@ fn windowed(
 ) -> Vec<(LiftedTrack, [f32; 2])> {
     let times: Vec<f64> = frames.iter().map(|f| f.time).collect();
     let middle = super::middle_frame(frames);
-    let wins = windows(&times, st.window as usize);
+    let wins = windows(&times, st.window as usize, st.handover);
     let spans: Vec<_> = (wins.iter())
         .filter(|w| w.reference != middle)
         .map(|w| (w.reference, w.context.clone()))

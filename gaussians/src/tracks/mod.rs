@@ -30,7 +30,7 @@ pub(crate) use init::{Image, add_moving};
 use lift::{Lifted, Observation};
 use rayon::prelude::*;
 use scene::Camera;
-pub use settings::{AUTO_STRIDE_PIXELS, TrackSettings};
+pub use settings::{AUTO_STRIDE_PIXELS, Handover, TrackSettings};
 
 /// How much nearer (relative) another point within a pixel may be before a stereo point
 /// counts as hidden when the priors are aligned ([`depth::visible_points`]).

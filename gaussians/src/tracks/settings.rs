@@ -55,25 +55,40 @@ pub struct TrackSettings {
     /// that one quadratic holds over most of the recording (seen in ¾ of the frames)
     /// keeps one Gaussian from the middle frame; the others come from each window's
     /// middle frame, fitted over the window (and a frame either side) and shown only
-    /// within it. 0 = one trajectory over the recording for every track, from the
-    /// middle frame. 3 measured (BENCHMARKS.md, "Tracks through event images, and
-    /// windows of trajectories").
+    /// within it. 0 = the frames that `window_s` spans. With both 0, one trajectory
+    /// over the recording for every track, from the middle frame.
     pub window: u32,
+    /// Seconds of recording a window spans when `window` = 0: `1 + round(window_s / Δt)`
+    /// frames, at least 2, Δt the train frames' mean interval
+    /// ([`TrackSettings::window_frames`]). A quadratic holds a turn for a stretch of
+    /// time, not of frames: on the path-traced `spin` windows of 5 frames win at 20 fps
+    /// and lose at 10 fps, where 3 win (BENCHMARKS.md, "The windows' handover at
+    /// the frames").
+    pub window_s: f64,
     /// Every this many pixels (in x and in y) a track starts in a reference frame, and
     /// a moving track's Gaussian covers that footprint. 0 = automatic: 1 up to
     /// [`AUTO_STRIDE_PIXELS`] pixels a frame, else the smallest stride that starts at most
     /// that many ([`TrackSettings::stride_for`]): the init's cost grows with the tracks.
     pub stride: u32,
-    /// Train views render the windows' copies of a moment up to one frame interval away
-    /// (uniformly, either side), so that a window's frames next to its life's ends are
-    /// drawn by the neighbouring window's copies a quarter of the time: each window is
-    /// then fitted to its context frames, not only to its own, and a time near a life's
-    /// end lies between frames its copies were trained on, not half an interval beyond
-    /// them ([`crate::motion::life_clock`]). Off by default: on the path-traced `spin`
-    /// it lifts the test frames at the lives' ends by 1.8 dB at 20 fps (+0.34 dB on all,
-    /// LPIPS level) but costs 0.009 LPIPS at 10 fps (BENCHMARKS.md, "The windows'
-    /// handover").
-    pub life_jitter: bool,
+    /// Where one window's copies hand over to the next ([`Handover`]).
+    pub handover: Handover,
+}
+
+/// Where the windows of trajectories hand over (`tracks.handover`; [`super::init::windows`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Handover {
+    /// Runs of `window` frames; a run's copies live from midway to the previous run's
+    /// last frame to midway to the next one's first. The time at a life's end lies half
+    /// an interval beyond the frames its copies are drawn at.
+    Midway,
+    /// Runs of `window` frames that share their end frames (a run starts at the previous
+    /// one's last frame); a run's copies live from its first frame to its last, and a
+    /// train view at a shared frame draws either run's copies (half of its views each,
+    /// [`crate::motion::life_clock_shared`]): every time lies between two frames its
+    /// copies were fitted to.
+    #[default]
+    Frame,
 }
 
 /// Tracked pixels per reference frame the automatic stride keeps to (128²).
@@ -97,9 +112,10 @@ impl Default for TrackSettings {
             prior_prunes: false,
             depth_weight: 0.1,
             event_steps: 2,
-            window: 3,
+            window: 0,
+            window_s: 0.2,
             stride: 0,
-            life_jitter: false,
+            handover: Handover::Frame,
         }
     }
 }
@@ -114,6 +130,20 @@ impl TrackSettings {
         (1..)
             .find(|&s| width.div_ceil(s) * height.div_ceil(s) <= AUTO_STRIDE_PIXELS)
             .unwrap_or(1)
+    }
+
+    /// The frames per window ([`Self::window`]) for train frames at `seconds` (in time
+    /// order): `window`, or when 0 the frames `window_s` spans; 0 = no windows.
+    pub fn window_frames(&self, seconds: &[f64]) -> u32 {
+        let n = seconds.len();
+        if self.window > 0 || self.window_s <= 0.0 || n < 2 {
+            return self.window;
+        }
+        let interval = (seconds[n - 1] - seconds[0]) / (n - 1) as f64;
+        match interval > 0.0 {
+            true => (1.0 + (self.window_s / interval).round()).clamp(2.0, n as f64) as u32,
+            false => 0,
+        }
     }
 
     pub fn validate(&self) -> Result<(), String> {
@@ -141,10 +171,11 @@ impl TrackSettings {
             || !(self.depth_sigma.is_finite() && self.depth_sigma >= 0.0)
             || !(self.depth_ridge.is_finite() && self.depth_ridge >= 0.0)
             || !(self.depth_weight.is_finite() && self.depth_weight >= 0.0)
+            || !(self.window_s.is_finite() && self.window_s >= 0.0)
         {
             return Err(
                 "tracks: thresholds and huber_px must be positive, ridge, min_texture, \
-                 weight, depth_sigma, depth_ridge and depth_weight finite and ≥ 0"
+                 weight, depth_sigma, depth_ridge, depth_weight and window_s finite and ≥ 0"
                     .into(),
             );
         }
@@ -170,5 +201,27 @@ mod tests {
             ..Default::default()
         };
         assert_eq!(fixed.stride_for(640, 480), 2);
+    }
+
+    #[test]
+    fn the_windows_span_window_s_at_any_frame_rate() {
+        let st = TrackSettings::default();
+        let at =
+            |fps: f64, n: usize| -> Vec<f64> { (0..n).map(|k| 2.0 + k as f64 / fps).collect() };
+        // 1 + round(0.2 s · fps), at least 2, by hand
+        assert_eq!(st.window_frames(&at(20.0, 21)), 5);
+        assert_eq!(st.window_frames(&at(10.0, 11)), 3);
+        assert_eq!(st.window_frames(&at(8.0, 9)), 3); // 1.6 intervals
+        assert_eq!(st.window_frames(&at(4.0, 5)), 2); // 0.8 of one
+        assert_eq!(st.window_frames(&at(40.0, 41)), 9);
+        assert_eq!(st.window_frames(&at(40.0, 3)), 3); // not more than the frames
+        assert_eq!(st.window_frames(&at(20.0, 1)), 0);
+        let frames = TrackSettings { window: 4, ..st };
+        assert_eq!(frames.window_frames(&at(20.0, 21)), 4);
+        let none = TrackSettings {
+            window_s: 0.0,
+            ..st
+        };
+        assert_eq!(none.window_frames(&at(20.0, 21)), 0);
     }
 }

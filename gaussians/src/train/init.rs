@@ -294,11 +294,21 @@ pub(crate) fn initial_splats(
                         });
                     let k = &cams[0].intrinsics;
                     let stride = (settings.tracks).stride_for(k.width as usize, k.height as usize);
+                    let st = crate::tracks::TrackSettings {
+                        window: settings.tracks.window_frames(&seconds),
+                        ..settings.tracks
+                    };
+                    if st.window > 0 {
+                        eprintln!(
+                            "tracks: windows of {} frames ({:?} handover)",
+                            st.window, st.handover
+                        );
+                    }
                     let (table, aligned) = crate::tracks::add_moving(
                         &mut s,
                         &images,
                         stride,
-                        &settings.tracks,
+                        &st,
                         priors.as_ref(),
                         source.as_ref(),
                     );

@@ -27,7 +27,7 @@ impl super::Trainer {
         self.render_view_living(r, camera, t, t)
     }
 
-    /// [`Self::render_view`] with the lives read at `life_t` ([`crate::motion::life_clock`]).
+    /// [`Self::render_view`] with the lives read at `life_t` ([`crate::motion::life_clock_shared`]).
     pub fn render_view_living<R: Rasterizer>(
         &self,
         r: &R,
@@ -79,17 +79,17 @@ impl super::Trainer {
     }
 
     /// When train view `k` of `views` (in time order) reads the Gaussians' lives: its
-    /// own time, or with `tracks.life_jitter` and windowed copies a random time up to a
-    /// frame interval away ([`crate::motion::life_clock`]).
+    /// own time, or with windowed copies and `tracks.handover = "frame"` at a shared
+    /// frame either window's ([`crate::motion::life_clock_shared`]).
     pub fn life_time(&mut self, views: &[View], k: usize) -> f32 {
         let t = views[k].time;
-        if !self.settings.tracks.life_jitter || self.splats.life.is_empty() {
+        let shared = self.settings.tracks.handover == crate::tracks::Handover::Frame;
+        if !shared || self.splats.life.is_empty() {
             return t;
         }
         let prev = (k.checked_sub(1).map(|j| views[j].time)).filter(|&p| p < t);
-        let next = (views.get(k + 1).map(|v| v.time)).filter(|&n| n > t);
         let unit: f32 = rand::RngExt::random(&mut self.rng);
-        crate::motion::life_clock(t, prev, next, unit)
+        crate::motion::life_clock_shared(t, prev, unit)
     }
 
     /// [`Self::view_backward`] with `L_depth` ([`crate::tracks::prior_loss`]) joined at
