@@ -179,11 +179,14 @@ pub struct Window {
 /// the previous one's last frame ([`Handover::Frame`], `size` at least 2).
 pub fn windows(times: &[f64], size: usize, handover: Handover) -> Vec<Window> {
     let n = times.len();
-    let (size, step, edge): (usize, usize, &dyn Fn(usize) -> f32) = match handover {
-        Handover::Midway => (size.max(1), size.max(1), &|b| {
-            (0.5 * (times[b - 1] + times[b])) as f32
-        }),
-        Handover::Frame => (size.max(2), size.max(2) - 1, &|b| times[b - 1] as f32),
+    let (size, step) = match handover {
+        Handover::Midway => (size.max(1), size.max(1)),
+        Handover::Frame => (size.max(2), size.max(2) - 1),
+    };
+    // Where the life of a window ending before frame `b` ends.
+    let edge = |b: usize| match handover {
+        Handover::Midway => (0.5 * (times[b - 1] + times[b])) as f32,
+        Handover::Frame => times[b - 1] as f32,
     };
     let mut out = Vec::new();
     if n == 0 {
