@@ -8,6 +8,11 @@
 //!   then the model's render, the two-sided event pseudo image and the linear blend
 //!   (those that exist), each followed by its difference ×4: where the model is softer
 //!   or wronger than what the events alone give.
+//! - `test_error_map.png`: one panel each for the model, the event pseudo image and the
+//!   blend: every pixel's absolute error (mean of the channels) averaged over the test
+//!   frames, ×8 (white: off by an eighth of the range on average). What one frame's
+//!   difference cannot tell: the error that stays at the same place (a moving shadow's
+//!   outline, a halo beside a moving object, a blurred background).
 
 use anyhow::{Result, bail};
 use scene::image_io::{Image, read_image, write_png};
@@ -73,25 +78,35 @@ pub(crate) fn write_sheet(rows: &[(&Path, Vec<&Path>)], out: &Path) -> Result<Op
     Ok(Some(out.to_path_buf()))
 }
 
-/// `test_sheet.png` in `dir` (module doc): the test frames `gt`, the model's renders
-/// (`model`: pairs in the frames' order, possibly none) and the event pseudo image and
-/// blend of `baselines`; None when there is nothing to set beside the frames.
-pub(crate) fn test_sheet(
+/// The columns set beside the test frames `gt`: the model's renders (`model`: pairs in
+/// the frames' order, possibly none), then the event pseudo image and the blend of
+/// `baselines`, those that have one image per frame.
+fn columns<'a>(
     gt: &[PathBuf],
-    model: &[(&Path, &Path)],
-    baselines: &crate::baselines::BaselineImages,
-    dir: &Path,
-) -> Result<Option<PathBuf>> {
+    model: &[(&'a Path, &'a Path)],
+    baselines: &'a crate::baselines::BaselineImages,
+) -> Vec<Vec<&'a Path>> {
     let of = |name: &str| baselines.iter().find(|(n, _)| *n == name).map(|(_, p)| p);
-    let columns: Vec<Vec<&Path>> = [
+    [
         Some(model.iter().map(|p| p.1).collect()),
         of("events").map(|p| p.iter().map(PathBuf::as_path).collect()),
         of("blend").map(|p| p.iter().map(PathBuf::as_path).collect()),
     ]
     .into_iter()
     .flatten()
-    .filter(|c: &Vec<&Path>| c.len() == gt.len())
-    .collect();
+    .filter(|c: &Vec<&Path>| !c.is_empty() && c.len() == gt.len())
+    .collect()
+}
+
+/// `test_sheet.png` in `dir` (module doc): the test frames `gt` beside [`columns`];
+/// None when there is nothing to set beside the frames.
+pub(crate) fn test_sheet(
+    gt: &[PathBuf],
+    model: &[(&Path, &Path)],
+    baselines: &crate::baselines::BaselineImages,
+    dir: &Path,
+) -> Result<Option<PathBuf>> {
+    let columns = columns(gt, model, baselines);
     if columns.is_empty() {
         return Ok(None);
     }
@@ -102,6 +117,85 @@ pub(crate) fn test_sheet(
         .collect();
     write_sheet(&rows, &dir.join(TEST_SHEET))?;
     Ok(Some(PathBuf::from(TEST_SHEET)))
+}
+
+/// `test_error_map.png` in `dir` (module doc) for [`columns`]; None when there are none.
+pub(crate) fn test_error_map(
+    gt: &[PathBuf],
+    model: &[(&Path, &Path)],
+    baselines: &crate::baselines::BaselineImages,
+    dir: &Path,
+) -> Result<Option<PathBuf>> {
+    let columns = columns(gt, model, baselines);
+    if columns.is_empty() {
+        return Ok(None);
+    }
+    let maps = columns
+        .iter()
+        .map(|c| mean_abs_error(gt, c))
+        .collect::<Result<Vec<_>>>()?;
+    let (w, h) = (maps[0].width, maps[0].height);
+    let z = 128u32.div_ceil(w.max(1)).max(1);
+    let n = maps.len() as u32;
+    let mut strip = Image::new(n * z * w + (n - 1) * GAP, z * h, 1);
+    strip.data.iter_mut().for_each(|v| *v = 1.0);
+    for (i, m) in maps.iter().enumerate() {
+        for y in 0..z * h {
+            for x in 0..z * w {
+                let e = m.data[((y / z) * w + x / z) as usize];
+                strip.data[(y * strip.width + i as u32 * (z * w + GAP) + x) as usize] =
+                    (ERROR_GAIN * e).min(1.0);
+            }
+        }
+    }
+    write_png(dir.join(TEST_ERROR_MAP), &strip)?;
+    Ok(Some(PathBuf::from(TEST_ERROR_MAP)))
+}
+
+/// The error map's gain: white is an average error of `1/ERROR_GAIN` of the range.
+pub(crate) const ERROR_GAIN: f32 = 8.0;
+
+/// The test frames' error map in the output directory.
+pub(crate) const TEST_ERROR_MAP: &str = "test_error_map.png";
+
+/// Each pixel's absolute error between `gt[k]` and `images[k]`, the mean of its
+/// channels, averaged over the frames (one channel, 0–1).
+pub(crate) fn mean_abs_error(gt: &[PathBuf], images: &[&Path]) -> Result<Image> {
+    let mut sum: Option<Image> = None;
+    for (g, p) in gt.iter().zip(images) {
+        let (a, b) = (read_image(g)?, read_image(p)?);
+        if (a.width, a.height) != (b.width, b.height) {
+            bail!(
+                "{}: {}x{}, and {} {}x{}",
+                g.display(),
+                a.width,
+                a.height,
+                p.display(),
+                b.width,
+                b.height
+            );
+        }
+        let acc = sum.get_or_insert_with(|| Image::new(a.width, a.height, 1));
+        if (acc.width, acc.height) != (a.width, a.height) {
+            bail!(
+                "{}: {}x{}, the first frame {}x{}",
+                g.display(),
+                a.width,
+                a.height,
+                acc.width,
+                acc.height
+            );
+        }
+        for (i, v) in acc.data.iter_mut().enumerate() {
+            let (x, y) = (i as u32 % a.width, i as u32 / a.width);
+            let (pa, pb) = (rgb(&a, x, y), rgb(&b, x, y));
+            *v += (0..3).map(|c| (pa[c] - pb[c]).abs()).sum::<f32>() / 3.0;
+        }
+    }
+    let mut m = sum.unwrap_or_else(|| Image::new(0, 0, 1));
+    let n = gt.len().min(images.len()).max(1) as f32;
+    m.data.iter_mut().for_each(|v| *v /= n);
+    Ok(m)
 }
 
 /// The test frames' sheet in the output directory.

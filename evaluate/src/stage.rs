@@ -151,6 +151,8 @@ pub fn evaluate(inputs: Inputs, s: &EvalSettings, dir: &Path) -> Result<Metrics>
         }
     };
     let test_sheet = crate::sheet::test_sheet(&test_images, &test_pairs, &base_images, dir)?;
+    let test_error_map =
+        crate::sheet::test_error_map(&test_images, &test_pairs, &base_images, dir)?;
     let mean = |frames: &[FrameMetrics], f: &dyn Fn(&FrameMetrics) -> f64| {
         (!frames.is_empty()).then(|| frames.iter().map(f).sum::<f64>() / frames.len() as f64)
     };
@@ -166,6 +168,7 @@ pub fn evaluate(inputs: Inputs, s: &EvalSettings, dir: &Path) -> Result<Metrics>
         still_psnr_mean: mean_of(frames.iter().map(|f| f.masks.still_psnr)),
         still_lpips_mean: mean_of(frames.iter().map(|f| f.masks.still_lpips)),
         test_sheet,
+        test_error_map,
         lpips_net,
         lpips_note,
         frames,

@@ -196,6 +196,20 @@ pub fn execute(command: Command) -> Result<()> {
                 eval::compare_table(&[(m.experiment.clone(), m.clone())])
             );
             print!("\n{}", eval::baseline_block(&m));
+            if let Some(sheet) = &m.test_sheet {
+                println!(
+                    "  test frames beside the renders, the event pseudo image, the blend and ×4 \
+                     differences: {}",
+                    sheet.display()
+                );
+            }
+            if let Some(map) = &m.test_error_map {
+                println!(
+                    "  where the error stays (mean |error| over the test frames ×8; model, event \
+                     pseudo image, blend): {}",
+                    map.display()
+                );
+            }
             let ssim = |s: Option<f64>, l: Option<f64>| {
                 let l = l.map_or(String::new(), |l| format!(", LPIPS {l:.4}"));
                 s.map_or(l.clone(), |s| format!(", SSIM {s:.4}{l}"))

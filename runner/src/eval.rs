@@ -115,7 +115,11 @@ pub fn eval_run_with(
         .map(|s| (s.stage.clone(), s.built_wall_s.unwrap_or(s.wall_s)))
         .collect();
     metrics.total_stage_s = metrics.stage_s.iter().map(|(_, t)| t).sum();
-    for sheet in [&mut metrics.novel_sheet, &mut metrics.test_sheet] {
+    for sheet in [
+        &mut metrics.novel_sheet,
+        &mut metrics.test_sheet,
+        &mut metrics.test_error_map,
+    ] {
         if let Some(name) = sheet.as_ref() {
             let to = run_dir.join(name);
             std::fs::copy(entry.join(name), &to)

@@ -83,6 +83,10 @@ pub struct Metrics {
     /// (`test_sheet.png`), when written.
     #[serde(default)]
     pub test_sheet: Option<PathBuf>,
+    /// Where the error stays over the test frames: the model's and the 2D baselines'
+    /// mean absolute error per pixel (`test_error_map.png`), when written.
+    #[serde(default)]
+    pub test_error_map: Option<PathBuf>,
     #[serde(default)]
     pub lpips_net: Option<String>,
     #[serde(default)]

@@ -193,6 +193,56 @@ fn eval_and_compare_report_known_errors() {
         (sheet.width, sheet.height),
         (7 * z * first.width + 6 * 2, 2 * z * first.height + 2)
     );
+    // The error map: model, event image, blend; each pixel's |error| (channel mean)
+    // averaged over the two frames, ×8, as 8-bit grey.
+    let map = read_image(run_dir.join("test_error_map.png")).unwrap();
+    let (w, h) = (first.width, first.height);
+    assert_eq!((map.width, map.height), (3 * z * w + 2 * 2, z * h));
+    let code =
+        |x: u32, y: u32| (map.data[((y * map.width + x) * map.channels) as usize] * 255.0).round();
+    // the model: frame 1 off by 40 levels in one channel of pixel (0, 0), exact elsewhere
+    let want = (8.0 * 40.0 / 255.0 / 3.0 / 2.0 * 255.0f64).round() as f32;
+    assert_eq!(code(0, 0), want);
+    assert_eq!(code(z - 1, z - 1), want);
+    let off = (0..z * h)
+        .flat_map(|y| (0..z * w).map(move |x| (x, y)))
+        .filter(|&(x, y)| (x >= z || y >= z) && code(x, y) != 0.0)
+        .map(|(x, y)| (x, y, code(x, y)))
+        .collect::<Vec<_>>();
+    assert!(
+        off.is_empty(),
+        "{} pixels: {:?}",
+        off.len(),
+        &off[..off.len().min(8)]
+    );
+    // the blend, against its images read here
+    let gts: Vec<_> = (0..2)
+        .map(|k| read_image(scene.image_path(&scene.test.frames[k])).unwrap())
+        .collect();
+    let blend: Vec<_> = (0..2)
+        .map(|k| read_image(run_dir.join(format!("baselines/blend/{k:04}.png"))).unwrap())
+        .collect();
+    let x0 = 2 * (z * w + 2);
+    for (x, y) in [(0, 0), (w / 2, h / 2), (w - 1, h - 1)] {
+        let mut e = 0.0f64;
+        for k in 0..2 {
+            let o = ((y * w + x) * 3) as usize;
+            e += (0..3)
+                .map(|c| f64::from((gts[k].data[o + c] - blend[k].data[o + c]).abs()))
+                .sum::<f64>()
+                / 6.0;
+        }
+        let want = ((8.0 * e).min(1.0) * 255.0).round() as f32;
+        let got = code(x0 + z * x, z * y);
+        assert!(
+            (got - want).abs() <= 1.0,
+            "blend at ({x}, {y}): {got} vs {want}"
+        );
+    }
+    assert!(
+        out.contains("where the error stays") && out.contains("test_error_map.png"),
+        "{out}"
+    );
     assert!(
         line("model (gaussians renders)").contains(&format!("{:.2}", mean)),
         "{out}"
@@ -451,8 +501,11 @@ fn eval_scores_the_baselines_itself_not_from_the_deform_report() {
         "{out}"
     );
     assert_eq!(block[5], "  2D baselines: computed from the scene", "{out}");
-    // the deform entry rendered no novel views: no novel block
-    assert_eq!(block.len(), 6, "{out}");
+    // where to look: the sheet and the error map, then (no novel views rendered by the
+    // deform entry) no novel block
+    assert!(block[6].ends_with("test_sheet.png"), "{out}");
+    assert!(block[7].ends_with("test_error_map.png"), "{out}");
+    assert_eq!(block.len(), 8, "{out}");
     let m: serde_json::Value =
         serde_json::from_slice(&fs::read(run.join("metrics.json")).unwrap()).unwrap();
     assert_eq!(m["render_stage"], "deform");
