@@ -32,7 +32,7 @@ fn main() -> ExitCode {
             stagekit::verb::run::<deform::settings::DeformSettings>(&a, stagekit::verb::no_files)
         }
         Verb::Train(args) => {
-            let total = stage::resolve_settings(&args)?.iterations;
+            let total = stage::joint_iterations(&args)?;
             let progress = Progress::new("deform", total as u64);
             let o = stage::train(&args, sigint_flag(), |s| {
                 progress.set(s.iteration as u64, || {

@@ -40,7 +40,9 @@ pub enum FrameEncoding {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct DeformSettings {
-    /// Joint iterations after the warm-up.
+    /// Joint iterations after the warm-up; 0 = by the train frames' interval
+    /// ([`DeformSettings::iterations_for`]): 2000 at 20 fps and faster, growing with the
+    /// interval to 4000 at 10 fps and slower.
     pub iterations: u32,
     /// Seed of the sampling of views, event times and the PoseNet's first layer.
     pub seed: u64,
@@ -127,7 +129,7 @@ pub struct DeformSettings {
 impl Default for DeformSettings {
     fn default() -> Self {
         DeformSettings {
-            iterations: 2000,
+            iterations: 0,
             seed: 0,
             schedule: LossSchedule::default(),
             posenet: true,
@@ -162,7 +164,35 @@ impl Default for DeformSettings {
     }
 }
 
+/// The joint iterations of `iterations = 0` at train frames [`AUTO_INTERVAL_S`] apart or
+/// closer, and the most at any interval.
+pub const AUTO_ITERATIONS: (u32, u32) = (2000, 4000);
+
+/// The frame interval (seconds) up to which `iterations = 0` gives the fewest iterations.
+pub const AUTO_INTERVAL_S: f64 = 0.05;
+
 impl DeformSettings {
+    /// The joint iterations for train frames at `times` (seconds): `iterations`, or when
+    /// that is 0, `2000 × Δt / 50 ms` within [2000, 4000], Δt the median interval. The
+    /// longer the frames' interval, the more of the motion only the events show, and
+    /// the longer the joint training keeps gaining on the frames between: measured
+    /// +0.2 to +0.8 dB at 4–10 fps from 4000 iterations, −0.1 to −0.4 dB at 20 fps
+    /// (BENCHMARKS.md, "The joint training's length").
+    pub fn iterations_for(&self, times: &[f64]) -> u32 {
+        if self.iterations > 0 {
+            return self.iterations;
+        }
+        let (fewest, most) = AUTO_ITERATIONS;
+        let mut gaps: Vec<f64> = times.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
+        if gaps.is_empty() {
+            return fewest;
+        }
+        gaps.sort_by(f64::total_cmp);
+        let dt = gaps[gaps.len() / 2];
+        let k = (dt / AUTO_INTERVAL_S).clamp(1.0, f64::from(most) / f64::from(fewest));
+        (f64::from(fewest) * k).round() as u32
+    }
+
     /// Why the values cannot be used, if they cannot.
     pub fn validate(&self) -> Result<(), String> {
         let finite_nonneg = |name: &str, v: f64| {
@@ -222,5 +252,40 @@ impl DeformSettings {
 impl stagekit::Settings for DeformSettings {
     fn validate(&self) -> Result<(), String> {
         DeformSettings::validate(self)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Train frames at `fps` over one second.
+    fn frames(fps: f64) -> Vec<f64> {
+        (0..=fps as usize).map(|k| k as f64 / fps).collect()
+    }
+
+    #[test]
+    fn the_joint_iterations_grow_with_the_frames_interval() {
+        let s = DeformSettings::default();
+        assert_eq!(s.iterations, 0, "by the frame rate unless set");
+        // 2000 × Δt / 50 ms within [2000, 4000], by hand
+        for (fps, want) in [(40.0, 2000), (20.0, 2000), (16.0, 2500), (12.5, 3200)] {
+            assert_eq!(s.iterations_for(&frames(fps)), want, "{fps} fps");
+        }
+        for fps in [10.0, 8.0, 4.0, 1.0] {
+            assert_eq!(s.iterations_for(&frames(fps)), 4000, "{fps} fps");
+        }
+        // the median interval: one long gap among 20 fps frames changes nothing
+        let mut t = frames(20.0);
+        t.push(2.0);
+        assert_eq!(s.iterations_for(&t), 2000);
+        // one frame (no interval): the fewest
+        assert_eq!(s.iterations_for(&[0.5]), 2000);
+        // a number set is kept
+        let set = DeformSettings {
+            iterations: 1234,
+            ..DeformSettings::default()
+        };
+        assert_eq!(set.iterations_for(&frames(4.0)), 1234);
     }
 }

@@ -157,6 +157,19 @@ pub(crate) fn save_posenet(p: &PoseNet<f32>, dir: &Path) -> Result<()> {
     write_json_atomic(&dir.join("posenet.json"), p.settings())
 }
 
+/// The joint iterations `deform train` will run with `args`: the settings' `iterations`,
+/// or when 0, what the scene's train frames' interval gives
+/// ([`DeformSettings::iterations_for`]).
+pub fn joint_iterations(args: &TrainArgs) -> Result<u32> {
+    let s = resolve_settings(args)?;
+    if s.iterations > 0 {
+        return Ok(s.iterations);
+    }
+    let scene = scene::manifest::Scene::open(&args.stage.scene)?;
+    let times: Vec<f64> = scene.train.frames.iter().map(|f| f.timestamp).collect();
+    Ok(s.iterations_for(&times))
+}
+
 /// `deform train`: load everything, train until done or until `stop` is set, write
 /// every output. `on_step` sees each iteration's figures (progress display).
 pub fn train(
@@ -167,7 +180,7 @@ pub fn train(
     let start = std::time::Instant::now();
     let mut phases = Phases::new();
     phases.start("load");
-    let settings = resolve_settings(args)?;
+    let mut settings = resolve_settings(args)?;
     let rule = OutputRule::new("deform train")
         .force(args.stage.output.force)
         .source(&args.stage.scene)
@@ -182,6 +195,7 @@ pub fn train(
         &args.assoc,
         &settings,
     )?;
+    settings.iterations = settings.iterations_for(&d.times);
     let out = AtomicDir::new(&args.stage.output.out, &rule)?;
     phases.start("train");
     let mut tr = JointTrainer::new(&d, settings.clone());

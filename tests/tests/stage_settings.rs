@@ -32,9 +32,10 @@ fn every_known_stage_has_defaults() {
     assert_eq!(e.get("epochs"), None, "the stopping rule by default");
     assert_eq!(e["stop"].get("min_steps"), Some(&Value::Integer(10)));
     assert_eq!(defaults("assoc").get("k"), Some(&Value::Integer(3)));
+    // 0: by the train frames' interval (`DeformSettings::iterations_for`)
     assert_eq!(
         defaults("deform").get("iterations"),
-        Some(&Value::Integer(2000))
+        Some(&Value::Integer(0))
     );
 }
 
