@@ -98,17 +98,18 @@ fn columns<'a>(
     .collect()
 }
 
-/// `test_sheet.png` in `dir` (module doc): the test frames `gt` beside [`columns`];
-/// None when there is nothing to set beside the frames.
-pub(crate) fn test_sheet(
+/// `test_sheet.png` and `test_error_map.png` in `dir` (module doc): the test frames `gt`
+/// beside [`columns`], and where each column's error stays; None for both when there is
+/// nothing to set beside the frames.
+pub(crate) fn test_sheets(
     gt: &[PathBuf],
     model: &[(&Path, &Path)],
     baselines: &crate::baselines::BaselineImages,
     dir: &Path,
-) -> Result<Option<PathBuf>> {
+) -> Result<(Option<PathBuf>, Option<PathBuf>)> {
     let columns = columns(gt, model, baselines);
     if columns.is_empty() {
-        return Ok(None);
+        return Ok((None, None));
     }
     let rows: Vec<(&Path, Vec<&Path>)> = gt
         .iter()
@@ -116,20 +117,15 @@ pub(crate) fn test_sheet(
         .map(|(k, g)| (g.as_path(), columns.iter().map(|c| c[k]).collect()))
         .collect();
     write_sheet(&rows, &dir.join(TEST_SHEET))?;
-    Ok(Some(PathBuf::from(TEST_SHEET)))
+    error_map(gt, &columns, &dir.join(TEST_ERROR_MAP))?;
+    Ok((
+        Some(PathBuf::from(TEST_SHEET)),
+        Some(PathBuf::from(TEST_ERROR_MAP)),
+    ))
 }
 
-/// `test_error_map.png` in `dir` (module doc) for [`columns`]; None when there are none.
-pub(crate) fn test_error_map(
-    gt: &[PathBuf],
-    model: &[(&Path, &Path)],
-    baselines: &crate::baselines::BaselineImages,
-    dir: &Path,
-) -> Result<Option<PathBuf>> {
-    let columns = columns(gt, model, baselines);
-    if columns.is_empty() {
-        return Ok(None);
-    }
+/// Write the error map (module doc) of `columns` against `gt` to `out`.
+fn error_map(gt: &[PathBuf], columns: &[Vec<&Path>], out: &Path) -> Result<()> {
     let maps = columns
         .iter()
         .map(|c| mean_abs_error(gt, c))
@@ -148,8 +144,8 @@ pub(crate) fn test_error_map(
             }
         }
     }
-    write_png(dir.join(TEST_ERROR_MAP), &strip)?;
-    Ok(Some(PathBuf::from(TEST_ERROR_MAP)))
+    write_png(out, &strip)?;
+    Ok(())
 }
 
 /// The error map's gain: white is an average error of `1/ERROR_GAIN` of the range.

@@ -150,9 +150,8 @@ pub fn evaluate(inputs: Inputs, s: &EvalSettings, dir: &Path) -> Result<Metrics>
             Err(why) => (None, Some(why)),
         }
     };
-    let test_sheet = crate::sheet::test_sheet(&test_images, &test_pairs, &base_images, dir)?;
-    let test_error_map =
-        crate::sheet::test_error_map(&test_images, &test_pairs, &base_images, dir)?;
+    let (test_sheet, test_error_map) =
+        crate::sheet::test_sheets(&test_images, &test_pairs, &base_images, dir)?;
     let mean = |frames: &[FrameMetrics], f: &dyn Fn(&FrameMetrics) -> f64| {
         (!frames.is_empty()).then(|| frames.iter().map(f).sum::<f64>() / frames.len() as f64)
     };
