@@ -81,3 +81,27 @@ fn a_missing_scene_is_an_error_naming_it() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("no-such-scene"), "{err}");
 }
+
+/// The joint iterations `deform train` announces (its progress total) follow the
+/// scene's train frames: 4 fps frames get 4000, 20 fps frames 2000 (`2000 × Δt / 50 ms`
+/// within [2000, 4000]), and `--iterations` wins over both.
+#[test]
+fn the_joint_iterations_follow_the_frame_rate_unless_set() {
+    let dir = tempfile::tempdir().unwrap();
+    for (fps, want) in [(4.0, 4000), (20.0, 2000)] {
+        let cfg = synth::config::SynthConfig {
+            width: 32,
+            height: 32,
+            train_fps: fps,
+            ..synth::config::SynthConfig::preset("rigid").unwrap()
+        };
+        let scene_dir = dir.path().join(format!("fps{fps}"));
+        synth::scene_dir::write_synthetic_scene(&cfg, &scene_dir).unwrap();
+        let mut a = deform::stage::TrainArgs::default();
+        a.stage.scene = scene_dir;
+        let got = deform::stage::joint_iterations(&a).unwrap();
+        assert_eq!(got, want, "{fps} fps");
+        a.training.iterations = Some(7);
+        assert_eq!(deform::stage::joint_iterations(&a).unwrap(), 7);
+    }
+}
