@@ -183,12 +183,10 @@ impl DeformSettings {
             return self.iterations;
         }
         let (fewest, most) = AUTO_ITERATIONS;
-        let mut gaps: Vec<f64> = times.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
-        if gaps.is_empty() {
+        let dt = scene::manifest::median_interval(times);
+        if dt <= 0.0 {
             return fewest;
         }
-        gaps.sort_by(f64::total_cmp);
-        let dt = gaps[gaps.len() / 2];
         let k = (dt / AUTO_INTERVAL_S).clamp(1.0, f64::from(most) / f64::from(fewest));
         (f64::from(fewest) * k).round() as u32
     }

@@ -69,7 +69,8 @@ pub fn read_ecd(src: &Path) -> Result<Recording> {
     };
     // Events "cover" a frame up to half a (median) frame interval beyond their span:
     // the simulator's or sensor's first event comes a little after the first frame.
-    let slack = 0.5 * median_interval(&frames);
+    let times: Vec<f64> = frames.iter().map(|f| f.0).collect();
+    let slack = 0.5 * scene::manifest::median_interval(&times);
     let (c0, c1) = (e0 - slack, e1 + slack);
     let mut warnings = Vec::new();
     let mut out = Vec::new();
@@ -116,13 +117,6 @@ pub fn read_ecd(src: &Path) -> Result<Recording> {
         warnings,
         held_out: None,
     })
-}
-
-/// The median time between consecutive frames (0 for a single frame).
-fn median_interval(frames: &[(f64, PathBuf)]) -> f64 {
-    let mut d: Vec<f64> = frames.windows(2).map(|w| w[1].0 - w[0].0).collect();
-    d.sort_by(f64::total_cmp);
-    d.get(d.len() / 2).copied().unwrap_or(0.0)
 }
 
 /// `images.txt`: (timestamp, absolute image path) per frame, times increasing.

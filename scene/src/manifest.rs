@@ -58,6 +58,14 @@ pub struct Frame {
     pub cam_to_world: Pose,
 }
 
+/// The median time between consecutive `times` (in time order; 0 for fewer than two):
+/// a frame rate's interval that one dropped or late frame does not move.
+pub fn median_interval(times: &[f64]) -> f64 {
+    let mut d: Vec<f64> = times.windows(2).map(|w| w[1] - w[0]).collect();
+    d.sort_by(f64::total_cmp);
+    d.get(d.len() / 2).copied().unwrap_or(0.0)
+}
+
 /// Where the event stream is and its contrast threshold.
 #[derive(Clone, Debug, PartialEq)]
 pub struct EventsRef {

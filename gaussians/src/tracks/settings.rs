@@ -59,7 +59,7 @@ pub struct TrackSettings {
     /// over the recording for every track, from the middle frame.
     pub window: u32,
     /// Seconds of recording a window spans when `window` = 0: `1 + round(window_s / Δt)`
-    /// frames, at least 2, Δt the train frames' mean interval
+    /// frames, at least 2, Δt the train frames' median interval
     /// ([`TrackSettings::window_frames`]). A quadratic holds a turn for a stretch of
     /// time, not of frames: on the path-traced `spin` windows of 5 frames win at 20 fps
     /// and lose at 10 fps, where 3 win (BENCHMARKS.md, "The windows' handover at
@@ -139,7 +139,7 @@ impl TrackSettings {
         if self.window > 0 || self.window_s <= 0.0 || n < 2 {
             return self.window;
         }
-        let interval = (seconds[n - 1] - seconds[0]) / (n - 1) as f64;
+        let interval = scene::manifest::median_interval(seconds);
         match interval > 0.0 {
             true => (1.0 + (self.window_s / interval).round()).clamp(2.0, n as f64) as u32,
             false => 0,
