@@ -42,7 +42,7 @@ pub enum FrameEncoding {
 pub struct DeformSettings {
     /// Joint iterations after the warm-up; 0 = by the train frames' interval
     /// ([`DeformSettings::iterations_for`]): 2000 at 20 fps and faster, growing with the
-    /// interval to 4000 at 10 fps and slower.
+    /// interval to 6000 at 10 fps and slower.
     pub iterations: u32,
     /// Seed of the sampling of views, event times and the PoseNet's first layer.
     pub seed: u64,
@@ -164,31 +164,31 @@ impl Default for DeformSettings {
     }
 }
 
-/// The joint iterations of `iterations = 0` at train frames [`AUTO_INTERVAL_S`] apart or
-/// closer, and the most at any interval.
-pub const AUTO_ITERATIONS: (u32, u32) = (2000, 4000);
+/// The joint iterations of `iterations = 0`: the fewest at train frames
+/// [`AUTO_INTERVALS_S`]`.0` apart or closer, the most at `.1` apart or further.
+pub const AUTO_ITERATIONS: (u32, u32) = (2000, 6000);
 
-/// The frame interval (seconds) up to which `iterations = 0` gives the fewest iterations.
-pub const AUTO_INTERVAL_S: f64 = 0.05;
+/// The frame intervals (seconds) between which `iterations = 0` grows linearly from the
+/// fewest iterations to the most (20 fps and 10 fps).
+pub const AUTO_INTERVALS_S: (f64, f64) = (0.05, 0.10);
 
 impl DeformSettings {
     /// The joint iterations for train frames at `times` (seconds): `iterations`, or when
-    /// that is 0, `2000 × Δt / 50 ms` within [2000, 4000], Δt the median interval. The
-    /// longer the frames' interval, the more of the motion only the events show, and
-    /// the longer the joint training keeps gaining on the frames between: measured
-    /// +0.2 to +0.8 dB at 4–10 fps from 4000 iterations, −0.1 to −0.4 dB at 20 fps
-    /// (BENCHMARKS.md, "The joint training's length").
+    /// that is 0, 2000 at Δt ≤ 50 ms (20 fps and faster), 6000 at Δt ≥ 100 ms (10 fps and
+    /// slower), linear in Δt between, Δt the median interval. The longer the frames'
+    /// interval, the more of the motion only the events show, and the longer the joint
+    /// training keeps gaining on the frames between: measured +0.4 to +0.8 dB at 10 fps
+    /// from 6000 iterations against 4000, mixed at 20 fps from 4000 against 2000, where
+    /// the sensor-size runs must stay within their time (BENCHMARKS.md, "The joint
+    /// training's length").
     pub fn iterations_for(&self, times: &[f64]) -> u32 {
         if self.iterations > 0 {
             return self.iterations;
         }
-        let (fewest, most) = AUTO_ITERATIONS;
+        let ((fewest, most), (near, far)) = (AUTO_ITERATIONS, AUTO_INTERVALS_S);
         let dt = scene::manifest::median_interval(times);
-        if dt <= 0.0 {
-            return fewest;
-        }
-        let k = (dt / AUTO_INTERVAL_S).clamp(1.0, f64::from(most) / f64::from(fewest));
-        (f64::from(fewest) * k).round() as u32
+        let s = ((dt - near) / (far - near)).clamp(0.0, 1.0);
+        (f64::from(fewest) + s * f64::from(most - fewest)).round() as u32
     }
 
     /// Why the values cannot be used, if they cannot.
@@ -266,12 +266,13 @@ mod tests {
     fn the_joint_iterations_grow_with_the_frames_interval() {
         let s = DeformSettings::default();
         assert_eq!(s.iterations, 0, "by the frame rate unless set");
-        // 2000 × Δt / 50 ms within [2000, 4000], by hand
-        for (fps, want) in [(40.0, 2000), (20.0, 2000), (16.0, 2500), (12.5, 3200)] {
+        // 2000 at 50 ms, 6000 at 100 ms, linear between, by hand: 16 fps is 62.5 ms,
+        // a quarter of the way (3000); 12.5 fps 80 ms, three fifths (4400)
+        for (fps, want) in [(40.0, 2000), (20.0, 2000), (16.0, 3000), (12.5, 4400)] {
             assert_eq!(s.iterations_for(&frames(fps)), want, "{fps} fps");
         }
         for fps in [10.0, 8.0, 4.0, 1.0] {
-            assert_eq!(s.iterations_for(&frames(fps)), 4000, "{fps} fps");
+            assert_eq!(s.iterations_for(&frames(fps)), 6000, "{fps} fps");
         }
         // the median interval: one long gap among 20 fps frames changes nothing
         let mut t = frames(20.0);

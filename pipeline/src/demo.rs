@@ -25,7 +25,7 @@ pub(crate) const DEMO_SIZE: u32 = 96;
 pub(crate) const DEMO_GAUSSIANS_ITERATIONS: u32 = 1500;
 /// LoCM epochs of the demo (the stage default trains until the CM loss stops improving).
 pub(crate) const DEMO_EVFLOW_EPOCHS: usize = 1;
-/// Joint iterations of the demo (the stage default is 2000 to 4000 by the frame rate).
+/// Joint iterations of the demo (the stage default is 2000 to 6000 by the frame rate).
 pub(crate) const DEMO_DEFORM_ITERATIONS: u32 = 600;
 
 /// What the demo runs.
@@ -116,7 +116,7 @@ pub fn describe(opts: &DemoOptions, experiment_file: &Path) -> String {
     }
     if let Some(n) = opts.deform_iterations {
         reduced.push(format!(
-            "deform iterations = {n} (default 2000–4000 by the frame rate)"
+            "deform iterations = {n} (default 2000–6000 by the frame rate)"
         ));
     }
     format!(
