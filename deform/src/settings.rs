@@ -177,10 +177,10 @@ impl DeformSettings {
     /// that is 0, 2000 at Δt ≤ 50 ms (20 fps and faster), 6000 at Δt ≥ 100 ms (10 fps and
     /// slower), linear in Δt between, Δt the median interval. The longer the frames'
     /// interval, the more of the motion only the events show, and the longer the joint
-    /// training keeps gaining on the frames between: measured +0.4 to +0.8 dB at 10 fps
-    /// from 6000 iterations against 4000, mixed at 20 fps from 4000 against 2000, where
-    /// the sensor-size runs must stay within their time (BENCHMARKS.md, "The joint
-    /// training's length").
+    /// training keeps gaining on the frames between: measured −0.1 to +0.4 dB (LPIPS
+    /// level or lower) at 4–10 fps from 6000 iterations against 4000, mixed at 20 fps from
+    /// 4000 against 2000, where the sensor-size runs must stay within their time
+    /// (BENCHMARKS.md, "The joint training's length", "6 000 joint iterations at 10 fps").
     pub fn iterations_for(&self, times: &[f64]) -> u32 {
         if self.iterations > 0 {
             return self.iterations;
