@@ -41,8 +41,8 @@ pub enum FrameEncoding {
 #[serde(default, deny_unknown_fields)]
 pub struct DeformSettings {
     /// Joint iterations after the warm-up; 0 = by the train frames' interval
-    /// ([`DeformSettings::iterations_for`]): 2000 at 20 fps and faster, growing with the
-    /// interval to 6000 at 10 fps and slower.
+    /// ([`DeformSettings::iterations_for`]): 4000 at 20 fps and faster (2000 at sensor
+    /// size), growing with the interval to 6000 at 10 fps and slower.
     pub iterations: u32,
     /// Seed of the sampling of views, event times and the PoseNet's first layer.
     pub seed: u64,
@@ -118,8 +118,9 @@ pub struct DeformSettings {
     /// before the end of densification leaves the joint training any to do.
     pub regrow: bool,
     /// Give the warm-up's deformation field a colour head (`FieldSettings::color`,
-    /// started at zero) for the joint training: each dynamic Gaussian's colour may then
-    /// change with time as the frames and the events show (shading on a turning object).
+    /// started at zero) for the joint training: each Gaussian's colour may then change
+    /// with time as the frames and the events show (shading on a turning object, a
+    /// shadow moving over a still floor; the static ones keep their geometry).
     /// Nothing when the warm-up's field already has one or the warm-up kept no field.
     pub field_color: bool,
     /// Record the losses every this many iterations in the report.
@@ -166,26 +167,43 @@ impl Default for DeformSettings {
 
 /// The joint iterations of `iterations = 0`: the fewest at train frames
 /// [`AUTO_INTERVALS_S`]`.0` apart or closer, the most at `.1` apart or further.
-pub const AUTO_ITERATIONS: (u32, u32) = (2000, 6000);
+pub const AUTO_ITERATIONS: (u32, u32) = (4000, 6000);
+
+/// The fewest of [`AUTO_ITERATIONS`] for frames of [`SENSOR_PIXELS`] or more: a joint
+/// step costs linearly in the pixels and Gaussians, and at DAVIS346 size (0.19 s a step)
+/// 4000 would take the whole run from 14 to about 20 minutes.
+pub const AUTO_FEWEST_SENSOR: u32 = 2000;
+
+/// Frames of this many pixels or more (DAVIS346's 346 × 260 = 89 960; the 128² of the
+/// scenes measured at 4000 is 16 384) take [`AUTO_FEWEST_SENSOR`].
+pub const SENSOR_PIXELS: u64 = 65_536;
 
 /// The frame intervals (seconds) between which `iterations = 0` grows linearly from the
 /// fewest iterations to the most (20 fps and 10 fps).
 pub const AUTO_INTERVALS_S: (f64, f64) = (0.05, 0.10);
 
 impl DeformSettings {
-    /// The joint iterations for train frames at `times` (seconds): `iterations`, or when
-    /// that is 0, 2000 at Δt ≤ 50 ms (20 fps and faster), 6000 at Δt ≥ 100 ms (10 fps and
-    /// slower), linear in Δt between, Δt the median interval. The longer the frames'
-    /// interval, the more of the motion only the events show, and the longer the joint
-    /// training keeps gaining on the frames between: measured −0.1 to +0.4 dB (LPIPS
-    /// level or lower) at 4–10 fps from 6000 iterations against 4000, mixed at 20 fps from
-    /// 4000 against 2000, where the sensor-size runs must stay within their time
-    /// (BENCHMARKS.md, "The joint training's length", "6 000 joint iterations at 10 fps").
-    pub fn iterations_for(&self, times: &[f64]) -> u32 {
+    /// The joint iterations for train frames at `times` (seconds) of `pixels` each:
+    /// `iterations`, or when that is 0, 4000 at Δt ≤ 50 ms (20 fps and faster; 2000 for
+    /// frames of [`SENSOR_PIXELS`] or more), 6000 at Δt ≥ 100 ms (10 fps and slower),
+    /// linear in Δt between, Δt the median interval. The longer the frames' interval,
+    /// the more of the motion only the events show, and the longer the joint training
+    /// keeps gaining on the frames between: measured −0.1 to +0.4 dB (LPIPS level or
+    /// lower) at 4–10 fps from 6000 iterations against 4000; at 20 fps from 4000 against
+    /// 2000 PSNR mixed (±0.4 dB, every row far above the event pseudo image) and LPIPS
+    /// lower on the outside scenes, which only then come under the event pseudo image's
+    /// on both seeds (BENCHMARKS.md, "The joint training's length", "6 000 joint
+    /// iterations at 10 fps", "4 000 joint iterations at 20 fps").
+    pub fn iterations_for(&self, times: &[f64], pixels: u64) -> u32 {
         if self.iterations > 0 {
             return self.iterations;
         }
         let ((fewest, most), (near, far)) = (AUTO_ITERATIONS, AUTO_INTERVALS_S);
+        let fewest = if pixels >= SENSOR_PIXELS {
+            AUTO_FEWEST_SENSOR
+        } else {
+            fewest
+        };
         let dt = scene::manifest::median_interval(times);
         let s = ((dt - near) / (far - near)).clamp(0.0, 1.0);
         (f64::from(fewest) + s * f64::from(most - fewest)).round() as u32
@@ -266,25 +284,34 @@ mod tests {
     fn the_joint_iterations_grow_with_the_frames_interval() {
         let s = DeformSettings::default();
         assert_eq!(s.iterations, 0, "by the frame rate unless set");
-        // 2000 at 50 ms, 6000 at 100 ms, linear between, by hand: 16 fps is 62.5 ms,
-        // a quarter of the way (3000); 12.5 fps 80 ms, three fifths (4400)
-        for (fps, want) in [(40.0, 2000), (20.0, 2000), (16.0, 3000), (12.5, 4400)] {
-            assert_eq!(s.iterations_for(&frames(fps)), want, "{fps} fps");
+        let small = 128 * 128;
+        // 4000 at 50 ms, 6000 at 100 ms, linear between, by hand: 16 fps is 62.5 ms,
+        // a quarter of the way (4500); 12.5 fps 80 ms, three fifths (5200)
+        for (fps, want) in [(40.0, 4000), (20.0, 4000), (16.0, 4500), (12.5, 5200)] {
+            assert_eq!(s.iterations_for(&frames(fps), small), want, "{fps} fps");
         }
         for fps in [10.0, 8.0, 4.0, 1.0] {
-            assert_eq!(s.iterations_for(&frames(fps)), 6000, "{fps} fps");
+            assert_eq!(s.iterations_for(&frames(fps), small), 6000, "{fps} fps");
         }
+        // at sensor size (DAVIS346: 346 × 260) from 2000: 16 fps a quarter of the way
+        // to 6000 (3000), 12.5 fps three fifths (4400)
+        let davis = 346 * 260;
+        for (fps, want) in [(20.0, 2000), (16.0, 3000), (12.5, 4400), (10.0, 6000)] {
+            assert_eq!(s.iterations_for(&frames(fps), davis), want, "{fps} fps");
+        }
+        assert_eq!(s.iterations_for(&frames(20.0), 65_535), 4000);
+        assert_eq!(s.iterations_for(&frames(20.0), 65_536), 2000);
         // the median interval: one long gap among 20 fps frames changes nothing
         let mut t = frames(20.0);
         t.push(2.0);
-        assert_eq!(s.iterations_for(&t), 2000);
+        assert_eq!(s.iterations_for(&t, small), 4000);
         // one frame (no interval): the fewest
-        assert_eq!(s.iterations_for(&[0.5]), 2000);
+        assert_eq!(s.iterations_for(&[0.5], small), 4000);
         // a number set is kept
         let set = DeformSettings {
             iterations: 1234,
             ..DeformSettings::default()
         };
-        assert_eq!(set.iterations_for(&frames(4.0)), 1234);
+        assert_eq!(set.iterations_for(&frames(4.0), davis), 1234);
     }
 }

@@ -167,7 +167,12 @@ pub fn joint_iterations(args: &TrainArgs) -> Result<u32> {
     }
     let scene = scene::manifest::Scene::open(&args.stage.scene)?;
     let times: Vec<f64> = scene.train.frames.iter().map(|f| f.timestamp).collect();
-    Ok(s.iterations_for(&times))
+    Ok(s.iterations_for(&times, frame_pixels(&scene.train.camera)))
+}
+
+/// The pixels of one train frame.
+fn frame_pixels(c: &scene::camera::Intrinsics) -> u64 {
+    u64::from(c.width) * u64::from(c.height)
 }
 
 /// `deform train`: load everything, train until done or until `stop` is set, write
@@ -195,7 +200,7 @@ pub fn train(
         &args.assoc,
         &settings,
     )?;
-    settings.iterations = settings.iterations_for(&d.times);
+    settings.iterations = settings.iterations_for(&d.times, frame_pixels(&d.scene.train.camera));
     let out = AtomicDir::new(&args.stage.output.out, &rule)?;
     phases.start("train");
     let mut tr = JointTrainer::new(&d, settings.clone());

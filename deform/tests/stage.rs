@@ -83,12 +83,12 @@ fn a_missing_scene_is_an_error_naming_it() {
 }
 
 /// The joint iterations `deform train` announces (its progress total) follow the
-/// scene's train frames: 4 fps frames get 6000, 20 fps frames 2000 (2000 at 50 ms, 6000
-/// at 100 ms and over), and `--iterations` wins over both.
+/// scene's train frames: 4 fps frames get 6000, 20 fps frames 4000 (4000 at 50 ms, 6000
+/// at 100 ms and over, at this size), and `--iterations` wins over both.
 #[test]
 fn the_joint_iterations_follow_the_frame_rate_unless_set() {
     let dir = tempfile::tempdir().unwrap();
-    for (fps, want) in [(4.0, 6000), (20.0, 2000)] {
+    for (fps, want) in [(4.0, 6000), (20.0, 4000)] {
         let cfg = synth::config::SynthConfig {
             width: 32,
             height: 32,

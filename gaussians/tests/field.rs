@@ -386,3 +386,95 @@ fn a_colour_head_added_keeps_the_deformation() {
     );
     assert_eq!(c.with_color().params, c.params);
 }
+
+/// With a colour head the field runs on every Gaussian even when `dynamic_only`: the
+/// static-flagged ones keep their geometry and take the field's colour. The deltas
+/// against the f64 network's rows with the static ones' geometric columns zeroed, and
+/// both backward paths against central differences of that masked loss in f64.
+#[test]
+fn a_colour_field_recolours_static_gaussians_without_moving_them() {
+    use gaussians::Gaussian;
+    use gaussians::field::{FieldWork, MlpCache, splat_deltas_backward_into, splat_deltas_into};
+    let n = 9;
+    let x = points(n);
+    let splats: gaussians::Splats = x
+        .iter()
+        .enumerate()
+        .map(|(i, m)| Gaussian {
+            dynamic: i.is_multiple_of(3),
+            ..Gaussian::isotropic(m.map(|v| v as f32), -2.0, 0.0, [0.1; 3])
+        })
+        .collect();
+    let settings = coloured(3, 8);
+    let mlp = Mlp::<f32>::new(settings, 5);
+    let mut net = Mlp::<f64>::new(settings, 5);
+    net.params = mlp.params.iter().map(|&p| p as f64).collect();
+    let t = 0.4;
+    let w = weights_of(n, 13);
+    // The masked weights: a static Gaussian's geometric outputs do not reach the loss.
+    let mask = |i: usize, k: usize| i.is_multiple_of(3) || k >= field::HEAD_OUT;
+    let wm: Vec<f64> = (0..n * 13)
+        .map(|j| if mask(j / 13, j % 13) { w[j] } else { 0.0 })
+        .collect();
+
+    let (d, cache) = field::splat_deltas(&mlp, &splats, t as f32, true);
+    let mut work = FieldWork::default();
+    let (mut d2, mut cache2) = (Deltas::default(), MlpCache::default());
+    splat_deltas_into(
+        &mlp,
+        &splats,
+        t as f32,
+        true,
+        &mut work,
+        &mut d2,
+        &mut cache2,
+    );
+    assert_eq!(d, d2);
+    let (rows, _) = net.forward(&x, &[t]);
+    for i in 0..n {
+        let got = [&d.dx[i][..], &d.dq[i][..], &d.ds[i][..], &d.dc[i][..]].concat();
+        for k in 0..13 {
+            let want = if mask(i, k) { rows[i * 13 + k] } else { 0.0 };
+            assert!(
+                (got[k] as f64 - want).abs() < 1e-5,
+                "Gaussian {i} output {k}: {} against {want}",
+                got[k]
+            );
+        }
+        if !i.is_multiple_of(3) {
+            assert!(
+                d.dc[i].iter().any(|v| v.abs() > 1e-4),
+                "static {i} recoloured"
+            );
+        }
+    }
+
+    // The gradient of Σ w ⊙ deltas: the full weights go in, the static geometry's drop.
+    let mut g = Deltas::default();
+    for i in 0..n {
+        let r = &w[i * 13..i * 13 + 13];
+        g.dx.push([r[0], r[1], r[2]].map(|v| v as f32));
+        g.dq.push([r[3], r[4], r[5], r[6]].map(|v| v as f32));
+        g.ds.push([r[7], r[8], r[9]].map(|v| v as f32));
+        g.dc.push([r[10], r[11], r[12]].map(|v| v as f32));
+    }
+    let grad = field::splat_deltas_backward(&mlp, &splats, true, &cache, &g);
+    let mut grad2 = Vec::new();
+    splat_deltas_backward_into(&mlp, &splats, true, &cache2, &g, &mut work, &mut grad2);
+    assert_eq!(grad, grad2);
+    let p0 = net.params.clone();
+    let (mut num, mut den) = (0.0f64, 0.0f64);
+    const EPS: f64 = 1e-6;
+    for p in 0..p0.len() {
+        net.params[p] = p0[p] + EPS;
+        let lp = loss(&net, &x, &[t], &wm);
+        net.params[p] = p0[p] - EPS;
+        let lm = loss(&net, &x, &[t], &wm);
+        net.params[p] = p0[p];
+        let fd = (lp - lm) / (2.0 * EPS);
+        num += (grad[p] as f64 - fd).powi(2);
+        den += fd * fd;
+    }
+    let rel = num.sqrt() / den.sqrt();
+    assert!(den.sqrt() > 1e-2 && rel < 1e-4, "relative error {rel:.2e}");
+}

@@ -1,18 +1,49 @@
 //! The deformation field evaluated on [`Splats`]: on every Gaussian, or only on those
-//! flagged dynamic (`dynamic_only`; the others keep their canonical parameters).
+//! flagged dynamic (`dynamic_only`; the others keep their canonical parameters). A field
+//! with a colour head runs on every Gaussian even when `dynamic_only`: the static ones
+//! keep their canonical geometry and take its colour (a still floor under a moving
+//! shadow changes colour without moving).
 
 use super::deltas::{Deformation, Deltas, apply_color_deltas, apply_deltas, apply_deltas_in_place};
-use super::mlp::{Mlp, MlpCache, MlpScratch};
+use super::mlp::{HEAD_OUT, Mlp, MlpCache, MlpScratch};
 use crate::splats::Splats;
 
 /// Indices the field is evaluated on: all (`None`), or the dynamic ones when
-/// `dynamic_only` (missing flags count as dynamic).
-pub fn evaluated_indices(splats: &Splats, dynamic_only: bool) -> Option<Vec<usize>> {
-    dynamic_only.then(|| {
+/// `dynamic_only` and the field has no colour head (missing flags count as dynamic).
+pub fn evaluated_indices(
+    mlp: &Mlp<f32>,
+    splats: &Splats,
+    dynamic_only: bool,
+) -> Option<Vec<usize>> {
+    subset(mlp, dynamic_only).then(|| {
         (0..splats.len())
             .filter(|&i| splats.is_dynamic(i))
             .collect()
     })
+}
+
+/// Whether the field runs on the dynamic subset only: `dynamic_only` without a colour
+/// head.
+fn subset(mlp: &Mlp<f32>, dynamic_only: bool) -> bool {
+    dynamic_only && !mlp.settings.color
+}
+
+/// Zero the geometric deltas (or their gradients) of the static-flagged Gaussians.
+fn still_geometry(splats: &Splats, d: &mut Deltas) {
+    for i in (0..d.len()).filter(|&i| !splats.is_dynamic(i)) {
+        d.dx[i] = [0.0; 3];
+        d.dq[i] = [0.0; 4];
+        d.ds[i] = [0.0; 3];
+    }
+}
+
+/// The same on head rows of `width` (geometry first, as [`Deltas::set_row`]).
+fn still_geometry_rows(splats: &Splats, rows: &mut [f32], width: usize) {
+    for (i, r) in rows.chunks_mut(width).enumerate() {
+        if !splats.is_dynamic(i) {
+            r[..HEAD_OUT].fill(0.0);
+        }
+    }
 }
 
 /// Field deltas for every Gaussian at time `t` (zero for static-flagged ones when
@@ -23,8 +54,14 @@ pub fn splat_deltas(
     t: f32,
     dynamic_only: bool,
 ) -> (Deltas, MlpCache<f32>) {
-    match evaluated_indices(splats, dynamic_only) {
-        None => Deformation::forward(mlp, &splats.means, &[t]),
+    match evaluated_indices(mlp, splats, dynamic_only) {
+        None => {
+            let (mut d, cache) = Deformation::forward(mlp, &splats.means, &[t]);
+            if dynamic_only {
+                still_geometry(splats, &mut d);
+            }
+            (d, cache)
+        }
         Some(idx) => {
             let sub: Vec<[f32; 3]> = idx.iter().map(|&i| splats.means[i]).collect();
             let (ds, cache) = Deformation::forward(mlp, &sub, &[t]);
@@ -48,7 +85,12 @@ pub fn splat_deltas_backward(
     cache: &MlpCache<f32>,
     g: &Deltas,
 ) -> Vec<f32> {
-    match evaluated_indices(splats, dynamic_only) {
+    match evaluated_indices(mlp, splats, dynamic_only) {
+        None if dynamic_only => {
+            let mut g = g.clone();
+            still_geometry(splats, &mut g);
+            Deformation::backward(mlp, cache, &g)
+        }
         None => Deformation::backward(mlp, cache, g),
         Some(idx) => {
             let mut sub = Deltas::default();
@@ -99,8 +141,11 @@ pub fn splat_deltas_into(
         scratch, rows, sub, ..
     } = work;
     let width = mlp.settings.head_out();
-    if !dynamic_only {
+    if !subset(mlp, dynamic_only) {
         mlp.forward_into(&splats.means, &[t], cache, scratch, rows);
+        if dynamic_only {
+            still_geometry_rows(splats, rows, width);
+        }
         deltas.set_rows(rows, width);
         return;
     }
@@ -135,7 +180,7 @@ pub fn splat_deltas_backward_into(
         ..
     } = work;
     let width = mlp.settings.head_out();
-    if dynamic_only {
+    if subset(mlp, dynamic_only) {
         sub_deltas.set_zeros(0);
         for i in (0..splats.len()).filter(|&i| splats.is_dynamic(i)) {
             sub_deltas.push_one(g, i);
@@ -143,6 +188,9 @@ pub fn splat_deltas_backward_into(
         sub_deltas.rows_into(rows, width);
     } else {
         g.rows_into(rows, width);
+        if dynamic_only {
+            still_geometry_rows(splats, rows, width);
+        }
     }
     mlp.backward_into(cache, rows, scratch, grads);
 }
