@@ -48,7 +48,7 @@ struct Spec {
     x_label: String,
     y_label: String,
     series: Vec<Series>,
-    /// Horizontal reference lines (label, y).
+    /// Horizontal reference lines (label with its value, y).
     lines: Vec<(String, f64)>,
     /// Plot x on a log10 axis (ticks still in x's units).
     log_x: bool,
@@ -106,9 +106,9 @@ fn first_name(experiments: &[String]) -> &str {
     experiments.first().map(String::as_str).unwrap_or("")
 }
 
-/// Model points of one scene as series by method, x from `x_of` (points without an x
-/// left out).
-fn model_series(points: &[&ModelPoint], x_of: &XOf) -> Vec<Series> {
+/// Model points of one scene as series by method, x from `x_of` and y from `y_of`
+/// (points without either left out).
+fn model_series(points: &[&ModelPoint], x_of: &XOf, y_of: &XOf) -> Vec<Series> {
     let names: Vec<&str> = points.iter().map(|p| first_name(&p.experiments)).collect();
     let labels = short_labels(&names);
     let mut out: Vec<Series> = Vec::new();
@@ -137,7 +137,7 @@ fn model_series(points: &[&ModelPoint], x_of: &XOf) -> Vec<Series> {
                     }
                     _ => l.clone(),
                 };
-                Some((x_of(p)?, p.psnr, tag))
+                Some((x_of(p)?, y_of(p)?, tag))
             })
             .collect();
         if !pts.is_empty() {
@@ -164,44 +164,57 @@ pub(crate) fn draw_all(data: &ChartData, out: &Path) -> Result<Vec<PathBuf>> {
     let mut written = Vec::new();
     for scene in scenes {
         let models: Vec<&ModelPoint> = data.models.iter().filter(|p| p.scene == scene).collect();
-        let lines: Vec<(String, f64)> = data
-            .baselines
-            .iter()
-            .filter(|b| b.scene == scene)
-            .map(|b| (b.name.clone(), b.psnr))
+        let baselines = data.baselines.iter().filter(|b| b.scene == scene);
+        let psnr_lines: Vec<(String, f64)> = baselines
+            .clone()
+            .map(|b| (format!("{} ({:.2} dB)", b.name, b.psnr), b.psnr))
             .collect();
-        let psnr = "test PSNR (dB)".to_string();
-        let charts: [(&str, String, &XOf); 3] = [
+        let lpips_lines: Vec<(String, f64)> = baselines
+            .filter_map(|b| Some((format!("{} ({:.4})", b.name, b.lpips?), b.lpips?)))
+            .collect();
+        let time = "total wall time of the stages, cached ones at their build cost (s)";
+        let psnr: &XOf = &|p| Some(p.psnr);
+        let lpips: &XOf = &|p| p.lpips;
+        let charts: [(&str, String, &XOf, &XOf); 4] = [
+            ("psnr-vs-time", time.into(), &|p| Some(p.total_s), psnr),
             (
-                "psnr-vs-time",
-                "total wall time of the stages, cached ones at their build cost (s)".into(),
-                &|p| Some(p.total_s),
+                "psnr-vs-size",
+                "model files on disk (MiB)".into(),
+                &|p| Some(p.model_bytes as f64 / (1 << 20) as f64),
+                psnr,
             ),
-            ("psnr-vs-size", "model files on disk (MiB)".into(), &|p| {
-                Some(p.model_bytes as f64 / (1 << 20) as f64)
-            }),
-            ("psnr-vs-gaussians", "Gaussians".into(), &|p| {
-                p.gaussians.map(|g| g as f64)
-            }),
+            (
+                "psnr-vs-gaussians",
+                "Gaussians".into(),
+                &|p| p.gaussians.map(|g| g as f64),
+                psnr,
+            ),
+            ("lpips-vs-time", time.into(), &|p| Some(p.total_s), lpips),
         ];
-        for (file, x_label, x_of) in charts {
-            let series = model_series(&models, x_of);
+        for (file, x_label, x_of, y_of) in charts {
+            let series = model_series(&models, x_of, y_of);
             if series.is_empty() {
                 continue;
             }
             let question = match file {
                 "psnr-vs-time" => "accuracy against time",
                 "psnr-vs-size" => "accuracy against model size",
+                "lpips-vs-time" => "perceptual error against time",
                 _ => "accuracy against Gaussian count",
             };
+            let is_lpips = file.starts_with("lpips");
             let spec = Spec {
                 title: format!("{scene}: {question}"),
                 x_label,
-                y_label: psnr.clone(),
+                y_label: if is_lpips {
+                    "test LPIPS (VGG; lower is better)".into()
+                } else {
+                    "test PSNR (dB)".into()
+                },
                 log_x: spread(&series) > 20.0,
                 series,
-                lines: lines.clone(),
-                lower_is_better: false,
+                lines: if is_lpips { &lpips_lines } else { &psnr_lines }.clone(),
+                lower_is_better: is_lpips,
             };
             written.extend(write_both(&spec, &out.join(format!("{scene}-{file}")))?);
         }
@@ -400,7 +413,7 @@ fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, spec: &Spec) -> Resul
     let mut lines_drawn = Vec::new();
     for (i, (label, y)) in spec.lines.iter().enumerate() {
         let c = LINE_COLOURS[i % LINE_COLOURS.len()];
-        labels.push(format!("2D baseline: {label} ({y:.2} dB)"));
+        labels.push(format!("2D baseline: {label}"));
         lines_drawn.extend(polyline_anchors(&[
             chart.backend_coord(&(x0, *y)),
             chart.backend_coord(&(x1, *y)),

@@ -86,12 +86,13 @@ pub struct FlowPoint {
     pub mode: Option<String>,
 }
 
-/// A 2D baseline's test PSNR on a scene.
+/// A 2D baseline's test PSNR (and LPIPS, when the report has it) on a scene.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Baseline {
     pub scene: String,
     pub name: String,
     pub psnr: f64,
+    pub lpips: Option<f64>,
 }
 
 /// Everything charted.
@@ -285,14 +286,20 @@ pub fn collect(runs: &[RunRecord]) -> ChartData {
                 });
             }
             if s.stage == "deform" && !data.baselines.iter().any(|b| b.scene == scene) {
-                for (name, path) in [
-                    ("nearest frame", "baselines/nearest/psnr_mean"),
-                    ("linear blend", "baselines/blend/psnr_mean"),
-                    ("event pseudo image", "baselines/events/psnr_mean"),
+                for (name, key) in [
+                    ("nearest frame", "nearest"),
+                    ("linear blend", "blend"),
+                    ("event pseudo image", "events"),
                 ] {
-                    if let Some(psnr) = num(&report, path) {
+                    if let Some(psnr) = num(&report, &format!("baselines/{key}/psnr_mean")) {
+                        let lpips = num(&report, &format!("baselines/{key}/lpips_mean"));
                         let (scene, name) = (scene.clone(), name.to_string());
-                        data.baselines.push(Baseline { scene, name, psnr });
+                        data.baselines.push(Baseline {
+                            scene,
+                            name,
+                            psnr,
+                            lpips,
+                        });
                     }
                 }
             }
@@ -350,7 +357,13 @@ pub(crate) fn to_csv(d: &ChartData) -> String {
         );
     }
     for b in &d.baselines {
-        s += &format!("baseline,{},,,{},,{},,,,,,,,\n", b.scene, b.name, b.psnr);
+        s += &format!(
+            "baseline,{},,,{},,{},,{},,,,,,\n",
+            b.scene,
+            b.name,
+            b.psnr,
+            opt(b.lpips)
+        );
     }
     s
 }

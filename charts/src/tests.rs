@@ -112,7 +112,8 @@ fn points_come_from_the_reports_and_shared_entries_count_once() {
                 "finetune": {"mode": "lora"}}"#;
     let degs = r#"{"test": {"psnr_mean": 27.0, "lpips_mean": 0.125}, "gaussians": 3500,
         "settings": {"schedule": {"gamma1": 1.0, "gamma2_max": 1.0}},
-        "baselines": {"nearest": {"psnr_mean": 20.0}, "blend": {"psnr_mean": 22.5},
+        "baselines": {"nearest": {"psnr_mean": 20.0, "lpips_mean": 0.25},
+                      "blend": {"psnr_mean": 22.5, "lpips_mean": 0.1875},
                       "events": null}}"#;
     let rgb = r#"{"test": {"psnr_mean": 26.0}, "gaussians": 3400,
         "settings": {"schedule": {"gamma1": 0.0, "gamma2_max": 0.0}}}"#;
@@ -167,12 +168,18 @@ fn points_come_from_the_reports_and_shared_entries_count_once() {
         ),
         (12.5, 4.0, Some("lora"))
     );
-    let lines: Vec<(&str, f64)> = data
+    let lines: Vec<(&str, f64, Option<f64>)> = data
         .baselines
         .iter()
-        .map(|b| (b.name.as_str(), b.psnr))
+        .map(|b| (b.name.as_str(), b.psnr, b.lpips))
         .collect();
-    assert_eq!(lines, [("nearest frame", 20.0), ("linear blend", 22.5)]);
+    assert_eq!(
+        lines,
+        [
+            ("nearest frame", 20.0, Some(0.25)),
+            ("linear blend", 22.5, Some(0.1875))
+        ]
+    );
     assert!(data.models.iter().all(|p| p.scene == "rigid"));
     let csv = to_csv(&data);
     assert_eq!(csv.lines().count(), 1 + 3 + 1 + 2);
@@ -199,6 +206,8 @@ fn points_come_from_the_reports_and_shared_entries_count_once() {
             "rigid-psnr-vs-size.svg",
             "rigid-psnr-vs-gaussians.png",
             "rigid-psnr-vs-gaussians.svg",
+            "rigid-lpips-vs-time.png",
+            "rigid-lpips-vs-time.svg",
             "rigid-epe-vs-locm.png",
             "rigid-epe-vs-locm.svg",
             "chart.json",
@@ -232,6 +241,21 @@ fn points_come_from_the_reports_and_shared_entries_count_once() {
     ] {
         assert!(svg.contains(text), "{text}");
     }
+    // the LPIPS chart: only the point whose report has LPIPS, the lines at theirs
+    let svg = std::fs::read_to_string(out.join("rigid-lpips-vs-time.svg")).unwrap();
+    for text in [
+        "test LPIPS (VGG; lower is better)",
+        "linear blend (0.1875)",
+        "nearest frame (0.2500)",
+    ] {
+        assert!(svg.contains(text), "{text}");
+    }
+    assert!(!svg.contains("dB"), "no PSNR on the LPIPS chart");
+    let baseline_row = csv.lines().last().unwrap();
+    assert_eq!(
+        baseline_row,
+        "baseline,rigid,,,linear blend,,22.5,,0.1875,,,,,,"
+    );
     let json: Value =
         serde_json::from_slice(&std::fs::read(out.join("chart.json")).unwrap()).unwrap();
     assert_eq!(json["models"][1]["total_s"], 61.0);

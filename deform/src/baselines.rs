@@ -10,19 +10,24 @@ use crate::event_image::{
     PseudoImage, PseudoInputs, PseudoMode, PseudoSettings, linear_to_srgb, pseudo_image,
     srgb_to_linear,
 };
+use gaussians::evaluation::{Lpips, lpips_planar};
 use gaussians::stage::PSNR_CAP;
 use gaussians::train::View;
 use scene::events::EventStream;
 use scene::metrics::{psnr_u8, ssim_u8};
 use serde::Serialize;
 
-/// PSNR (at most `gaussians::stage::PSNR_CAP`) and SSIM of one baseline over the test
-/// frames.
+/// PSNR (at most `gaussians::stage::PSNR_CAP`), SSIM and LPIPS of one baseline over the
+/// test frames.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct BaselineScore {
     pub psnr_mean: f64,
     pub ssim_mean: f64,
     pub psnr: Vec<f64>,
+    /// LPIPS (VGG16) as the model's (`gaussians::evaluation`); absent when the model's
+    /// has none (its `lpips_note` says why) or a pair could not be scored.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lpips_mean: Option<f64>,
     /// The predictions themselves, one per test frame (planar RGB in the frames'
     /// stored encoding, like [`View::rgb`]), for a user to look at.
     #[serde(skip)]
@@ -67,7 +72,7 @@ fn neighbours(times: &[f64], t: f64) -> (usize, usize, f64) {
     (j, j + 1, s)
 }
 
-fn score(preds: Vec<Vec<f32>>, targets: &[&View]) -> BaselineScore {
+fn score(preds: Vec<Vec<f32>>, targets: &[&View], lpips: Option<&Lpips>) -> BaselineScore {
     let mut out = BaselineScore::default();
     let mut ssim = 0.0;
     for (p, v) in preds.iter().zip(targets) {
@@ -81,12 +86,30 @@ fn score(preds: Vec<Vec<f32>>, targets: &[&View]) -> BaselineScore {
     let n = preds.len().max(1) as f64;
     out.psnr_mean = out.psnr.iter().sum::<f64>() / n;
     out.ssim_mean = ssim / n;
+    let size = |v: &View| {
+        let k = &v.camera.intrinsics;
+        (k.width as usize, k.height as usize)
+    };
+    let lpips: Option<Vec<f64>> = lpips.filter(|_| !preds.is_empty()).and_then(|m| {
+        let pair = |(p, v): (&Vec<f32>, &&View)| {
+            let (w, h) = size(v);
+            lpips_planar(m, p, &v.rgb, w, h).ok()
+        };
+        preds.iter().zip(targets).map(pair).collect()
+    });
+    out.lpips_mean = lpips.map(|l| l.iter().sum::<f64>() / n);
     out.images = preds;
     out
 }
 
-/// Score the baselines on `test` views whose times (seconds) are `test_times`.
-pub fn evaluate(rec: &Recording<'_>, test: &[View], test_times: &[f64]) -> Baselines {
+/// Score the baselines on `test` views whose times (seconds) are `test_times`, LPIPS
+/// with `lpips` when given.
+pub fn evaluate(
+    rec: &Recording<'_>,
+    test: &[View],
+    test_times: &[f64],
+    lpips: Option<&Lpips>,
+) -> Baselines {
     let targets: Vec<&View> = test.iter().collect();
     let mut nearest: Vec<Vec<f32>> = Vec::new();
     let mut blend: Vec<Vec<f32>> = Vec::new();
@@ -149,11 +172,11 @@ pub fn evaluate(rec: &Recording<'_>, test: &[View], test_times: &[f64]) -> Basel
                         .collect()
                 })
                 .collect::<Vec<Vec<f32>>>();
-            score(preds, &targets)
+            score(preds, &targets, lpips)
         });
     Baselines {
-        nearest: score(nearest, &targets),
-        blend: score(blend, &targets),
+        nearest: score(nearest, &targets, lpips),
+        blend: score(blend, &targets, lpips),
         events,
     }
 }
@@ -186,7 +209,7 @@ mod tests {
             srgb: false,
         };
         let test = [view(0.3)];
-        let b = evaluate(&rec, &test, &[0.25]);
+        let b = evaluate(&rec, &test, &[0.25], None);
         assert_eq!(b.blend.psnr[0], PSNR_CAP);
         let want = scene::metrics::psnr_u8(&[0.2; 24], &[0.3; 24]);
         assert!((b.nearest.psnr[0] - want).abs() < 1e-12);

@@ -45,12 +45,11 @@ fn main() -> ExitCode {
             progress.finish();
             let r = &o.report;
             eprintln!(
-                "{}: {} joint iterations, {} Gaussians, test PSNR {:.2} dB, SSIM {:.4}{}",
+                "{}: {} joint iterations, {} Gaussians, test {}{}",
                 o.out.display(),
                 r.iterations,
                 r.gaussians,
-                r.test.psnr_mean,
-                r.test.ssim_mean,
+                r.test.figures(),
                 if r.interrupted { " (interrupted)" } else { "" }
             );
             Ok::<_, scene::Error>(if r.interrupted {

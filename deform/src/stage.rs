@@ -9,7 +9,7 @@
 //! OUT/renders/NNNN.png    every test frame
 //! OUT/renders/novel/NNNN.png  every novel view (when the scene has that split)
 //! OUT/settings.toml       the resolved settings
-//! OUT/report.json         losses every `log_every` iterations, time per phase, test PSNR/SSIM
+//! OUT/report.json         losses every `log_every` iterations, time per phase, test PSNR/SSIM/LPIPS
 //!                         (`test`), novel-view PSNR/SSIM (`novel`), the 2D baselines on
 //!                         the test frames (`baselines`)
 //! ```
@@ -135,7 +135,8 @@ pub struct TrainReport {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub trajectory: Option<gaussians::trajectory::TrajectoryError>,
     /// The 2D baselines on the same test frames (nearest frame, linear blend, event
-    /// pseudo image); none on the novel views, which they cannot render.
+    /// pseudo image with the `contrast_threshold` above, where `degs eval`'s uses the
+    /// scene's); none on the novel views, which they cannot render.
     pub baselines: Baselines,
 }
 
@@ -244,7 +245,11 @@ pub fn train(
         contrast: d.contrast,
         srgb: d.srgb,
     };
-    let baselines = crate::baselines::evaluate(&rec, &d.test, &test_times);
+    // LPIPS beside the model's only when the model's test frames have it.
+    let lpips = test
+        .lpips_mean
+        .and_then(|_| gaussians::evaluation::stage_lpips().ok());
+    let baselines = crate::baselines::evaluate(&rec, &d.test, &test_times, lpips.as_ref());
     phases.stop();
     let report = TrainReport {
         stage: "deform train",

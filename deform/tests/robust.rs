@@ -346,7 +346,7 @@ fn duplicate_frame_times_are_refused_by_the_cli_and_survived_by_the_trainer() {
         contrast: d.contrast,
         srgb: d.srgb,
     };
-    let b = deform::baselines::evaluate(&rec, &d.test, &[TEST_TIME]);
+    let b = deform::baselines::evaluate(&rec, &d.test, &[TEST_TIME], None);
     let all = [&b.nearest, &b.blend, b.events.as_ref().unwrap()];
     assert!(all.iter().all(|s| s.psnr_mean.is_finite()), "{b:?}");
 

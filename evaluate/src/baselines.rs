@@ -43,7 +43,7 @@ pub fn compute(scene: &Scene, dir: &Path) -> Result<Option<(BaselineFigures, Bas
         contrast: scene.contrast_threshold(),
         srgb: scene.train.frames_srgb(),
     };
-    let b = deform::baselines::evaluate(&rec, &test, &test_times);
+    let b = deform::baselines::evaluate(&rec, &test, &test_times, None);
     let score = |s: &BaselineScore| Score {
         psnr_mean: s.psnr_mean,
         ssim_mean: s.ssim_mean,

@@ -8,6 +8,7 @@
 //! trait, the [`RenderedImage`] it returns and the CPU [`TileRasterizer`].
 
 pub mod densify;
+pub mod evaluation;
 pub mod export;
 pub mod field;
 pub mod model;

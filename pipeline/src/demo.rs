@@ -50,13 +50,17 @@ pub struct DemoSummary {
     pub events: Option<usize>,
     pub preview: Option<PathBuf>,
     pub stages: Vec<DemoStage>,
-    /// Test-frame PSNR/SSIM of the final renders (`degs eval`).
+    /// Test-frame PSNR/SSIM/LPIPS of the final renders (`degs eval`).
     pub psnr: Option<f64>,
     pub ssim: Option<f64>,
+    pub lpips: Option<f64>,
     /// The same on the novel views (`degs eval`; None when the scene or the renders
     /// have none).
     pub novel_psnr: Option<f64>,
     pub novel_ssim: Option<f64>,
+    pub novel_lpips: Option<f64>,
+    /// Why there is no LPIPS (`DEGS_LPIPS=off`, or no weights).
+    pub lpips_note: Option<String>,
     /// Per-event flow EPE against the scene's ground truth (`degs eval`), px/s.
     pub flow_epe: Option<f64>,
     pub renders: Option<PathBuf>,
@@ -208,8 +212,11 @@ pub fn demo(opts: &DemoOptions, ctx: &Context, progress: &Progress) -> Result<De
         stages: stage_rows(&record),
         psnr: metrics.as_ref().and_then(|m| m.psnr_mean),
         ssim: metrics.as_ref().and_then(|m| m.ssim_mean),
+        lpips: metrics.as_ref().and_then(|m| m.lpips_mean),
         novel_psnr: metrics.as_ref().and_then(|m| m.novel_psnr_mean),
         novel_ssim: metrics.as_ref().and_then(|m| m.novel_ssim_mean),
+        novel_lpips: metrics.as_ref().and_then(|m| m.novel_lpips_mean),
+        lpips_note: metrics.as_ref().and_then(|m| m.lpips_note.clone()),
         flow_epe: metrics.as_ref().and_then(|m| m.flow_epe),
         renders,
         metrics: metrics.map(|_| run_dir.join("metrics.json")),
@@ -368,13 +375,24 @@ pub fn format_summary(s: &DemoSummary) -> String {
             format!("{} (test frames; novel views in novel/)", r.display()),
         );
     }
+    let lpips = |l: Option<f64>| match (l, &s.lpips_note) {
+        (Some(l), _) => format!(", LPIPS {l:.4}"),
+        (None, Some(note)) => format!(", {note}"),
+        (None, None) => String::new(),
+    };
     if let (Some(p), Some(q)) = (s.psnr, s.ssim) {
-        line("test PSNR/SSIM:", format!("{p:.2} dB / {q:.4}"));
+        line(
+            "test PSNR/SSIM:",
+            format!("{p:.2} dB / {q:.4}{}", lpips(s.lpips)),
+        );
     }
     if let (Some(p), Some(q)) = (s.novel_psnr, s.novel_ssim) {
         line(
             "novel PSNR/SSIM:",
-            format!("{p:.2} dB / {q:.4} (views off the path)"),
+            format!(
+                "{p:.2} dB / {q:.4}{} (views off the path)",
+                lpips(s.novel_lpips)
+            ),
         );
     }
     if let Some(e) = s.flow_epe {

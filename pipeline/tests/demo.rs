@@ -102,11 +102,13 @@ fn demo_runs_every_built_stage_and_summarises_it() {
     // renders are the test images and novel views here, so eval gives the PSNR cap
     // and SSIM 1 on both splits
     assert!(
-        table.contains("test PSNR/SSIM:  100.00 dB / 1.0000"),
+        table.contains("test PSNR/SSIM:  100.00 dB / 1.0000, LPIPS off (DEGS_LPIPS=off)"),
         "{table}"
     );
     assert!(
-        table.contains("novel PSNR/SSIM: 100.00 dB / 1.0000 (views off the path)"),
+        table.contains(
+            "novel PSNR/SSIM: 100.00 dB / 1.0000, LPIPS off (DEGS_LPIPS=off) (views off the path)"
+        ),
         "{table}"
     );
     assert!(table.contains("flow EPE:        12.500 px/s"), "{table}");
@@ -133,6 +135,7 @@ fn demo_runs_every_built_stage_and_summarises_it() {
         serde_json::from_slice(&fs::read(out.join("summary.json")).unwrap()).unwrap();
     assert_eq!(summary["psnr"], 100.0);
     assert_eq!(summary["novel_psnr"], 100.0);
+    assert_eq!(summary["lpips_note"], "LPIPS off (DEGS_LPIPS=off)");
     assert_eq!(summary["stages"][2]["figures"][0][1], 27.5);
     // its charts: the warm-up point against time, size and Gaussians, the flow point
     let charts: Vec<&str> = summary["charts"]

@@ -101,6 +101,25 @@ fn a_tiny_stress_run_writes_its_record_report_and_charts_without_nan() {
         );
     }
     assert!(!dir.join("stress-corrupt.png").exists());
+    // LPIPS as `degs eval` gives it (fetched at first use): 0 for the fake renders, which
+    // are the test frames, above 0 for the 2D baselines; a chart of it per stress
+    let clean = get("clean", "degs");
+    if clean["lpips"].is_null() {
+        let note = clean["lpips_note"].as_str().unwrap_or_default();
+        assert!(
+            std::env::var("DEGS_SKIP_LPIPS").is_ok_and(|s| s == "1"),
+            "no LPIPS ({note}); opt out with DEGS_SKIP_LPIPS=1"
+        );
+        eprintln!("SKIPPED: the stress's LPIPS ({note}) and DEGS_SKIP_LPIPS=1");
+    } else {
+        assert_eq!(clean["lpips"].as_f64(), Some(0.0), "{clean}");
+        for b in ["nearest_lpips", "blend_lpips", "events_lpips"] {
+            assert!(clean[b].as_f64().unwrap() > 1e-3, "{b}: {clean}");
+        }
+        let svg = fs::read_to_string(dir.join("stress-fps-lpips.svg")).unwrap();
+        assert!(svg.contains("test LPIPS (VGG; lower is better)"));
+        assert!(report.contains("| DEGS LPIPS |"), "{report}");
+    }
 
     // a second run finds everything cached and writes the same results
     let again = f.degs(&["stress", p.to_str().unwrap(), "-q"]);

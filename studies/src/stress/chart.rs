@@ -1,5 +1,6 @@
-//! One chart per stress: test PSNR against the stress level, DEGS and RGB-only as
-//! lines with markers, the 2D baselines (from the DEGS runs) dashed. Levels sit at even
+//! Two charts per stress: test PSNR and test LPIPS (when the runs have it) against the
+//! stress level, DEGS and RGB-only as lines with markers, the 2D baselines (from the
+//! DEGS runs) dashed. Levels sit at even
 //! spacing in increasing order (they span decades and include 0), ticked with their
 //! values; the clean scene is the stress's neutral level.
 
@@ -18,7 +19,7 @@ use std::path::{Path, PathBuf};
 /// A figure of a result (None where it has none).
 type Figure = dyn Fn(&StressResult) -> Option<f64>;
 
-/// One line: its legend label, style and `(level index, PSNR)` points.
+/// One line: its legend label, style and `(level index, figure)` points.
 struct Line {
     label: String,
     color: RGBColor,
@@ -31,6 +32,7 @@ struct Line {
 struct StressChart {
     title: String,
     x_label: String,
+    y_label: &'static str,
     /// Tick text of each level position.
     levels: Vec<String>,
     lines: Vec<Line>,
@@ -45,7 +47,32 @@ fn level_text(v: f64) -> String {
     }
 }
 
-fn build(r: &StressRecord, kind: StressKind) -> Option<StressChart> {
+/// The figure a chart plots: the test PSNR or the test LPIPS, of the model and of each
+/// 2D baseline.
+#[derive(Clone, Copy, PartialEq)]
+enum Plotted {
+    Psnr,
+    Lpips,
+}
+
+impl Plotted {
+    fn figures(self) -> [&'static Figure; 4] {
+        match self {
+            Plotted::Psnr => [&|x| x.psnr, &|x| x.nearest_psnr, &|x| x.blend_psnr, &|x| {
+                x.events_psnr
+            }],
+            Plotted::Lpips => [
+                &|x| x.lpips,
+                &|x| x.nearest_lpips,
+                &|x| x.blend_lpips,
+                &|x| x.events_lpips,
+            ],
+        }
+    }
+}
+
+fn build(r: &StressRecord, kind: StressKind, plotted: Plotted) -> Option<StressChart> {
+    let [model, nearest, blend, events] = plotted.figures();
     let degs = r.curve(kind, "degs");
     let rgb = r.curve(kind, "rgb");
     let mut levels: Vec<f64> = degs.iter().chain(&rgb).map(|(l, _)| *l).collect();
@@ -71,13 +98,16 @@ fn build(r: &StressRecord, kind: StressKind) -> Option<StressChart> {
             color,
             marker: Some(marker),
             dashed: false,
-            points: curve(c, &|x| x.psnr),
+            points: curve(c, model),
         });
     }
+    if lines.iter().all(|l| l.points.is_empty()) {
+        return None;
+    }
     let baselines: [(&str, &Figure); 3] = [
-        ("nearest frame", &|x| x.nearest_psnr),
-        ("linear blend", &|x| x.blend_psnr),
-        ("event pseudo image", &|x| x.events_psnr),
+        ("nearest frame", nearest),
+        ("linear blend", blend),
+        ("event pseudo image", events),
     ];
     for (i, (name, f)) in baselines.into_iter().enumerate() {
         lines.push(Line {
@@ -89,9 +119,14 @@ fn build(r: &StressRecord, kind: StressKind) -> Option<StressChart> {
         });
     }
     lines.retain(|l| !l.points.is_empty());
-    (!lines.is_empty()).then(|| StressChart {
-        title: format!("{}: test PSNR under stress ({})", r.stress, kind.key()),
+    let (what, y_label) = match plotted {
+        Plotted::Psnr => ("test PSNR", "test PSNR (dB)"),
+        Plotted::Lpips => ("test LPIPS", "test LPIPS (VGG; lower is better)"),
+    };
+    Some(StressChart {
+        title: format!("{}: {what} under stress ({})", r.stress, kind.key()),
         x_label: kind.axis_label().into(),
+        y_label,
         levels: levels.iter().map(|&l| level_text(l)).collect(),
         lines,
     })
@@ -118,7 +153,7 @@ impl Drawing for StressChart {
         chart
             .configure_mesh()
             .x_desc(&self.x_label)
-            .y_desc("test PSNR (dB)")
+            .y_desc(self.y_label)
             .axis_desc_style(("sans-serif", 18))
             .label_style(("sans-serif", 15))
             .x_labels(levels.len() * 2 + 1)
@@ -173,16 +208,17 @@ impl Drawing for StressChart {
     }
 }
 
-/// `<out>/stress-<key>.png` and `.svg` for every stress with levels (corruptions have
-/// no chart); the files written.
+/// `<out>/stress-<key>.png` and `.svg` (PSNR) and `stress-<key>-lpips.png` and `.svg`
+/// (when the runs have LPIPS) for every stress with levels (corruptions have no chart);
+/// the files written.
 pub fn write_charts(r: &StressRecord, out: &Path) -> Result<Vec<PathBuf>> {
     let mut written = Vec::new();
     for kind in r.stresses() {
-        if let Some(chart) = build(r, kind) {
-            written.extend(write_png_and_svg(
-                &chart,
-                &out.join(format!("stress-{}", kind.key())),
-            )?);
+        for (plotted, suffix) in [(Plotted::Psnr, ""), (Plotted::Lpips, "-lpips")] {
+            if let Some(chart) = build(r, kind, plotted) {
+                let stem = out.join(format!("stress-{}{suffix}", kind.key()));
+                written.extend(write_png_and_svg(&chart, &stem)?);
+            }
         }
     }
     Ok(written)

@@ -257,7 +257,7 @@ fn result_of(
         .filter(|s| s.action.has_output())
         .map(|s| s.built_wall_s.unwrap_or(s.wall_s));
     let quiet = runner::progress::Progress::new(true);
-    match runner::eval::eval_run_with(&run_dir, ctx, "off", &quiet) {
+    match runner::eval::eval_run(&run_dir, ctx, &quiet) {
         Ok(m) => {
             let mut keep = |name: &str, v: Option<f64>| -> Option<f64> {
                 let v = v?;
@@ -270,8 +270,16 @@ fn result_of(
             };
             r.psnr = keep("psnr", m.psnr_mean);
             r.ssim = keep("ssim", m.ssim_mean);
+            r.lpips = keep("lpips", m.lpips_mean);
+            r.lpips_note = m.lpips_note.clone();
             r.novel_psnr = keep("novel_psnr", m.novel_psnr_mean);
             let b = m.baselines.as_ref();
+            r.nearest_lpips = keep("nearest_lpips", b.and_then(|b| b.nearest.lpips_mean));
+            r.blend_lpips = keep("blend_lpips", b.and_then(|b| b.blend.lpips_mean));
+            r.events_lpips = keep(
+                "events_lpips",
+                b.and_then(|b| b.events.as_ref()).and_then(|e| e.lpips_mean),
+            );
             r.nearest_psnr = keep("nearest_psnr", b.map(|b| b.nearest.psnr_mean));
             r.blend_psnr = keep("blend_psnr", b.map(|b| b.blend.psnr_mean));
             r.events_psnr = keep(

@@ -23,11 +23,19 @@ pub struct StressResult {
     pub status: String,
     pub psnr: Option<f64>,
     pub ssim: Option<f64>,
+    /// Test LPIPS (VGG; None when the evaluation had no LPIPS: `lpips_note`).
+    pub lpips: Option<f64>,
     pub novel_psnr: Option<f64>,
     /// The 2D baselines' test PSNR (nearest frame, linear blend, event pseudo image).
     pub nearest_psnr: Option<f64>,
     pub blend_psnr: Option<f64>,
     pub events_psnr: Option<f64>,
+    /// Their test LPIPS.
+    pub nearest_lpips: Option<f64>,
+    pub blend_lpips: Option<f64>,
+    pub events_lpips: Option<f64>,
+    /// Why there is no LPIPS (`degs eval`'s note: off, or no weights).
+    pub lpips_note: Option<String>,
     /// Wall time of every stage the run used, as built, seconds.
     pub total_s: Option<f64>,
     /// Wall time of its `deform` stage, seconds.
@@ -114,7 +122,8 @@ pub(crate) fn markdown(r: &StressRecord) -> String {
     let mut s = format!(
         "# Stress run `{}`\n\nBase: {} ({}×{}). Every variant is run with DEGS (the base's \
          settings) and RGB-only (`deform` with `schedule.gamma1 = gamma2_max = 0`). Test \
-         PSNR/SSIM over the held-out test frames; 2D baselines on the same frames. The \
+         PSNR/SSIM/LPIPS (VGG; lower is better) over the held-out test frames; 2D baselines \
+         on the same frames. The \
          wrong-contrast stress keeps the events and changes the C the manifest claims to \
          C/ratio (ratio = true C / claimed C). `deform` estimates C from the recording by \
          default (`contrast = \"estimate\"`), so the claimed C matters only where the \
@@ -144,9 +153,10 @@ pub(crate) fn markdown(r: &StressRecord) -> String {
             s += &corrupt_table(r);
             continue;
         }
-        s += "| level | DEGS PSNR | RGB-only PSNR | DEGS SSIM | RGB-only SSIM | DEGS novel | \
-              RGB novel | nearest | blend | events | train frames | DEGS s | RGB s | note |\n\
-              |---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+        s += "| level | DEGS PSNR | RGB-only PSNR | DEGS SSIM | RGB-only SSIM | DEGS LPIPS | \
+              RGB-only LPIPS | DEGS novel | RGB novel | nearest | blend | events | \
+              events LPIPS | train frames | DEGS s | RGB s | note |\n\
+              |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
         let degs = r.curve(kind, "degs");
         let rgb = r.curve(kind, "rgb");
         let neutral = r
@@ -175,16 +185,20 @@ pub(crate) fn markdown(r: &StressRecord) -> String {
                 note.insert(0, "clean".into());
             }
             s += &format!(
-                "| {level} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+                "| {level} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | \
+                 {} | {} | {} |\n",
                 num(d.psnr, 2),
                 num(gp, 2),
                 num(d.ssim, 3),
                 num(g.and_then(|g| g.ssim), 3),
+                num(d.lpips, 4),
+                num(g.and_then(|g| g.lpips), 4),
                 num(d.novel_psnr, 2),
                 num(g.and_then(|g| g.novel_psnr), 2),
                 num(d.nearest_psnr, 2),
                 num(d.blend_psnr, 2),
                 num(d.events_psnr, 2),
+                num(d.events_lpips, 4),
                 d.train_frames.map_or("—".into(), |n| n.to_string()),
                 num(d.total_s, 0),
                 num(g.and_then(|g| g.total_s), 0),
