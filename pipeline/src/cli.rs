@@ -319,7 +319,8 @@ pub enum Command {
     },
     /// Charts of accuracy against cost across runs, one per question and scene, PNG and
     /// SVG: test PSNR against total stage time (cached stages at their build cost),
-    /// against model size on disk and against Gaussian count, flow EPE against LoCM
+    /// against model size on disk and against Gaussian count, test LPIPS against total
+    /// stage time (where the stages had the LPIPS weights), flow EPE against LoCM
     /// time; Pareto front drawn, 2D baselines as horizontal lines, RGB-only and DEGS
     /// told apart. The numbers go to chart.json and chart.csv beside them.
     ///
