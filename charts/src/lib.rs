@@ -242,11 +242,11 @@ pub fn collect(runs: &[RunRecord]) -> ChartData {
                     continue;
                 };
                 let gamma = |k: &str| num(&report, &format!("settings/schedule/{k}"));
+                let motion_off = gamma("gamma2_max") == Some(0.0)
+                    || report.pointer("/settings/schedule/motion") == Some(&"off".into());
                 let method = match s.stage.as_str() {
                     "gaussians" => Method::RgbWarmup,
-                    _ if gamma("gamma1") == Some(0.0) && gamma("gamma2_max") == Some(0.0) => {
-                        Method::RgbJoint
-                    }
+                    _ if gamma("gamma1") == Some(0.0) && motion_off => Method::RgbJoint,
                     _ => Method::Degs,
                 };
                 data.models.push(ModelPoint {

@@ -115,8 +115,9 @@ fn points_come_from_the_reports_and_shared_entries_count_once() {
         "baselines": {"nearest": {"psnr_mean": 20.0, "lpips_mean": 0.25},
                       "blend": {"psnr_mean": 22.5, "lpips_mean": 0.1875},
                       "events": null}}"#;
+    // RGB-only: no event term, and the motion term off (by its weight or by `motion`)
     let rgb = r#"{"test": {"psnr_mean": 26.0}, "gaussians": 3400,
-        "settings": {"schedule": {"gamma1": 0.0, "gamma2_max": 0.0}}}"#;
+        "settings": {"schedule": {"gamma1": 0.0, "gamma2_max": 1.0, "motion": "off"}}}"#;
     let a = record(
         d.path(),
         "sw_a",

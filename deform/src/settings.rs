@@ -46,8 +46,9 @@ pub struct DeformSettings {
     pub iterations: u32,
     /// Seed of the sampling of views, event times and the PoseNet's first layer.
     pub seed: u64,
-    /// γ1 and γ2(iter) of Eq. 13 (`gamma1 = 0`: w/o L_event; `gamma2_max = 0`: w/o
-    /// L_motion).
+    /// γ1 and γ2(iter) of Eq. 13 (`gamma1 = 0`: w/o L_event; `gamma2_max = 0` or
+    /// `motion = "off"`: w/o L_motion; `motion = "auto"`, the default, uses L_motion only
+    /// below 9 fps: [`crate::schedule`]).
     pub schedule: LossSchedule,
     /// Use the PoseNet correction of the interpolated camera path (`false`: plain
     /// interpolation).

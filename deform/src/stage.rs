@@ -158,17 +158,27 @@ pub(crate) fn save_posenet(p: &PoseNet<f32>, dir: &Path) -> Result<()> {
     write_json_atomic(&dir.join("posenet.json"), p.settings())
 }
 
-/// The joint iterations `deform train` will run with `args`: the settings' `iterations`,
-/// or when 0, what the scene's train frames' interval gives
-/// ([`DeformSettings::iterations_for`]).
-pub fn joint_iterations(args: &TrainArgs) -> Result<u32> {
-    let s = resolve_settings(args)?;
-    if s.iterations > 0 {
-        return Ok(s.iterations);
-    }
+/// The settings `deform train` runs with on `args`' scene: the file's and the flags',
+/// `iterations = 0` and `schedule.motion = "auto"` made concrete by its train frames
+/// ([`DeformSettings::iterations_for`], [`crate::schedule::LossSchedule::resolve_motion`]).
+pub fn run_settings(args: &TrainArgs) -> Result<DeformSettings> {
+    let mut s = resolve_settings(args)?;
     let scene = scene::manifest::Scene::open(&args.stage.scene)?;
     let times: Vec<f64> = scene.train.frames.iter().map(|f| f.timestamp).collect();
-    Ok(s.iterations_for(&times, frame_pixels(&scene.train.camera)))
+    resolve_auto(&mut s, &times, frame_pixels(&scene.train.camera));
+    Ok(s)
+}
+
+/// The joint iterations `deform train` will run with `args` ([`run_settings`]).
+pub fn joint_iterations(args: &TrainArgs) -> Result<u32> {
+    Ok(run_settings(args)?.iterations)
+}
+
+/// `iterations = 0` and `schedule.motion = "auto"` made concrete for train frames at
+/// `times` (seconds) of `pixels` each.
+fn resolve_auto(s: &mut DeformSettings, times: &[f64], pixels: u64) {
+    s.iterations = s.iterations_for(times, pixels);
+    s.schedule.resolve_motion(times);
 }
 
 /// The pixels of one train frame.
@@ -201,7 +211,7 @@ pub fn train(
         &args.assoc,
         &settings,
     )?;
-    settings.iterations = settings.iterations_for(&d.times, frame_pixels(&d.scene.train.camera));
+    resolve_auto(&mut settings, &d.times, frame_pixels(&d.scene.train.camera));
     let out = AtomicDir::new(&args.stage.output.out, &rule)?;
     phases.start("train");
     let mut tr = JointTrainer::new(&d, settings.clone());

@@ -84,7 +84,10 @@ fn a_missing_scene_is_an_error_naming_it() {
 
 /// The joint iterations `deform train` announces (its progress total) follow the
 /// scene's train frames: 4 fps frames get 6000, 20 fps frames 4000 (4000 at 50 ms, 6000
-/// at 100 ms and over, at this size), and `--iterations` wins over both.
+/// at 100 ms and over, at this size), and `--iterations` wins over both; `L_motion` is
+/// on at 4 fps and off at 20 fps.
+use deform::schedule::MotionUse;
+
 #[test]
 fn the_joint_iterations_follow_the_frame_rate_unless_set() {
     let dir = tempfile::tempdir().unwrap();
@@ -101,6 +104,14 @@ fn the_joint_iterations_follow_the_frame_rate_unless_set() {
         a.stage.scene = scene_dir;
         let got = deform::stage::joint_iterations(&a).unwrap();
         assert_eq!(got, want, "{fps} fps");
+        // L_motion at 4 fps (250 ms apart: over 1/9 s), not at 20 fps (50 ms)
+        let motion = deform::stage::run_settings(&a).unwrap().schedule.motion;
+        let on = if fps < 9.0 {
+            MotionUse::On
+        } else {
+            MotionUse::Off
+        };
+        assert_eq!(motion, on, "{fps} fps");
         a.training.iterations = Some(7);
         assert_eq!(deform::stage::joint_iterations(&a).unwrap(), 7);
     }

@@ -88,9 +88,20 @@ fn after_the_posenet_warm_up_the_event_loss_moves_the_scene() {
 #[test]
 fn the_ablation_switches_reach_the_trainer() {
     let fx = build(Variant::Normal);
-    let settings = "iterations = 6\nlog_every = 1\nrebind_every = 100\nposenet_warmup = 0\n\
-                    [schedule]\ngamma2_iters = 0.0\n";
+    let auto = "iterations = 6\nlog_every = 1\nrebind_every = 3\nposenet_warmup = 0\n\
+                [schedule]\ngamma2_iters = 0.0\n";
+    // By default the motion term is off at these 10 fps frames (100 ms apart, under
+    // 1/9 s): resolved in the report, never computed, the bindings never rebuilt.
+    let (_, steps, r) = train_with(&fx, "auto", auto, TrainArgs::default());
+    assert_eq!(r["settings"]["schedule"]["motion"], "off", "{r}");
+    assert!(steps.iter().all(|s| s.l_motion == 0.0 && s.bound == 0));
+    assert!(steps.iter().any(|s| s.l_event > 0.0));
+    assert_eq!(r["rebinds"], 0, "{r}");
+
+    let settings = &format!("{auto}motion = \"on\"\n");
     let (full, steps, r) = train_with(&fx, "full", settings, TrainArgs::default());
+    assert_eq!(r["settings"]["schedule"]["motion"], "on", "{r}");
+    assert!(r["rebinds"].as_u64().unwrap() >= 2, "{r}");
     assert!(steps.iter().any(|s| s.l_event > 0.0) && steps.iter().any(|s| s.l_motion > 0.0));
     assert!(full.out.join("posenet.safetensors").is_file());
     assert_eq!(r["settings"]["posenet"], true);

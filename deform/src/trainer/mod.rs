@@ -450,9 +450,11 @@ impl JointTrainer {
         }
         self.iteration += 1;
         self.timings.update += clock.elapsed().as_secs_f64();
+        // The bindings serve `L_motion` only: none to rebuild without it.
         let every = self.settings.rebind_every;
         let changed = self.inner.splats.len() != before;
-        if changed || (every > 0 && self.iteration.is_multiple_of(every)) {
+        let due = changed || (every > 0 && self.iteration.is_multiple_of(every));
+        if due && self.settings.schedule.uses_motion() {
             self.rebind(r, d);
         }
         JointStep {
