@@ -14,8 +14,9 @@
 //! default): on when the train frames' median interval is longer than
 //! [`AUTO_MOTION_INTERVAL_S`] (slower than 9 fps), off otherwise. Measured with and
 //! without it (BENCHMARKS.md, "`L_motion` by the frame rate"): at 10 and 20 fps every
-//! realistic row gains without it (+0.1 to +1.5 dB, LPIPS lower), at 4 and 8 fps no row
-//! gains (`fast` 4 fps −1.6 dB, `rigid` 8 fps −0.2 dB, `nonrigid` 4 fps level).
+//! realistic row gains without it (+0.1 to +1.5 dB, LPIPS lower) or is level, at 4 and
+//! 8 fps no row gains (`fast` 4 fps −1.6 dB, `rigid` 8 fps −0.2 dB, `nonrigid` 4 fps
+//! level).
 
 use serde::{Deserialize, Serialize};
 
