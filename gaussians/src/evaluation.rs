@@ -5,13 +5,11 @@
 //! evaluation says why (`lpips_note`).
 
 use crate::model::Model;
-use crate::stage::load_views;
 use crate::train::View;
 pub use lpips::Lpips;
 use lpips::{Rgb, Variant};
 use scene::error::{Error, Result};
 use scene::image_io::{write_exr_depth, write_png};
-use scene::manifest::Scene;
 use scene::metrics;
 use serde::Serialize;
 use std::path::Path;
@@ -102,9 +100,9 @@ pub fn evaluate(
 }
 
 /// [`evaluate`], writing each render to `NNNN.png` in the first folder and, when given,
-/// its depth ([`crate::stage::write_depths`]' form) to `NNNN.exr` in the second, from one
+/// its depth (`stage::write_depths`' form) to `NNNN.exr` in the second, from one
 /// render.
-fn evaluate_writing(
+pub(crate) fn evaluate_writing(
     model: &Model,
     views: &[View],
     split: &str,
@@ -172,18 +170,4 @@ fn mean_colour(rgb: &[f32]) -> Vec<f32> {
         out.extend(std::iter::repeat_n(m as f32, c.len()));
     }
     out
-}
-
-/// PSNR/SSIM of `model` on the scene's novel-view split, its renders written to
-/// `renders/novel/NNNN.png` and their depth to `renders/novel_depth/NNNN.exr` under
-/// `out` (`degs eval` scores the depth of moving objects on it); None when the scene
-/// has no novel views.
-pub fn evaluate_novel(model: &Model, scene: &Scene, out: &Path) -> Result<Option<Evaluation>> {
-    if scene.novel.frames.is_empty() {
-        return Ok(None);
-    }
-    let views = load_views(scene, &scene.novel)?;
-    let dir = out.join("renders").join("novel");
-    let depth = out.join("renders").join("novel_depth");
-    evaluate_writing(model, &views, "novel", Some((&dir, Some(&depth)))).map(Some)
 }

@@ -9,6 +9,7 @@
 //! if it has one), `settings.toml` (resolved settings) and `report.json` (PSNR/SSIM of
 //! the test frames in `test`, of the novel views in `novel`).
 
+use crate::evaluation::evaluate_writing;
 use crate::model::Model;
 use crate::raster::TileRasterizer;
 use crate::train::settings::Init;
@@ -220,7 +221,21 @@ fn input_hashes(scene: &Scene, init: [Option<&Path>; 2], events: bool) -> Result
     Ok(out)
 }
 
-pub use crate::evaluation::{Evaluation, PSNR_CAP, evaluate, evaluate_novel};
+pub use crate::evaluation::{Evaluation, PSNR_CAP, evaluate};
+
+/// PSNR/SSIM/LPIPS of `model` on the scene's novel-view split, its renders written to
+/// `renders/novel/NNNN.png` and their depth to `renders/novel_depth/NNNN.exr` under
+/// `out` (`degs eval` scores the depth of moving objects on it); None when the scene
+/// has no novel views.
+pub fn evaluate_novel(model: &Model, scene: &Scene, out: &Path) -> Result<Option<Evaluation>> {
+    if scene.novel.frames.is_empty() {
+        return Ok(None);
+    }
+    let views = load_views(scene, &scene.novel)?;
+    let dir = out.join("renders").join("novel");
+    let depth = out.join("renders").join("novel_depth");
+    evaluate_writing(model, &views, "novel", Some((&dir, Some(&depth)))).map(Some)
+}
 
 /// Write `depth/NNNN.exr` for every view.
 pub fn write_depths(model: &Model, views: &[View], dir: &Path) -> Result<()> {
