@@ -244,8 +244,10 @@ pub fn train(
     phases.start("depth");
     write_depths(&model, &d.views, &out.path().join("depth"))?;
     phases.start("evaluate");
-    let test = evaluate(&model, &d.test, "test", Some(&out.path().join("renders")))?;
-    let novel = evaluate_novel(&model, &d.scene, out.path())?;
+    let lpips = gaussians::stage::stage_lpips();
+    let renders = out.path().join("renders");
+    let test = evaluate(&model, &d.test, "test", Some(&renders), &lpips)?;
+    let novel = evaluate_novel(&model, &d.scene, out.path(), &lpips)?;
     phases.start("baselines");
     let test_times: Vec<f64> = d.scene.test.frames.iter().map(|f| f.timestamp).collect();
     let rec = Recording {
@@ -256,9 +258,7 @@ pub fn train(
         srgb: d.srgb,
     };
     // LPIPS beside the model's only when the model's test frames have it.
-    let lpips = test
-        .lpips_mean
-        .and_then(|_| gaussians::evaluation::stage_lpips().ok());
+    let lpips = lpips.ok().filter(|_| test.lpips_mean.is_some());
     let baselines = crate::baselines::evaluate(&rec, &d.test, &test_times, lpips.as_ref());
     phases.stop();
     let report = TrainReport {

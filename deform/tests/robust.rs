@@ -334,7 +334,8 @@ fn duplicate_frame_times_are_refused_by_the_cli_and_survived_by_the_trainer() {
     assert!(finite(&tr.inner.field.params));
     assert!(finite(tr.posenet.as_ref().unwrap().params()));
     let model = Model::from(&tr.inner);
-    let test = gaussians::stage::evaluate(&model, &d.test, "test", None).unwrap();
+    let test =
+        gaussians::stage::evaluate(&model, &d.test, "test", None, &Err("off".into())).unwrap();
     assert!(
         test.psnr_mean.is_finite() && test.psnr_mean > 10.0,
         "{test:?}"

@@ -56,9 +56,12 @@ pub const PSNR_CAP: f64 = 100.0;
 /// The network the reports use (`degs eval`'s).
 const VARIANT: Variant = Variant::Vgg;
 
-/// The LPIPS metric a stage scores with, or why there is none: off by `DEGS_LPIPS=off`,
-/// else the cached weights (`DEGS_LPIPS` = `fetch`, `cached` or unset).
-pub fn stage_lpips() -> std::result::Result<Lpips, String> {
+/// The LPIPS metric a stage scores with, or why there is none.
+pub type StageLpips = std::result::Result<Lpips, String>;
+
+/// [`StageLpips`], loaded once per stage: off by `DEGS_LPIPS=off`, else the cached
+/// weights (`DEGS_LPIPS` = `fetch`, `cached` or unset).
+pub fn stage_lpips() -> StageLpips {
     match std::env::var("DEGS_LPIPS").as_deref() {
         Ok("off") => Err("LPIPS off (DEGS_LPIPS=off)".into()),
         Err(_) | Ok("" | "fetch" | "cached") => Lpips::load_cached(VARIANT).map_err(|e| {
@@ -89,14 +92,16 @@ pub fn lpips_planar(m: &Lpips, a: &[f32], b: &[f32], width: usize, height: usize
 }
 
 /// Render `model` at every view, write `renders/NNNN.png` (when `renders` is set) and
-/// return PSNR (at most [`PSNR_CAP`]), SSIM and LPIPS against the views' images.
+/// return PSNR (at most [`PSNR_CAP`]), SSIM and LPIPS (with `lpips`) against the views'
+/// images.
 pub fn evaluate(
     model: &Model,
     views: &[View],
     split: &str,
     renders: Option<&Path>,
+    lpips: &StageLpips,
 ) -> Result<Evaluation> {
-    evaluate_writing(model, views, split, renders.map(|r| (r, None)))
+    evaluate_writing(model, views, split, renders.map(|r| (r, None)), lpips)
 }
 
 /// [`evaluate`], writing each render to `NNNN.png` in the first folder and, when given,
@@ -107,6 +112,7 @@ pub(crate) fn evaluate_writing(
     views: &[View],
     split: &str,
     out: Option<(&Path, Option<&Path>)>,
+    lpips: &StageLpips,
 ) -> Result<Evaluation> {
     if let Some(depth) = out.and_then(|o| o.1) {
         std::fs::create_dir_all(depth).map_err(|e| Error::io(depth, e))?;
@@ -116,10 +122,10 @@ pub(crate) fn evaluate_writing(
         frames: views.len(),
         ..Evaluation::default()
     };
-    let mut lpips = if views.is_empty() {
-        Err("no frames".to_string())
-    } else {
-        stage_lpips()
+    let mut note = match lpips {
+        _ if views.is_empty() => Some("no frames".to_string()),
+        Ok(_) => None,
+        Err(e) => Some(e.clone()),
     };
     let mut base = Vec::new();
     for (i, v) in views.iter().enumerate() {
@@ -140,10 +146,10 @@ pub(crate) fn evaluate_writing(
         ev.ssim
             .push(metrics::ssim_u8(&f.rgb, &v.rgb, f.width, f.height));
         base.push(metrics::psnr_u8(&mean_colour(&v.rgb), &v.rgb).min(PSNR_CAP));
-        if let Ok(m) = &lpips {
+        if let (Ok(m), None) = (lpips, &note) {
             match lpips_planar(m, &f.rgb, &v.rgb, f.width, f.height) {
                 Ok(d) => ev.lpips.push(d),
-                Err(e) => lpips = Err(format!("LPIPS not computed: frame {i}: {e}")),
+                Err(e) => note = Some(format!("LPIPS not computed: frame {i}: {e}")),
             }
         }
     }
@@ -151,9 +157,9 @@ pub(crate) fn evaluate_writing(
     ev.psnr_mean = mean(&ev.psnr);
     ev.ssim_mean = mean(&ev.ssim);
     ev.mean_colour_psnr_mean = mean(&base);
-    match lpips {
-        Ok(_) => ev.lpips_mean = Some(mean(&ev.lpips)),
-        Err(note) => {
+    match note {
+        None => ev.lpips_mean = Some(mean(&ev.lpips)),
+        Some(note) => {
             ev.lpips.clear();
             ev.lpips_note = Some(note);
         }

@@ -221,20 +221,25 @@ fn input_hashes(scene: &Scene, init: [Option<&Path>; 2], events: bool) -> Result
     Ok(out)
 }
 
-pub use crate::evaluation::{Evaluation, PSNR_CAP, evaluate};
+pub use crate::evaluation::{Evaluation, PSNR_CAP, StageLpips, evaluate, stage_lpips};
 
 /// PSNR/SSIM/LPIPS of `model` on the scene's novel-view split, its renders written to
 /// `renders/novel/NNNN.png` and their depth to `renders/novel_depth/NNNN.exr` under
 /// `out` (`degs eval` scores the depth of moving objects on it); None when the scene
 /// has no novel views.
-pub fn evaluate_novel(model: &Model, scene: &Scene, out: &Path) -> Result<Option<Evaluation>> {
+pub fn evaluate_novel(
+    model: &Model,
+    scene: &Scene,
+    out: &Path,
+    lpips: &StageLpips,
+) -> Result<Option<Evaluation>> {
     if scene.novel.frames.is_empty() {
         return Ok(None);
     }
     let views = load_views(scene, &scene.novel)?;
     let dir = out.join("renders").join("novel");
     let depth = out.join("renders").join("novel_depth");
-    evaluate_writing(model, &views, "novel", Some((&dir, Some(&depth)))).map(Some)
+    evaluate_writing(model, &views, "novel", Some((&dir, Some(&depth))), lpips).map(Some)
 }
 
 /// Write `depth/NNNN.exr` for every view.
@@ -365,13 +370,10 @@ pub fn train(
     phases.start("depth");
     write_depths(&model, &views, &out.path().join("depth"))?;
     phases.start("evaluate");
-    let test = evaluate(
-        &model,
-        &test_views,
-        "test",
-        Some(&out.path().join("renders")),
-    )?;
-    let novel = evaluate_novel(&model, &scene, out.path())?;
+    let lpips = stage_lpips();
+    let renders = out.path().join("renders");
+    let test = evaluate(&model, &test_views, "test", Some(&renders), &lpips)?;
+    let novel = evaluate_novel(&model, &scene, out.path(), &lpips)?;
     phases.stop();
     let report = TrainReport {
         stage: "gaussians train",
@@ -471,7 +473,8 @@ pub fn render(
     let views = load_views(&scene, m)?;
     let out = AtomicDir::new(out_dir, &rule)?;
     phases.start("render");
-    let evaluation = evaluate(&model, &views, name, Some(&out.path().join("renders")))?;
+    let renders = out.path().join("renders");
+    let evaluation = evaluate(&model, &views, name, Some(&renders), &stage_lpips())?;
     write_depths(&model, &views, &out.path().join("depth"))?;
     phases.stop();
     let report = RenderReport {
