@@ -101,6 +101,9 @@ pub struct TrackTerm {
     pub last: (f64, usize),
     /// The depth priors' term (`L_depth`), empty without priors.
     pub priors: super::prior_loss::PriorTerm,
+    /// The shape term's pairs (`tracks.rigidity`), while it is on, and its last value.
+    pub shape: Option<super::rigid::Pairs>,
+    pub last_shape: f64,
 }
 
 impl TrackTerm {

@@ -22,6 +22,7 @@ pub mod lift;
 pub mod lk;
 pub mod loss;
 pub mod prior_loss;
+pub mod rigid;
 mod settings;
 
 use crate::splats::Splats;

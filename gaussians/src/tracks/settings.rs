@@ -72,6 +72,16 @@ pub struct TrackSettings {
     pub stride: u32,
     /// Where one window's copies hand over to the next ([`Handover`]).
     pub handover: Handover,
+    /// Weight of the shape term ([`super::rigid`]): neighbouring tracked Gaussians of
+    /// one life keep their distances over time, so a moving object keeps its size and
+    /// a depth prior's frame-to-frame error cannot make it breathe along the rays
+    /// (0 = off).
+    pub rigidity: f64,
+    /// Neighbours per tracked Gaussian in the shape term.
+    pub rigidity_neighbours: u32,
+    /// `L_depth`'s gradient also trains the deformation field (else only the
+    /// Gaussians' canonical centres, shapes and trajectories).
+    pub depth_into_field: bool,
 }
 
 /// Where the windows of trajectories hand over (`tracks.handover`; [`super::init::windows`]).
@@ -116,6 +126,9 @@ impl Default for TrackSettings {
             window_s: 0.2,
             stride: 0,
             handover: Handover::Frame,
+            rigidity: 0.0,
+            rigidity_neighbours: 8,
+            depth_into_field: true,
         }
     }
 }
@@ -172,10 +185,13 @@ impl TrackSettings {
             || !(self.depth_ridge.is_finite() && self.depth_ridge >= 0.0)
             || !(self.depth_weight.is_finite() && self.depth_weight >= 0.0)
             || !(self.window_s.is_finite() && self.window_s >= 0.0)
+            || !(self.rigidity.is_finite() && self.rigidity >= 0.0)
+            || !(1..=64).contains(&self.rigidity_neighbours)
         {
             return Err(
                 "tracks: thresholds and huber_px must be positive, ridge, min_texture, \
-                 weight, depth_sigma, depth_ridge, depth_weight and window_s finite and ≥ 0"
+                 weight, depth_sigma, depth_ridge, depth_weight, window_s and rigidity finite and ≥ 0, \
+                 rigidity_neighbours 1..=64"
                     .into(),
             );
         }

@@ -196,6 +196,18 @@ impl Trainer {
         let mut out = self.spare.lock().take_grads();
         let g = &mut out.splats;
         out.camera = r.backward_view_into(&v.deformed, &v.camera, &v.state, d_rgb, d_planes, g);
+        // The depth planes' share of the centres' gradient, kept out of the field
+        // (`tracks.depth_into_field = false`): a prior's error differs from frame to
+        // frame and is not motion.
+        let depth_only = (d_planes.depth.is_some()
+            && v.deltas.is_some()
+            && !self.settings.tracks.depth_into_field)
+            .then(|| {
+                let zero = vec![0.0f32; d_rgb.len()];
+                let mut g2 = crate::splats::SplatGrads::default();
+                r.backward_view_into(&v.deformed, &v.camera, &v.state, &zero, d_planes, &mut g2);
+                g2.means
+            });
         if let Some(dm) = d_means {
             assert_eq!(dm.len(), g.means.len(), "view_backward: d_means size");
             for (a, b) in g.means.iter_mut().zip(dm) {
@@ -223,6 +235,11 @@ impl Trainer {
                 &mut g.rotations,
                 delta_grads,
             );
+            if let Some(dm) = &depth_only {
+                for (a, b) in delta_grads.dx.iter_mut().zip(dm) {
+                    (0..3).for_each(|c| a[c] -= b[c]);
+                }
+            }
             // L_iso on the deformed centres, into δx (the canonical ones held fixed).
             *rigidity_loss = rigidity::Neighbours::backward(
                 self.neighbours.as_ref(),
@@ -323,6 +340,7 @@ impl Trainer {
         let prior_error = (priors.last.1 > 0).then_some(priors.last_rel_error);
         tracks.priors = priors;
         self.tracks = tracks;
+        self.add_shape_term(rendered.time, rendered.life_time, &mut g);
         self.recycle_view(rendered);
         self.apply_gradients(&g);
         self.recycle_grads(g);

@@ -72,6 +72,7 @@ impl super::Trainer {
             image,
             camera: *camera,
             time: t,
+            life_time: life_t,
             deformed,
             deltas,
             state,
@@ -105,9 +106,53 @@ impl super::Trainer {
         let mut priors = std::mem::take(&mut self.tracks.priors);
         priors.last = (0.0, 0);
         let planes = view.and_then(|k| priors.gradient(&v.image, k, &self.settings.tracks));
-        let g = self.view_backward(r, v, d_rgb, planes.unwrap_or_default(), d_means);
+        let mut g = self.view_backward(r, v, d_rgb, planes.unwrap_or_default(), d_means);
         self.tracks.priors = priors;
+        if view.is_some() {
+            self.add_shape_term(v.time, v.life_time, &mut g);
+        }
         g
+    }
+
+    /// The tracked Gaussians' shape term (`tracks.rigidity`, [`crate::tracks::rigid`]) at
+    /// a train view of time `t` whose lives were read at `life_t`, into `g`'s centres and
+    /// trajectories; its pairs are rebuilt every `RIGID_REFRESH` iterations and whenever
+    /// the Gaussians change.
+    pub fn add_shape_term(&mut self, t: f32, life_t: f32, g: &mut ModelGrads) {
+        let (w, k) = (
+            self.settings.tracks.rigidity,
+            self.settings.tracks.rigidity_neighbours,
+        );
+        let term = &mut self.tracks;
+        if w <= 0.0 || self.splats.motion.is_empty() {
+            (term.shape, term.last_shape) = (None, 0.0);
+            return;
+        }
+        let it = self.iteration;
+        let n = self.splats.len();
+        let fresh = (term.shape.as_ref())
+            .is_some_and(|p| p.gaussians == n && it < p.built_at + RIGID_REFRESH);
+        if !fresh {
+            term.shape = Some(crate::tracks::rigid::Pairs::build(
+                &self.splats,
+                k as usize,
+                it,
+            ));
+        }
+        let pairs = term.shape.as_ref().expect("built above");
+        let gs = &mut g.splats;
+        gs.motion.resize(n, [0.0; 6]);
+        let s = &self.splats;
+        let l = pairs.loss(
+            w,
+            &s.means,
+            &s.motion,
+            t,
+            life_t,
+            &mut gs.means,
+            &mut gs.motion,
+        );
+        term.last_shape = f64::from(l);
     }
 
     /// The RGB loss of the warm-up (`(1−λ)·L1 + λ·D-SSIM`) of a render against a planar
@@ -179,12 +224,17 @@ impl View {
     }
 }
 
+/// Iterations between rebuilds of the shape term's pairs.
+const RIGID_REFRESH: u32 = 100;
+
 /// A view rendered by the current model, with what its backward needs.
 pub struct ViewRender<S> {
     pub image: RenderedImage,
     pub camera: Camera,
     /// Normalised time of the view.
     pub time: f32,
+    /// The time the Gaussians' lives were read at ([`crate::motion::advance_living`]).
+    pub life_time: f32,
     /// The Gaussians as rendered (deformed to the view's time).
     pub deformed: Splats,
     pub(super) deltas: Option<(field::Deltas, field::MlpCache<f32>)>,
