@@ -79,9 +79,6 @@ pub struct TrackSettings {
     pub rigidity: f64,
     /// Neighbours per tracked Gaussian in the shape term.
     pub rigidity_neighbours: u32,
-    /// `L_depth`'s gradient also trains the deformation field (else only the
-    /// Gaussians' canonical centres, shapes and trajectories).
-    pub depth_into_field: bool,
 }
 
 /// Where the windows of trajectories hand over (`tracks.handover`; [`super::init::windows`]).
@@ -128,7 +125,6 @@ impl Default for TrackSettings {
             handover: Handover::Frame,
             rigidity: 0.0,
             rigidity_neighbours: 8,
-            depth_into_field: true,
         }
     }
 }

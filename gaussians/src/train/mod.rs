@@ -196,18 +196,6 @@ impl Trainer {
         let mut out = self.spare.lock().take_grads();
         let g = &mut out.splats;
         out.camera = r.backward_view_into(&v.deformed, &v.camera, &v.state, d_rgb, d_planes, g);
-        // The depth planes' share of the centres' gradient, kept out of the field
-        // (`tracks.depth_into_field = false`): a prior's error differs from frame to
-        // frame and is not motion.
-        let depth_only = (d_planes.depth.is_some()
-            && v.deltas.is_some()
-            && !self.settings.tracks.depth_into_field)
-            .then(|| {
-                let zero = vec![0.0f32; d_rgb.len()];
-                let mut g2 = crate::splats::SplatGrads::default();
-                r.backward_view_into(&v.deformed, &v.camera, &v.state, &zero, d_planes, &mut g2);
-                g2.means
-            });
         if let Some(dm) = d_means {
             assert_eq!(dm.len(), g.means.len(), "view_backward: d_means size");
             for (a, b) in g.means.iter_mut().zip(dm) {
@@ -235,11 +223,6 @@ impl Trainer {
                 &mut g.rotations,
                 delta_grads,
             );
-            if let Some(dm) = &depth_only {
-                for (a, b) in delta_grads.dx.iter_mut().zip(dm) {
-                    (0..3).for_each(|c| a[c] -= b[c]);
-                }
-            }
             // L_iso on the deformed centres, into δx (the canonical ones held fixed).
             *rigidity_loss = rigidity::Neighbours::backward(
                 self.neighbours.as_ref(),
