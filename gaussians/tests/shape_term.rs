@@ -6,39 +6,9 @@ use gaussians::raster::TileRasterizer;
 use gaussians::train::init::random_splats;
 use gaussians::train::{TrainSettings, Trainer, View};
 use glam::DVec3;
-use scene::{Camera, Intrinsics, Pose};
 
-const W: usize = 24;
-const H: usize = 24;
-
-fn cameras(n: usize) -> Vec<Camera> {
-    let intr = Intrinsics::from_fov_x(W as u32, H as u32, 0.9);
-    (0..n)
-        .map(|k| {
-            let a = k as f64 / n as f64 * 1.2 - 0.6;
-            let eye = DVec3::new(3.0 * a.sin(), 0.4, 3.0 * a.cos());
-            Camera {
-                intrinsics: intr,
-                cam_to_world: Pose::look_at(eye, DVec3::ZERO, DVec3::Y),
-            }
-        })
-        .collect()
-}
-
-/// `iterations` steps on the Gaussians as given: no field, no densification, no sizing.
-fn fixed_gaussians(iterations: u32) -> TrainSettings {
-    let mut s = TrainSettings {
-        iterations,
-        deform: false,
-        size: gaussians::train::sizing::SizeSettings {
-            tolerance_db: 0.0,
-            ..Default::default()
-        },
-        ..Default::default()
-    };
-    s.densify.until_iter = 0;
-    s
-}
+mod train_common;
+use train_common::{H, W, cameras, fixed_gaussians};
 
 /// The shape term (`tracks.rigidity`) through the training step: two faint tracked
 /// Gaussians (no photometric pull to speak of) whose trajectories scale their distance

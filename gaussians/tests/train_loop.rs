@@ -6,10 +6,10 @@ use gaussians::train::init::{SH_C0, camera_bounds, camera_extent, random_splats}
 use gaussians::train::{TrainSettings, Trainer, View};
 use gaussians::{Planes, Rasterizer, RenderedImage, SplatGrads, Splats};
 use glam::DVec3;
-use scene::{Camera, Intrinsics, Pose};
+use scene::Camera;
 
-const W: usize = 24;
-const H: usize = 24;
+mod train_common;
+use train_common::{H, W, cameras, fixed_gaussians};
 
 struct Additive;
 
@@ -123,20 +123,6 @@ impl Additive {
         }
         g
     }
-}
-
-fn cameras(n: usize) -> Vec<Camera> {
-    let intr = Intrinsics::from_fov_x(W as u32, H as u32, 0.9);
-    (0..n)
-        .map(|k| {
-            let a = k as f64 / n as f64 * 1.2 - 0.6;
-            let eye = DVec3::new(3.0 * a.sin(), 0.4, 3.0 * a.cos());
-            Camera {
-                intrinsics: intr,
-                cam_to_world: Pose::look_at(eye, DVec3::ZERO, DVec3::Y),
-            }
-        })
-        .collect()
 }
 
 fn truth() -> Splats {
@@ -461,21 +447,6 @@ fn the_split_bakes_a_constant_shift_and_keeps_moving_gaussians_dynamic() {
 /// `L_track` through the training step: a faint Gaussian (no photometric pull to speak
 /// of) whose track moves across the views ends up where its track saw it in each view,
 /// its trajectory learning the motion its canonical centre cannot give.
-/// `iterations` steps on the Gaussians as given: no field, no densification, no sizing.
-fn fixed_gaussians(iterations: u32) -> TrainSettings {
-    let mut s = TrainSettings {
-        iterations,
-        deform: false,
-        size: gaussians::train::sizing::SizeSettings {
-            tolerance_db: 0.0,
-            ..Default::default()
-        },
-        ..Default::default()
-    };
-    s.densify.until_iter = 0;
-    s
-}
-
 #[test]
 fn a_tracked_gaussian_is_pulled_to_its_track_in_every_view() {
     use gaussians::tracks::loss::TrackTerm;

@@ -32,10 +32,9 @@ pub struct Pairs {
     /// Gaussians the lists were built for.
     pub gaussians: usize,
     pub pairs: Vec<[u32; 2]>,
-    /// Each pair's life (both Gaussians share it) and reference time `τ_r`
-    /// (normalised time, the life's middle within the recording).
+    /// Each pair's life (both Gaussians share it); its middle within the recording is
+    /// the pair's reference time `τ_r` ([`middle`]).
     pub life: Vec<[f32; 2]>,
-    pub reference: Vec<f32>,
     /// Mean distance `h` of the pairs at their reference times when built (> 0).
     pub scale: f32,
     pub built_at: u32,
@@ -90,7 +89,6 @@ impl Pairs {
                 for q in found.into_iter().filter(|q| q.item as usize != a) {
                     out.pairs.push([ids[a], ids[q.item as usize]]);
                     out.life.push(l);
-                    out.reference.push(tr);
                     total += f64::from(q.distance.sqrt());
                 }
             }
@@ -126,12 +124,12 @@ impl Pairs {
             std::array::from_fn(|a| means[i][a] + motion[i][a] * tau + motion[i][3 + a] * tau * tau)
         };
         let mut loss = T::ZERO;
-        for ((p, l), &tr) in self.pairs.iter().zip(&self.life).zip(&self.reference) {
-            if !crate::motion::alive(*l, life_t) {
+        for (p, &l) in self.pairs.iter().zip(&self.life) {
+            if !crate::motion::alive(l, life_t) {
                 continue;
             }
             let (i, j) = (p[0] as usize, p[1] as usize);
-            let taur = T::from_f64(f64::from(tr - crate::motion::T0));
+            let taur = T::from_f64(f64::from(middle(l) - crate::motion::T0));
             let (xi, xj, ri, rj) = (at(i, tau), at(j, tau), at(i, taur), at(j, taur));
             let d: [T; 3] = std::array::from_fn(|a| xi[a] - xj[a]);
             let r: [T; 3] = std::array::from_fn(|a| ri[a] - rj[a]);
@@ -221,27 +219,22 @@ mod tests {
         let l0 = pairs.loss(2.0, &means, &motion, t, life_t, &mut gm, &mut gv);
         assert!(l0 > 0.0);
         let h = 1e-6;
+        // Each of the 9 parameters of each Gaussian: μ (0..3), then v and a (3..9).
         for i in 0..12 {
-            for a in 0..3 {
-                let (mut p, mut m) = (means.clone(), means.clone());
-                p[i][a] += h;
-                m[i][a] -= h;
-                let fd = (f(&p, &motion) - f(&m, &motion)) / (2.0 * h);
-                assert!(
-                    (fd - gm[i][a]).abs() < 1e-6 * (1.0 + fd.abs()),
-                    "μ {i} {a}: {fd} {}",
-                    gm[i][a]
+            for q in 0..9 {
+                let (mut p, mut m) = (
+                    (means.clone(), motion.clone()),
+                    (means.clone(), motion.clone()),
                 );
-            }
-            for a in 0..6 {
-                let (mut p, mut m) = (motion.clone(), motion.clone());
-                p[i][a] += h;
-                m[i][a] -= h;
-                let fd = (f(&means, &p) - f(&means, &m)) / (2.0 * h);
+                match q {
+                    0..3 => (p.0[i][q] += h, m.0[i][q] -= h),
+                    _ => (p.1[i][q - 3] += h, m.1[i][q - 3] -= h),
+                };
+                let fd = (f(&p.0, &p.1) - f(&m.0, &m.1)) / (2.0 * h);
+                let got = if q < 3 { gm[i][q] } else { gv[i][q - 3] };
                 assert!(
-                    (fd - gv[i][a]).abs() < 1e-6 * (1.0 + fd.abs()),
-                    "v/a {i} {a}: {fd} {}",
-                    gv[i][a]
+                    (fd - got).abs() < 1e-6 * (1.0 + fd.abs()),
+                    "{i} {q}: {fd} {got}"
                 );
             }
         }
