@@ -16,9 +16,16 @@
 //!
 //! over pairs of tracked Gaussians of the same life (`Splats::life`), `j` one of the
 //! `k` nearest to `i` at the life's middle `τ_r`, with `x(τ) = μ + v·τ + a·τ²` the
-//! trajectory alone (`motion`), `P` the pairs and `h` their mean distance when the lists
-//! were built (so `w` is free of the scene's scale). Both ends of each distance are
-//! trained: the gradient reaches `μ`, `v` and `a` through `τ` and `τ_r`.
+//! trajectory alone (`motion`), `P` the pairs and `h` the mean distance of the nearest
+//! pairs when the lists were built (so `w` is free of the scene's scale). Both ends of
+//! each distance are trained: the gradient reaches `μ`, `v` and `a` through `τ` and `τ_r`.
+//!
+//! Near pairs alone hold an object's size only weakly: a breath of 5 % changes a
+//! neighbour's distance by 5 % of `h`, where a Gaussian sliding 2 % along its ray changes
+//! it by several `h`. `far` pairs per Gaussian (`tracks.rigidity_far`) reach across the
+//! object: other members of its *part*, the Gaussians of its life joined to it through
+//! near pairs no longer than twice the median near distance (so two objects apart in
+//! space are two parts), drawn with a fixed seed; their distances grow with the object.
 
 use crate::splats::Splats;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
@@ -49,7 +56,8 @@ fn middle(life: [f32; 2]) -> f32 {
 impl Pairs {
     /// The `k` nearest tracked Gaussians of each tracked one within its life group, at
     /// the group's reference time.
-    pub fn build(s: &Splats, k: usize, at: u32) -> Pairs {
+    /// With `far` > 0, also that many members of its part per Gaussian (module doc).
+    pub fn build(s: &Splats, k: usize, far: usize, at: u32) -> Pairs {
         let n = s.len();
         let mut out = Pairs {
             gaussians: n,
@@ -71,7 +79,7 @@ impl Pairs {
                     .push(i as u32);
             }
         }
-        let mut total = 0.0;
+        let (mut total, mut count) = (0.0, 0usize);
         for (key, ids) in groups {
             let l = [f32::from_bits(key[0]), f32::from_bits(key[1])];
             let tr = middle(l);
@@ -81,20 +89,31 @@ impl Pairs {
             }
             let tree: ImmutableKdTree<f32, 3> =
                 ImmutableKdTree::new_from_slice(&pts).expect("finite points build a tree");
+            let mut near: Vec<(u32, u32, f32)> = Vec::new();
             for (a, p) in pts.iter().enumerate() {
                 let found = tree
                     .query(p)
                     .nearest_n::<SquaredEuclidean<f32>>(k1)
                     .execute();
                 for q in found.into_iter().filter(|q| q.item as usize != a) {
-                    out.pairs.push([ids[a], ids[q.item as usize]]);
+                    near.push((a as u32, q.item, q.distance.sqrt()));
+                }
+            }
+            for &(a, b, d) in &near {
+                out.pairs.push([ids[a as usize], ids[b as usize]]);
+                out.life.push(l);
+                total += f64::from(d);
+                count += 1;
+            }
+            if far > 0 {
+                for [a, b] in far_pairs(pts.len(), &near, far, key) {
+                    out.pairs.push([ids[a as usize], ids[b as usize]]);
                     out.life.push(l);
-                    total += f64::from(q.distance.sqrt());
                 }
             }
         }
         if total > 0.0 {
-            out.scale = (total / out.pairs.len() as f64) as f32;
+            out.scale = (total / count as f64) as f32;
         }
         out
     }
@@ -156,6 +175,54 @@ impl Pairs {
     }
 }
 
+/// `far` pairs per point of `n` (indices within one life group) with other members of
+/// its part: the components of the graph of the `near` pairs `(a, b, distance)` no
+/// longer than twice their median. Drawn with a generator seeded by the group's `key`.
+fn far_pairs(n: usize, near: &[(u32, u32, f32)], far: usize, key: [u32; 2]) -> Vec<[u32; 2]> {
+    let mut parent: Vec<u32> = (0..n as u32).collect();
+    fn root(parent: &mut [u32], mut a: u32) -> u32 {
+        while parent[a as usize] != a {
+            parent[a as usize] = parent[parent[a as usize] as usize];
+            a = parent[a as usize];
+        }
+        a
+    }
+    let mut lengths: Vec<f32> = near.iter().map(|e| e.2).collect();
+    if lengths.is_empty() {
+        return Vec::new();
+    }
+    let m = lengths.len() / 2;
+    let limit = 2.0 * *lengths.select_nth_unstable_by(m, f32::total_cmp).1;
+    for &(a, b, _) in near.iter().filter(|e| e.2 <= limit) {
+        let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
+        parent[ra.max(rb) as usize] = ra.min(rb);
+    }
+    let mut parts: BTreeMap<u32, Vec<u32>> = BTreeMap::new();
+    for a in 0..n as u32 {
+        let r = root(&mut parent, a);
+        parts.entry(r).or_default().push(a);
+    }
+    let mut state = u64::from(key[0]) << 32 | u64::from(key[1]) | 1;
+    let mut next = |bound: usize| -> usize {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((state >> 33) as usize) % bound
+    };
+    let mut out = Vec::new();
+    for members in parts.values().filter(|p| p.len() > 1) {
+        for &a in members {
+            for _ in 0..far {
+                let b = members[next(members.len())];
+                if b != a {
+                    out.push([a, b]);
+                }
+            }
+        }
+    }
+    out
+}
+
 /// The trajectory's position of Gaussian `i` at normalised time `t` (no field).
 fn position(s: &Splats, i: usize, t: f32) -> [f32; 3] {
     let d = crate::motion::shift(s, i, t);
@@ -198,7 +265,7 @@ mod tests {
             });
         }
         let s = cloud(&ms, rows, lives);
-        let pairs = Pairs::build(&s, 3, 0);
+        let pairs = Pairs::build(&s, 3, 0, 0);
         assert!(!pairs.pairs.is_empty());
         assert!(
             pairs.pairs.iter().flatten().all(|&i| i != 11),
@@ -244,6 +311,41 @@ mod tests {
         assert!(a[6..].iter().flatten().all(|&g| g == 0.0));
     }
 
+    /// Two grids of one life, far apart: the far pairs join members of one grid only,
+    /// every Gaussian of both grids has some, and `h` stays the near pairs' spacing.
+    #[test]
+    fn far_pairs_stay_within_a_part() {
+        let grid = |x0: f32| -> Vec<[f32; 3]> {
+            (0..36)
+                .map(|i| [x0 + 0.1 * (i % 6) as f32, 0.1 * (i / 6) as f32, 3.0])
+                .collect()
+        };
+        let ms: Vec<[f32; 3]> = grid(0.0).into_iter().chain(grid(5.0)).collect();
+        let n = ms.len();
+        let s = cloud(&ms, vec![[0.1; 6]; n], vec![[0.0, 1.0]; n]);
+        let near = Pairs::build(&s, 4, 0, 0);
+        let both = Pairs::build(&s, 4, 3, 0);
+        let extra = &both.pairs[near.pairs.len()..];
+        assert_eq!(&both.pairs[..near.pairs.len()], &near.pairs[..]);
+        assert!(extra.len() > n && extra.len() <= 3 * n, "{}", extra.len());
+        assert!(
+            extra.iter().all(|p| (p[0] < 36) == (p[1] < 36)),
+            "across parts"
+        );
+        assert!(extra.iter().all(|p| p[0] != p[1]));
+        // Some reach beyond the neighbours: farther than three grid steps.
+        let dist = |p: &[u32; 2]| {
+            let (a, b) = (ms[p[0] as usize], ms[p[1] as usize]);
+            ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt()
+        };
+        assert!(extra.iter().any(|p| dist(p) > 0.3));
+        for i in 0..n as u32 {
+            assert!(extra.iter().any(|p| p[0] == i), "{i} has no far pair");
+        }
+        assert_eq!(both.scale, near.scale);
+        assert!(near.scale > 0.09 && near.scale < 0.15, "{}", near.scale);
+    }
+
     /// A rigid motion costs nothing; the same cloud scaled about a point over time does.
     #[test]
     fn rigid_motion_is_free_and_breathing_is_not() {
@@ -259,7 +361,9 @@ mod tests {
             vec![[0.4, -0.2, 0.1, 0.3, 0.0, -0.5]; 10],
             vec![crate::splats::ALWAYS; 10],
         );
-        let pairs = Pairs::build(&s, 4, 0);
+        // Near and far pairs (one part: the points are a connected chain).
+        let pairs = Pairs::build(&s, 4, 2, 0);
+        assert!(pairs.pairs.len() > 40, "{}", pairs.pairs.len());
         let means: Vec<[f64; 3]> = s.means.iter().map(|m| m.map(f64::from)).collect();
         let motion: Vec<[f64; 6]> = s.motion.iter().map(|m| m.map(f64::from)).collect();
         let (mut a, mut b) = (vec![[0.0; 3]; 10], vec![[0.0; 6]; 10]);

@@ -79,6 +79,9 @@ pub struct TrackSettings {
     pub rigidity: f64,
     /// Neighbours per tracked Gaussian in the shape term.
     pub rigidity_neighbours: u32,
+    /// Pairs per tracked Gaussian in the shape term with other members of its part, across
+    /// the object ([`super::rigid`]; 0 = the neighbours only).
+    pub rigidity_far: u32,
 }
 
 /// Where the windows of trajectories hand over (`tracks.handover`; [`super::init::windows`]).
@@ -125,6 +128,7 @@ impl Default for TrackSettings {
             handover: Handover::Frame,
             rigidity: 0.0,
             rigidity_neighbours: 8,
+            rigidity_far: 0,
         }
     }
 }
@@ -183,11 +187,12 @@ impl TrackSettings {
             || !(self.window_s.is_finite() && self.window_s >= 0.0)
             || !(self.rigidity.is_finite() && self.rigidity >= 0.0)
             || !(1..=64).contains(&self.rigidity_neighbours)
+            || self.rigidity_far > 64
         {
             return Err(
                 "tracks: thresholds and huber_px must be positive, ridge, min_texture, \
                  weight, depth_sigma, depth_ridge, depth_weight, window_s and rigidity finite and ≥ 0, \
-                 rigidity_neighbours 1..=64"
+                 rigidity_neighbours 1..=64, rigidity_far 0..=64"
                     .into(),
             );
         }

@@ -136,6 +136,7 @@ impl super::Trainer {
             term.shape = Some(crate::tracks::rigid::Pairs::build(
                 &self.splats,
                 k as usize,
+                self.settings.tracks.rigidity_far as usize,
                 it,
             ));
         }
