@@ -29,6 +29,7 @@
 
 use crate::splats::Splats;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use rand::{RngExt, SeedableRng};
 use scene::real::Real;
 use std::collections::BTreeMap;
 use std::num::NonZeroUsize;
@@ -202,18 +203,13 @@ fn far_pairs(n: usize, near: &[(u32, u32, f32)], far: usize, key: [u32; 2]) -> V
         let r = root(&mut parent, a);
         parts.entry(r).or_default().push(a);
     }
-    let mut state = u64::from(key[0]) << 32 | u64::from(key[1]) | 1;
-    let mut next = |bound: usize| -> usize {
-        state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        ((state >> 33) as usize) % bound
-    };
+    let mut rng =
+        rand_chacha::ChaCha8Rng::seed_from_u64(u64::from(key[0]) << 32 | u64::from(key[1]));
     let mut out = Vec::new();
     for members in parts.values().filter(|p| p.len() > 1) {
         for &a in members {
             for _ in 0..far {
-                let b = members[next(members.len())];
+                let b = members[rng.random_range(0..members.len())];
                 if b != a {
                     out.push([a, b]);
                 }
