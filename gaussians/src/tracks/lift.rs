@@ -85,22 +85,37 @@ pub fn still(obs: &[Observation]) -> Option<DVec3> {
 /// against the rays' `1 / depth²` (their residual, divided by the depth, is an angle,
 /// a pixel being `1 / f_x` of it). These rows fix the distance the rays leave free.
 pub fn moving(obs: &[Observation], guess: DVec3, ridge: f64, depth_sigma: f64) -> Option<Lifted> {
-    let mut m = [[0.0f64; 9]; 9];
-    let mut b = [0.0f64; 9];
+    let x = fit::<9>(obs, guess, ridge, depth_sigma)?;
+    Some(Lifted::Moving {
+        mu: DVec3::new(x[0], x[1], x[2]),
+        v: DVec3::new(x[3], x[4], x[5]),
+        a: DVec3::new(x[6], x[7], x[8]),
+    })
+}
+
+/// The still point nearest the rays and the observations' depths, weighted as in
+/// [`moving`]: where the cameras are close together the rays alone leave the distance
+/// loose (their meeting point may lie far off the prior though a point at the prior's
+/// depth fits them as well); the depth rows fix it. `None` when the system is singular.
+pub fn still_with_depth(obs: &[Observation], guess: DVec3, depth_sigma: f64) -> Option<DVec3> {
+    let x = fit::<3>(obs, guess, 0.0, depth_sigma)?;
+    Some(DVec3::new(x[0], x[1], x[2]))
+}
+
+/// Least squares for `X(τ) = Σ_j x_j τ^j`, `N / 3` coefficients (3: a still point, 9: a
+/// quadratic), the ridge on the last three (the acceleration of a quadratic).
+fn fit<const N: usize>(
+    obs: &[Observation],
+    guess: DVec3,
+    ridge: f64,
+    depth_sigma: f64,
+) -> Option<[f64; N]> {
+    let mut m = [[0.0f64; N]; N];
+    let mut b = [0.0f64; N];
     let mut depth2 = 0.0;
     let mut add = |w: f64, r: DVec3, rhs: f64, t: f64| {
-        let co = [
-            r.x,
-            r.y,
-            r.z,
-            r.x * t,
-            r.y * t,
-            r.z * t,
-            r.x * t * t,
-            r.y * t * t,
-            r.z * t * t,
-        ];
-        for u in 0..9 {
+        let co: [f64; N] = std::array::from_fn(|u| r[u % 3] * t.powi((u / 3) as i32));
+        for u in 0..N {
             b[u] += w * co[u] * rhs;
             for (q, cq) in co.iter().enumerate() {
                 m[u][q] += w * co[u] * cq;
@@ -122,15 +137,12 @@ pub fn moving(obs: &[Observation], guess: DVec3, ridge: f64, depth_sigma: f64) -
             add(w, r, r.dot(c), t);
         }
     }
-    for (u, row) in m.iter_mut().enumerate().skip(6) {
-        row[u] += ridge / depth2.max(1e-12);
+    if N > 3 {
+        for (u, row) in m.iter_mut().enumerate().skip(N - 3) {
+            row[u] += ridge / depth2.max(1e-12);
+        }
     }
-    let x = solve(m, b)?;
-    Some(Lifted::Moving {
-        mu: DVec3::new(x[0], x[1], x[2]),
-        v: DVec3::new(x[3], x[4], x[5]),
-        a: DVec3::new(x[6], x[7], x[8]),
-    })
+    solve(m, b)
 }
 
 /// Gaussian elimination with partial pivoting.

@@ -209,13 +209,26 @@ pub fn lift_track(
         return None;
     }
     let x = lift::still(&obs)?;
-    let still = Lifted::Still(x);
-    if lift::rms_pixels(&still, &obs) < st.still_pixels
-        && agrees_with_prior(x, &obs, 3.0 * st.depth_sigma)
-    {
-        return Some(still);
+    let is_still = |x: DVec3| {
+        lift::rms_pixels(&Lifted::Still(x), &obs) < st.still_pixels
+            && agrees_with_prior(x, &obs, 3.0 * st.depth_sigma)
+    };
+    if is_still(x) {
+        return Some(Lifted::Still(x));
     }
     let with_depth = obs.iter().filter(|o| o.depth.is_some()).count();
+    // Over a short baseline the rays' meeting point is loose in depth: a still point at
+    // the prior's depth that fits the rays as well is still (else three quarters of a
+    // window's trajectories were still points: BENCHMARKS.md, "Still points called
+    // moving").
+    if st.depth_sigma > 0.0 && with_depth > 0 {
+        let guess = prior_point(&obs).unwrap_or(x);
+        if let Some(y) =
+            lift::still_with_depth(&obs, guess, st.depth_sigma).filter(|&y| is_still(y))
+        {
+            return Some(Lifted::Still(y));
+        }
+    }
     if depths.iter().all(Option::is_none) {
         between = between_positions(frames, track, st);
         obs.extend(between.iter().map(|(camera, time, pixel)| Observation {
