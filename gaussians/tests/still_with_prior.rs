@@ -10,6 +10,8 @@ use gaussians::tracks::{Frame, TrackSettings, camera_pixel, lift_track};
 use glam::{DQuat, DVec2, DVec3, Vec2};
 use scene::{Camera, Intrinsics, Pose};
 
+mod synth_frames;
+
 const W: usize = 32;
 
 /// Five cameras looking down −Z from `z = 4`, their centres at `x = ±spread` and between.
@@ -181,23 +183,7 @@ fn a_windows_trajectories_start_on_the_moving_objects() {
     let times = &all[2..7];
     let cams: Vec<Camera> = times.iter().map(|&t| world.camera_at(t)).collect();
     let renders: Vec<_> = times.iter().map(|&t| world.render(t)).collect();
-    let frames: Vec<Frame> = (cams.iter().zip(times).zip(&renders))
-        .map(|((camera, &t), r)| Frame {
-            camera,
-            time: (t - t_first) / (t_last - t_first),
-            pyramid: Pyramid::new(
-                Grey {
-                    width: 80,
-                    height: 80,
-                    data: (r.rgb.chunks_exact(3))
-                        .map(|c| 0.299 * c[0] + 0.587 * c[1] + 0.114 * c[2])
-                        .collect(),
-                },
-                3,
-            ),
-            between: Vec::new(),
-        })
-        .collect();
+    let frames = synth_frames::frames(&cams, times, &renders, (t_first, t_last));
     let priors: Vec<Option<Aligned>> = (renders.iter().enumerate())
         .map(|(k, r)| {
             let z = (r.depth.iter().enumerate())

@@ -8,6 +8,8 @@ use gaussians::tracks::{Frame, TrackSettings, lift_frames, lift_track, track_fro
 use glam::{DQuat, DVec3, Vec2};
 use scene::{Camera, Intrinsics, Pose};
 
+mod synth_frames;
+
 /// A smooth texture: a sum of sinusoids, sampled at pixel centres shifted by `d`.
 fn texture(w: usize, h: usize, d: Vec2) -> Grey {
     textured(w, h, d, 0.0)
@@ -287,25 +289,7 @@ fn on_a_synthetic_scene_still_tracks_are_on_still_surfaces_and_moving_ones_move(
     let cams: Vec<Camera> = times.iter().map(|&t| world.camera_at(t)).collect();
     let renders: Vec<_> = times.iter().map(|&t| world.render(t)).collect();
     let (t_first, t_last) = (times[0], *times.last().unwrap());
-    let frames: Vec<Frame> = (cams.iter().zip(&times).zip(&renders))
-        .map(|((camera, &t), r)| Frame {
-            camera,
-            time: (t - t_first) / (t_last - t_first),
-            pyramid: Pyramid::new(
-                Grey {
-                    width: 80,
-                    height: 80,
-                    data: r
-                        .rgb
-                        .chunks_exact(3)
-                        .map(|c| 0.299 * c[0] + 0.587 * c[1] + 0.114 * c[2])
-                        .collect(),
-                },
-                3,
-            ),
-            between: Vec::new(),
-        })
-        .collect();
+    let frames = synth_frames::frames(&cams, &times, &renders, (t_first, t_last));
     let median = |v: &mut Vec<f64>| {
         v.sort_by(f64::total_cmp);
         v[v.len() / 2]
