@@ -218,9 +218,9 @@ pub fn lift_track(
     }
     let with_depth = obs.iter().filter(|o| o.depth.is_some()).count();
     // Over a short baseline the rays' meeting point is loose in depth: a still point at
-    // the prior's depth that fits the rays as well is still (else three quarters of a
-    // window's trajectories were still points: BENCHMARKS.md, "Still points called
-    // moving").
+    // the prior's depth that fits the rays as well is still (else three in five of a
+    // window's trajectories on `rigid` 8 fps were still points: BENCHMARKS.md, "Still
+    // points called moving").
     if st.depth_sigma > 0.0 && with_depth > 0 {
         let guess = prior_point(&obs).unwrap_or(x);
         if let Some(y) =
