@@ -248,7 +248,13 @@ fn runs_killed_at_seeded_points_resume_to_the_uninterrupted_result() {
                 std::fs::read_to_string(w.cache.join("runs/resume/run.json")).unwrap_or_default()
             )
         });
-        std::thread::sleep(Duration::from_secs_f64(f * wall));
+        // A stage of a few milliseconds (`assoc` here: 8.6 ms) may end within a point a
+        // millisecond or two in, on a faster run than the reference (CI saw it): under
+        // 10 ms it is stopped where it was found, inside it all the same.
+        let delay = f * wall;
+        if delay >= 0.01 {
+            std::thread::sleep(Duration::from_secs_f64(delay));
+        }
         // Stopped first, so the kill lands inside the stage, whatever the machine's speed.
         let when = format!(
             "kill {i} ({:?}) in {stage} at {:.1} of {:.1} ms",
