@@ -8,8 +8,9 @@
 //! cargo run --release -p degs-gaussians --example prior_error -- SCENE WARMUP_DIR
 //! ```
 //!
-//! The moving objects are those `synth.json` says move. Prints the median relative
-//! error (%) per frame and over all frames.
+//! The moving objects are those `synth.json` says move. Prints the median relative error
+//! (%) per frame and over all frames, and the signed median error 2 px or more inside
+//! each moving object per frame (what one scale per object and frame would remove).
 
 use std::path::Path;
 
@@ -43,6 +44,8 @@ fn main() -> scene::Result<()> {
     // (moving, band) → relative errors; bands: 0 on the outline (1 px), 1 within 3 px,
     // 2 farther.
     let mut all = vec![Vec::new(); 6];
+    // Per moving object and frame: the signed relative errors 2 px or more inside it.
+    let mut signed = vec![vec![Vec::new(); n]; moving_ids.len()];
     println!("frame  moving_in  moving_edge  still_in  (median |z_prior − z| / z, %)");
     for (f, map) in maps.iter().enumerate() {
         let Some(map) = map else {
@@ -85,6 +88,13 @@ fn main() -> scene::Result<()> {
                 let moving = moving_ids.contains(&me);
                 let slot = if moving { band } else { 3 + band };
                 frame[slot].push((p - t).abs() / t);
+                if let Some(o) = moving_ids
+                    .iter()
+                    .position(|&m| m == me)
+                    .filter(|_| band > 0)
+                {
+                    signed[o][f].push(p / t - 1.0);
+                }
             }
         }
         println!(
@@ -99,6 +109,17 @@ fn main() -> scene::Result<()> {
         for (a, b) in all.iter_mut().zip(frame) {
             a.extend(b);
         }
+    }
+    println!("signed median error 2 px or more inside each moving object, per frame, %:");
+    for (o, frames) in signed.iter().enumerate() {
+        let name = &cfg.objects[moving_ids[o] as usize - 1].name;
+        let row: Vec<String> = (frames.iter())
+            .map(|v| match v.len() {
+                0..10 => "    -".to_string(),
+                _ => format!("{:+5.1}", 100.0 * median(v.clone())),
+            })
+            .collect();
+        println!("  {name:8} {}", row.join(" "));
     }
     let names = [
         "moving, outline",
