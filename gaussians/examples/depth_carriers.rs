@@ -15,7 +15,10 @@
 //! whose centre projects onto the object and lies within 30 % of its true depth; and
 //! first, for the object's opaque trajectory Gaussians at the middle frame that live
 //! over the whole recording, how the distances to their 8 nearest change between the
-//! first frame, the last and the middle (1 = rigid).
+//! first frame, the last and the middle (1 = rigid). And per train frame the depth spread
+//! of the render (`raster::reference::depth_spread`: how far apart the depths blended into
+//! a pixel lie, relative) on the object's pixels and on the still objects' (ids 1–2, the
+//! presets' floor and wall: a layer in front or behind that averages to the right depth).
 
 use gaussians::model::Model;
 use gaussians::{Rasterizer, Splats, TileRasterizer};
@@ -172,6 +175,31 @@ fn main() {
             let q = quartiles(errs).map(|v| 100.0 * v);
             format!("{count} at {:+.1} {:+.1} {:+.1} %", q[0], q[1], q[2])
         };
+        // How far apart the depths blended into a pixel lie (relative), on the object and
+        // on the still pixels.
+        let spread = gaussians::raster::reference::depth_spread(
+            &gaussians::raster::reference::Gaussians64::from(&all),
+            &fr.camera,
+        );
+        let (mut on, mut off) = (Vec::new(), Vec::new());
+        for p in (0..w * h).filter(|&p| spread[p] > 0.0 || fr.depth[p] > 0.0) {
+            match fr.object[p] {
+                o if o == id => on.push(spread[p]),
+                1..=2 => off.push(spread[p]),
+                _ => {}
+            }
+        }
+        let (on, off) = (quartiles(on), quartiles(off));
+        println!(
+            "{k}: depth spread (quartiles, %) on the object {:.1} {:.1} {:.1}, on the still \
+             surfaces {:.1} {:.1} {:.1}",
+            100.0 * on[0],
+            100.0 * on[1],
+            100.0 * on[2],
+            100.0 * off[0],
+            100.0 * off[1],
+            100.0 * off[2]
+        );
         println!(
             "{k}: all {}, trajectories {}, trajectories without the field {}, the others {} \
              | trajectories {}, the others {}",

@@ -87,3 +87,76 @@ fn an_occluded_gaussian_weighs_what_shows_through() {
     assert_eq!((w2[0], w2[1]), (w[0], w[1]));
     assert!(w2[3] > 0.0);
 }
+
+/// The reference's depth spread (`Σᵢ Σⱼ wᵢ wⱼ |zᵢ − zⱼ| / ((Σ w)² D̄)`, summed over the
+/// depth-sorted Gaussians with running sums) against the double sum by brute force,
+/// each Gaussian's alpha read from a render of it alone and its weight `αᵢ Πⱼ (1 − αⱼ)`
+/// over the nearer ones; one Gaussian alone spreads nothing.
+#[test]
+fn depth_spread_is_the_double_sum() {
+    let mut s = Splats::default();
+    let layers = [([0.0, 0.0, 1.0], -1.2, 0.3), ([0.1, 0.0, 0.0], -1.0, 1.0)];
+    let more = [
+        ([-0.1, 0.1, -0.7], -0.9, -0.5),
+        ([0.0, -0.1, 0.4], -1.4, 0.0),
+    ];
+    for (m, ls, logit) in layers.iter().chain(&more) {
+        push_gaussian(&mut s, *m, *ls, *logit);
+    }
+    let cam = camera(40, 32, 36.0, DVec3::new(0.0, 0.0, 4.0));
+    let g = Gaussians64::from(&s);
+    let got = reference::depth_spread(&g, &cam);
+    let alone: Vec<Vec<f64>> = (0..s.len())
+        .map(|i| {
+            let mut one = Splats::default();
+            push_gaussian(
+                &mut one,
+                s.means[i],
+                s.log_scales[i][0],
+                s.opacity_logits[i],
+            );
+            reference::render(&Gaussians64::from(&one), &cam, 0, [0.0; 3]).alpha
+        })
+        .collect();
+    let z: Vec<f64> = (s.means.iter())
+        .map(|m| {
+            cam.project_world(glam::Vec3::from(*m).as_dvec3())
+                .unwrap()
+                .1
+        })
+        .collect();
+    let mut order: Vec<usize> = (0..s.len()).collect();
+    order.sort_by(|&a, &b| z[a].total_cmp(&z[b]));
+    let mut checked = 0;
+    for p in 0..got.len() {
+        let mut t = 1.0;
+        let mut w = vec![0.0; s.len()];
+        for &i in &order {
+            w[i] = alone[i][p] * t;
+            t *= 1.0 - alone[i][p];
+        }
+        let total: f64 = w.iter().sum();
+        if total < 0.05 {
+            continue;
+        }
+        let mean = w.iter().zip(&z).map(|(w, z)| w * z).sum::<f64>() / total;
+        let mut pairs = 0.0;
+        for i in 0..s.len() {
+            for j in 0..s.len() {
+                pairs += w[i] * w[j] * (z[i] - z[j]).abs();
+            }
+        }
+        let want = pairs / (total * total * mean);
+        assert!(
+            (got[p] - want).abs() < 1e-9,
+            "pixel {p}: {} against {want}",
+            got[p]
+        );
+        checked += (want > 0.01) as usize;
+    }
+    assert!(checked > 50, "too few pixels with two layers ({checked})");
+    let mut one = Splats::default();
+    push_gaussian(&mut one, [0.0, 0.0, 0.0], -1.0, 1.0);
+    let single = reference::depth_spread(&Gaussians64::from(&one), &cam);
+    assert!(single.iter().all(|&v| v.abs() < 1e-12));
+}

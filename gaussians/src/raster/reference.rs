@@ -117,14 +117,26 @@ pub fn render(
     sh_degree: u32,
     background: [f64; 3],
 ) -> RenderedImage64 {
-    composite(g, cam, sh_degree, background, None)
+    composite(g, cam, sh_degree, background, None, None)
 }
 
 /// Each Gaussian's blending weight `Σ_pixels αᵢ·Tᵢ` in the render of `g` at `cam`.
 pub fn contributions(g: &Gaussians64, cam: &Camera) -> Vec<f64> {
     let mut w = vec![0.0; g.means.len()];
-    composite(g, cam, 0, [0.0; 3], Some(&mut w));
+    composite(g, cam, 0, [0.0; 3], Some(&mut w), None);
     w
+}
+
+/// Per pixel, how far apart the depths blended into it lie: `Σᵢ Σⱼ wᵢ wⱼ |zᵢ − zⱼ|`
+/// over the Gaussians' weights `wᵢ = αᵢ Tᵢ` and centre depths (the distortion of
+/// Mip-NeRF 360 and 2DGS; 0 when one depth carries the pixel), divided by `(Σ w)² D̄`,
+/// `D̄` the blended depth: the mean distance between two depths drawn by the weights,
+/// relative (two equal layers `Δ` apart give `Δ / 2D̄`). 0 where nothing is drawn.
+pub fn depth_spread(g: &Gaussians64, cam: &Camera) -> Vec<f64> {
+    let n = (cam.intrinsics.width * cam.intrinsics.height) as usize;
+    let mut spread = vec![0.0; n];
+    composite(g, cam, 0, [0.0; 3], None, Some(&mut spread));
+    spread
 }
 
 /// The render, and when `weights` is given each Gaussian's `α·T` summed into it.
@@ -134,6 +146,7 @@ fn composite(
     sh_degree: u32,
     background: [f64; 3],
     mut weights: Option<&mut Vec<f64>>,
+    mut spread: Option<&mut Vec<f64>>,
 ) -> RenderedImage64 {
     let (w, h) = (
         cam.intrinsics.width as usize,
@@ -158,6 +171,8 @@ fn composite(
             let mut t = 1.0f64;
             let mut rgb = [0.0f64; 3];
             let mut depth = 0.0;
+            // Σ w, and Σᵢ Σⱼ<ᵢ wᵢ wⱼ (zᵢ − zⱼ) (the splats come nearest first).
+            let mut pairs = 0.0;
             for (i, s) in &splats {
                 let dx = x as f64 - s.mean[0];
                 let dy = y as f64 - s.mean[1];
@@ -176,7 +191,9 @@ fn composite(
                 for c in 0..3 {
                     rgb[c] += alpha * t * s.color[c];
                 }
-                depth += alpha * t * s.depth;
+                let wi = alpha * t;
+                pairs += wi * (s.depth * (1.0 - t) - depth);
+                depth += wi * s.depth;
                 if let Some(wts) = weights.as_deref_mut() {
                     wts[*i] += alpha * t;
                 }
@@ -188,6 +205,11 @@ fn composite(
             }
             f.depth[p] = depth;
             f.alpha[p] = 1.0 - t;
+            if let Some(out) = spread.as_deref_mut()
+                && depth > 0.0
+            {
+                out[p] = 2.0 * pairs / ((1.0 - t) * depth);
+            }
         }
     }
     f
