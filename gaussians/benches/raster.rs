@@ -138,6 +138,7 @@ fn main() {
                         Planes {
                             depth: Some(&d_depth),
                             alpha: None,
+                            distortion: None,
                         },
                         &mut g,
                     );

@@ -1,6 +1,7 @@
 //! Every gradient of the tile rasterizer (means, quaternions, log-scales, opacity
 //! logits, SH DC and rest, camera twist) against central finite differences of the f64
-//! reference, for losses on colour, depth and alpha. Relative error per group, norm-wise.
+//! reference, for losses on colour, depth and alpha, and for the depth distortion
+//! (`raster::Distortion`). Relative error per group, norm-wise.
 //!
 //! Scenes keep the cut-offs out of the way: opacity logits ≥ −0.5 (so α never falls to
 //! 1/255 inside the 3σ ellipse), ≤ 1.2 (α < 0.99), few layers (T stays above 1e-4), and
@@ -9,8 +10,8 @@
 mod raster_common;
 
 use gaussians::raster::reference::{self, Gaussians64};
-use gaussians::raster::{TileRasterizer, apply_twist};
-use gaussians::{SplatGrads, Splats};
+use gaussians::raster::{Distortion, Planes, TileRasterizer, apply_twist};
+use gaussians::{Rasterizer, SplatGrads, Splats};
 use glam::DVec3;
 use raster_common::*;
 use scene::Camera;
@@ -23,6 +24,7 @@ enum Target {
     Rgb,
     Depth,
     Alpha,
+    Distortion,
     All,
 }
 
@@ -30,6 +32,8 @@ struct Weights {
     rgb: Vec<f64>,
     depth: Vec<f64>,
     alpha: Vec<f64>,
+    /// The distortion's λ per pixel (≥ 0).
+    dist: Vec<f64>,
 }
 
 fn weights(rng: &mut Rng, np: usize, t: Target) -> Weights {
@@ -42,13 +46,18 @@ fn weights(rng: &mut Rng, np: usize, t: Target) -> Weights {
         rgb: w(matches!(t, Target::Rgb | Target::All), 3 * np),
         depth: w(matches!(t, Target::Depth | Target::All), np),
         alpha: w(matches!(t, Target::Alpha | Target::All), np),
+        dist: w(matches!(t, Target::Distortion | Target::All), np)
+            .iter()
+            .map(|v| v.abs())
+            .collect(),
     }
 }
 
 fn loss(g: &Gaussians64, cam: &Camera, sh: u32, bg: [f64; 3], w: &Weights) -> f64 {
     let f = reference::render(g, cam, sh, bg);
     let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-    dot(&f.rgb, &w.rgb) + dot(&f.depth, &w.depth) + dot(&f.alpha, &w.alpha)
+    let (dist, _) = reference::distortion(g, cam);
+    dot(&f.rgb, &w.rgb) + dot(&f.depth, &w.depth) + dot(&f.alpha, &w.alpha) + dot(&dist, &w.dist)
 }
 
 const GROUPS: [&str; 6] = [
@@ -93,16 +102,18 @@ struct Check {
 /// Compare every group for one scene and loss; returns (group, relative error, ‖fd‖).
 fn check_scene(s: &Splats, cam: &Camera, sh: u32, bg: [f32; 3], w: &Weights) -> Vec<Check> {
     let r = TileRasterizer;
-    let (_, st) = r.render_full(s, cam, sh, bg);
+    let (image, st) = r.render_full(s, cam, sh, bg);
     let f32v = |v: &[f64]| v.iter().map(|&x| x as f32).collect::<Vec<f32>>();
-    let (g, pose) = r.backward_full(
-        s,
-        cam,
-        &st,
-        &f32v(&w.rgb),
-        Some(&f32v(&w.depth)),
-        Some(&f32v(&w.alpha)),
-    );
+    let lam = f32v(&w.dist);
+    let planes = Planes {
+        depth: Some(&f32v(&w.depth)),
+        alpha: Some(&f32v(&w.alpha)),
+        distortion: Some(Distortion {
+            weight: &lam,
+            depth: &image.depth,
+        }),
+    };
+    let (g, pose) = r.backward_view(s, cam, &st, &f32v(&w.rgb), planes);
     let bg64 = bg.map(f64::from);
     let g64 = Gaussians64::from(s);
     let mut out = Vec::new();
@@ -178,7 +189,8 @@ fn run(target: Target, seeds: std::ops::Range<u64>, sh: u32) {
         let w = weights(&mut rng, 37 * 29, target);
         let bg = [0.3, 0.6, 0.1];
         for c in check_scene(&s, &cam, sh, bg, &w) {
-            let zero = matches!(target, Target::Depth | Target::Alpha) && c.name.starts_with("sh");
+            let zero = matches!(target, Target::Depth | Target::Alpha | Target::Distortion)
+                && c.name.starts_with("sh");
             eprintln!(
                 "{target:?} seed {seed} {}: rel {:.2e} (|fd| {:.3e})",
                 c.name, c.rel, c.norm
@@ -218,6 +230,13 @@ fn gradients_of_depth_loss_match_finite_differences() {
 #[test]
 fn gradients_of_alpha_loss_match_finite_differences() {
     run(Target::Alpha, 13..18, 3);
+}
+
+/// The depth distortion's gradient: the double sum's (`reference::distortion`) against
+/// the backward's walk with running sums.
+#[test]
+fn gradients_of_the_depth_distortion_match_finite_differences() {
+    run(Target::Distortion, 24..29, 3);
 }
 
 #[test]

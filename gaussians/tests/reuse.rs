@@ -71,6 +71,7 @@ fn render_and_backward_into_reused_buffers_match_fresh_ones() {
             Planes {
                 depth: Some(&d_depth),
                 alpha: None,
+                distortion: None,
             },
             &mut grads,
         );

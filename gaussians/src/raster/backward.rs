@@ -8,6 +8,7 @@ use super::alpha::{ALPHA_MAX, eval_alpha};
 use super::forward::{BackScratch, Plane, RenderState, TILE, lane_bits, row_span};
 use super::project::ScreenGrad;
 use super::project_backward_lanes::{Outs, Shared, backward_span};
+use super::rasterizer::{Distortion, Planes};
 use super::simd::{self, F4, Lanes, Mask};
 use crate::splats::{SplatGrads, Splats};
 use glam::{DMat3, DVec3};
@@ -19,6 +20,7 @@ struct PixelGrads<'a> {
     d_rgb: &'a [f32],
     d_depth: Option<&'a [f32]>,
     d_alpha: Option<&'a [f32]>,
+    distortion: Option<Distortion<'a>>,
 }
 
 /// Back to front over one tile's list with the widest lanes this CPU has.
@@ -62,6 +64,10 @@ fn tile_backward_lanes<V: Lanes>(
     let mut last: Plane<f32> = z;
     let mut behind: Plane<f32> = z;
     let mut dl: [Plane<f32>; 4] = [z; 4];
+    // The distortion's (`Planes::distortion`): its weight λ, the pixel's Σ w (`A`) and
+    // Σ w·z (`D`), and `ahead` = Σ w·z over the entries in front of the current one
+    // (`D` less those behind it, walked back).
+    let (mut lam, mut a_tot, mut d_tot, mut ahead) = (z, z, z, z);
     let mut max_last = 0u32;
     for y in r[2]..r[3] {
         for x in r[0]..r[1] {
@@ -79,8 +85,15 @@ fn tile_backward_lanes<V: Lanes>(
             }
             behind[ty][tx] = b;
             dl[3][ty][tx] = g.d_depth.map_or(0.0, |d| d[pix]);
+            if let Some(dist) = &g.distortion {
+                lam[ty][tx] = dist.weight[pix];
+                a_tot[ty][tx] = 1.0 - tf;
+                d_tot[ty][tx] = dist.depth[pix];
+                ahead[ty][tx] = dist.depth[pix];
+            }
         }
     }
+    let distortion = g.distortion.is_some();
     // Entries behind every pixel's last contributor get no gradient.
     out[max_last as usize..].fill([0.0; 10]);
     let n = V::N;
@@ -130,6 +143,22 @@ fn tile_backward_lanes<V: Lanes>(
                     dc = d.mul_add(cv[ch], dc);
                     acc[ch] = wgt.mul_add(d, acc[ch]);
                 }
+                if distortion {
+                    // L = λ Σᵢ Σⱼ wᵢ wⱼ |zᵢ − zⱼ| with A_k = 1 − T_k and B_k = Σ_{j<k} wⱼ zⱼ
+                    // in front: ∂L/∂w_k = 2λ(z_k(2A_k − A) + D − 2B_k) joins d·c as one
+                    // more channel, ∂L/∂z_k = 2λ w_k (2A_k + w_k − A) the depth's.
+                    let la = V::load(&lam[ro][l.clone()]);
+                    let at = V::load(&a_tot[ro][l.clone()]);
+                    let front = s(1.0) - t_in;
+                    let b_k = V::load(&ahead[ro][l.clone()]) - wgt * cv[3];
+                    b_k.store(&mut ahead[ro][l.clone()]);
+                    let twice = s(2.0) * la;
+                    let gw = cv[3] * (s(2.0) * front - at) + V::load(&d_tot[ro][l.clone()])
+                        - s(2.0) * b_k;
+                    dc = twice.mul_add(gw, dc);
+                    let gz = wgt * (s(2.0) * front + wgt - at);
+                    acc[3] = twice.mul_add(gz, acc[3]);
+                }
                 let bh = V::load(&behind[ro][l.clone()]);
                 // ∂L/∂α = T·(d·c) − (d·behind)/(1 − α).
                 let ga = t_in * dc - bh * inv;
@@ -172,11 +201,10 @@ pub(crate) fn backward(
     cam: &Camera,
     st: &RenderState,
     d_rgb: &[f32],
-    d_depth: Option<&[f32]>,
-    d_alpha: Option<&[f32]>,
+    planes: Planes,
 ) -> (SplatGrads, [f64; 6]) {
     let mut g = SplatGrads::default();
-    let twist = backward_into(s, cam, st, d_rgb, d_depth, d_alpha, &mut g);
+    let twist = backward_into(s, cam, st, d_rgb, planes, &mut g);
     (g, twist)
 }
 
@@ -187,10 +215,14 @@ pub(crate) fn backward_into(
     cam: &Camera,
     st: &RenderState,
     d_rgb: &[f32],
-    d_depth: Option<&[f32]>,
-    d_alpha: Option<&[f32]>,
+    planes: Planes,
     g: &mut SplatGrads,
 ) -> [f64; 6] {
+    let Planes {
+        depth: d_depth,
+        alpha: d_alpha,
+        distortion,
+    } = planes;
     let (w, h) = (st.cam.width, st.cam.height);
     assert_eq!(
         s.len(),
@@ -206,10 +238,15 @@ pub(crate) fn backward_into(
         d_alpha.is_none_or(|d| d.len() == w * h),
         "backward: d_alpha must be H×W"
     );
+    assert!(
+        distortion.is_none_or(|d| d.weight.len() == w * h && d.depth.len() == w * h),
+        "backward: the distortion's planes must be H×W"
+    );
     let pg = PixelGrads {
         d_rgb,
         d_depth,
         d_alpha,
+        distortion,
     };
     let mut guard = st.back.lock().unwrap_or_else(|e| e.into_inner());
     let BackScratch {

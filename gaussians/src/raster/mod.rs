@@ -36,7 +36,7 @@ pub mod simd;
 pub use alpha::{ALPHA_MAX, ALPHA_MIN, CULL_OPACITY, LOW_PASS, NEAR, SIGMA_CUTOFF, T_MIN};
 pub use contribution::add_contributions;
 pub use forward::{Projected, RenderState, TILE};
-pub use rasterizer::{Planes, Rasterizer, RenderedImage};
+pub use rasterizer::{Distortion, Planes, Rasterizer, RenderedImage};
 
 use crate::splats::{SplatGrads, Splats};
 use glam::{DQuat, DVec3};
@@ -87,7 +87,12 @@ impl TileRasterizer {
         d_depth: Option<&[f32]>,
         d_alpha: Option<&[f32]>,
     ) -> (SplatGrads, [f64; 6]) {
-        backward::backward(s, cam, state, d_rgb, d_depth, d_alpha)
+        let planes = Planes {
+            depth: d_depth,
+            alpha: d_alpha,
+            distortion: None,
+        };
+        backward::backward(s, cam, state, d_rgb, planes)
     }
 }
 
@@ -112,7 +117,7 @@ impl Rasterizer for TileRasterizer {
         d_rgb: &[f32],
         d_planes: Planes,
     ) -> (SplatGrads, [f64; 6]) {
-        self.backward_full(s, cam, state, d_rgb, d_planes.depth, d_planes.alpha)
+        backward::backward(s, cam, state, d_rgb, d_planes)
     }
 
     fn render_reusing(
@@ -147,7 +152,6 @@ impl Rasterizer for TileRasterizer {
         d_planes: Planes,
         grads: &mut SplatGrads,
     ) -> [f64; 6] {
-        let (dd, da) = (d_planes.depth, d_planes.alpha);
-        backward::backward_into(s, cam, state, d_rgb, dd, da, grads)
+        backward::backward_into(s, cam, state, d_rgb, d_planes, grads)
     }
 }

@@ -51,6 +51,20 @@ impl RenderedImage {
 pub struct Planes<'a> {
     pub depth: Option<&'a [f32]>,
     pub alpha: Option<&'a [f32]>,
+    /// The depth distortion's weight per pixel, where one is on ([`Distortion`]).
+    pub distortion: Option<Distortion<'a>>,
+}
+
+/// The depth distortion of Mip-NeRF 360 and 2DGS as a loss, `Σ_p λ_p Σᵢ Σⱼ wᵢ wⱼ |zᵢ − zⱼ|`
+/// over each pixel's blending weights `wᵢ = αᵢ Tᵢ` and the Gaussians' view depths
+/// (`raster::reference::distortion` is its f64 value): 0 where one depth carries a pixel.
+#[derive(Clone, Copy, Debug)]
+pub struct Distortion<'a> {
+    /// `λ_p` per pixel (`H×W`).
+    pub weight: &'a [f32],
+    /// The render's alpha-blended depth `Σ wᵢ zᵢ` per pixel (`H×W`), which the backward
+    /// needs and the forward does not keep.
+    pub depth: &'a [f32],
 }
 
 impl Planes<'_> {
@@ -58,6 +72,7 @@ impl Planes<'_> {
     pub const NONE: Planes<'static> = Planes {
         depth: None,
         alpha: None,
+        distortion: None,
     };
 }
 

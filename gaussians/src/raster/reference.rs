@@ -135,8 +135,20 @@ pub fn contributions(g: &Gaussians64, cam: &Camera) -> Vec<f64> {
 pub fn depth_spread(g: &Gaussians64, cam: &Camera) -> Vec<f64> {
     let n = (cam.intrinsics.width * cam.intrinsics.height) as usize;
     let mut spread = vec![0.0; n];
-    composite(g, cam, 0, [0.0; 3], None, Some(&mut spread));
+    let f = composite(g, cam, 0, [0.0; 3], None, Some(&mut spread));
+    for ((v, a), d) in spread.iter_mut().zip(&f.alpha).zip(&f.depth) {
+        *v = if *d > 0.0 { *v / (a * d) } else { 0.0 };
+    }
     spread
+}
+
+/// Per pixel, the depth distortion `Σᵢ Σⱼ wᵢ wⱼ |zᵢ − zⱼ|` (`raster::Distortion`'s loss
+/// before its weights), and the render.
+pub fn distortion(g: &Gaussians64, cam: &Camera) -> (Vec<f64>, RenderedImage64) {
+    let n = (cam.intrinsics.width * cam.intrinsics.height) as usize;
+    let mut out = vec![0.0; n];
+    let f = composite(g, cam, 0, [0.0; 3], None, Some(&mut out));
+    (out, f)
 }
 
 /// The render, and when `weights` is given each Gaussian's `α·T` summed into it.
@@ -205,10 +217,8 @@ fn composite(
             }
             f.depth[p] = depth;
             f.alpha[p] = 1.0 - t;
-            if let Some(out) = spread.as_deref_mut()
-                && depth > 0.0
-            {
-                out[p] = 2.0 * pairs / ((1.0 - t) * depth);
+            if let Some(out) = spread.as_deref_mut() {
+                out[p] = 2.0 * pairs;
             }
         }
     }

@@ -22,7 +22,7 @@
 //! tell: the rendering loss lets their Gaussians slide along the rays (DESIGN §5).
 
 use super::depth::Aligned;
-use crate::raster::{Planes, RenderedImage};
+use crate::raster::{Distortion, Planes, RenderedImage};
 
 /// Alpha below which a pixel is not compared (the render shows nothing there).
 pub const MIN_ALPHA: f32 = 0.5;
@@ -80,6 +80,8 @@ pub struct PriorTerm {
     pub maps: Vec<Option<Aligned>>,
     d_depth: Vec<f32>,
     d_alpha: Vec<f32>,
+    /// The distortion's weights at the last view.
+    lambda: Vec<f32>,
     /// `L_depth` and the pixels it compared at the last view.
     pub last: (f64, usize),
     /// The mean relative difference `|D/α − z|/z` over those pixels.
@@ -95,26 +97,71 @@ impl PriorTerm {
     }
 
     /// The gradient planes of `L_depth` at train view `view` of its render `image`
-    /// ([`at_view`]); `None` when the term is off, the view has no prior or a size
-    /// other than the prior's (a coarse view).
-    pub fn gradient(
-        &mut self,
-        image: &RenderedImage,
+    /// ([`at_view`]; not where the term is off, the view has no prior or a size other
+    /// than the prior's, a coarse view) and of the depth distortion (`tracks.distortion`,
+    /// [`distortion_weights`]); `None` when neither is on.
+    pub fn gradient<'a>(
+        &'a mut self,
+        image: &'a RenderedImage,
         view: usize,
         st: &super::TrackSettings,
-    ) -> Option<Planes<'_>> {
+    ) -> Option<Planes<'a>> {
         (self.last, self.last_rel_error) = ((0.0, 0), 0.0);
-        let map = self.maps.get(view)?.as_ref()?;
-        if st.depth_weight <= 0.0 || (map.width, map.height) != (image.width, image.height) {
-            return None;
+        let map = (self.maps.get(view).and_then(Option::as_ref))
+            .filter(|m| (m.width, m.height) == (image.width, image.height))
+            .filter(|_| st.depth_weight > 0.0);
+        if let Some(map) = map {
+            let (w, s) = (st.depth_weight, st.depth_sigma);
+            let (dd, da) = (&mut self.d_depth, &mut self.d_alpha);
+            let (loss, count, rel) = at_view(&image.depth, &image.alpha, &map.z, w, s, dd, da);
+            (self.last, self.last_rel_error) = ((loss, count), rel);
         }
-        let (w, s) = (st.depth_weight, st.depth_sigma);
-        let (dd, da) = (&mut self.d_depth, &mut self.d_alpha);
-        let (loss, count, rel) = at_view(&image.depth, &image.alpha, &map.z, w, s, dd, da);
-        (self.last, self.last_rel_error) = ((loss, count), rel);
-        (self.last.1 > 0).then_some(Planes {
-            depth: Some(&self.d_depth),
-            alpha: Some(&self.d_alpha),
+        let distortion = (st.distortion > 0.0).then(|| {
+            distortion_weights(&image.depth, &image.alpha, st.distortion, &mut self.lambda);
+            Distortion {
+                weight: &self.lambda,
+                depth: &image.depth,
+            }
+        });
+        let prior = self.last.1 > 0;
+        (prior || distortion.is_some()).then_some(Planes {
+            depth: prior.then_some(&self.d_depth[..]),
+            alpha: prior.then_some(&self.d_alpha[..]),
+            distortion,
         })
+    }
+}
+
+/// The depth distortion's weight per pixel (`raster::Distortion`): `w / (N·D̄_p)` where the
+/// render covers the pixel (`α ≥ ½`; `D̄ = D/α` its depth, held constant so that `w` is
+/// free of the scene's scale, `N` the pixels), 0 elsewhere.
+pub fn distortion_weights(depth: &[f32], alpha: &[f32], w: f64, out: &mut Vec<f32>) {
+    out.clear();
+    out.resize(depth.len(), 0.0);
+    let scale = w / depth.len().max(1) as f64;
+    for ((o, &d), &a) in out.iter_mut().zip(depth).zip(alpha) {
+        if a >= 0.5 && d > 0.0 {
+            *o = (scale * a as f64 / d as f64) as f32;
+        }
+    }
+}
+
+#[cfg(test)]
+mod distortion_tests {
+    use super::distortion_weights;
+
+    /// `w / (N·D/α)` where α ≥ ½, by hand; nothing where the render does not cover.
+    #[test]
+    fn weights_are_free_of_the_scale() {
+        let (depth, alpha) = ([2.0, 1.0, 3.0, 0.0], [1.0, 0.5, 0.4, 0.9]);
+        let mut out = Vec::new();
+        distortion_weights(&depth, &alpha, 0.8, &mut out);
+        let want = [0.8 / 4.0 / 2.0, 0.8 / 4.0 / 2.0, 0.0, 0.0];
+        for (a, b) in out.iter().zip(want) {
+            assert!((*a as f64 - b).abs() < 1e-7, "{out:?}");
+        }
+        // The same scene twice as far: the same weights times ½, so λ·Σ w w |Δz| is unchanged.
+        distortion_weights(&depth.map(|d| 2.0 * d), &alpha, 0.8, &mut out);
+        assert!((out[0] as f64 - 0.05).abs() < 1e-7);
     }
 }

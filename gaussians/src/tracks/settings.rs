@@ -82,6 +82,11 @@ pub struct TrackSettings {
     /// Pairs per tracked Gaussian in the shape term with other members of its part, across
     /// the object ([`super::rigid`]; 0 = the neighbours only).
     pub rigidity_far: u32,
+    /// Weight of the depth distortion on the train views in the warm-up and the joint
+    /// training (`raster::Distortion`, [`super::prior_loss::distortion_weights`]): one
+    /// depth per pixel, not layers in front and behind whose blend lands on it (which a
+    /// new viewpoint parts into copies). 0 = off.
+    pub distortion: f64,
 }
 
 /// Where the windows of trajectories hand over (`tracks.handover`; [`super::init::windows`]).
@@ -129,6 +134,7 @@ impl Default for TrackSettings {
             rigidity: 0.0,
             rigidity_neighbours: 8,
             rigidity_far: 0,
+            distortion: 0.0,
         }
     }
 }
@@ -186,12 +192,13 @@ impl TrackSettings {
             || !(self.depth_weight.is_finite() && self.depth_weight >= 0.0)
             || !(self.window_s.is_finite() && self.window_s >= 0.0)
             || !(self.rigidity.is_finite() && self.rigidity >= 0.0)
+            || !(self.distortion.is_finite() && self.distortion >= 0.0)
             || !(1..=64).contains(&self.rigidity_neighbours)
             || self.rigidity_far > 64
         {
             return Err(
                 "tracks: thresholds and huber_px must be positive, ridge, min_texture, \
-                 weight, depth_sigma, depth_ridge, depth_weight, window_s and rigidity finite and ≥ 0, \
+                 weight, depth_sigma, depth_ridge, depth_weight, window_s, rigidity and distortion finite and ≥ 0, \
                  rigidity_neighbours 1..=64, rigidity_far 0..=64"
                     .into(),
             );
