@@ -182,10 +182,10 @@ fn main() {
             &fr.camera,
         );
         let (mut on, mut off) = (Vec::new(), Vec::new());
-        for p in (0..w * h).filter(|&p| spread[p] > 0.0 || fr.depth[p] > 0.0) {
-            match fr.object[p] {
-                o if o == id => on.push(spread[p]),
-                1..=2 => off.push(spread[p]),
+        for (&o, &v) in fr.object.iter().zip(&spread) {
+            match o {
+                o if o == id => on.push(v),
+                1..=2 => off.push(v),
                 _ => {}
             }
         }

@@ -133,9 +133,7 @@ pub fn contributions(g: &Gaussians64, cam: &Camera) -> Vec<f64> {
 /// `D̄` the blended depth: the mean distance between two depths drawn by the weights,
 /// relative (two equal layers `Δ` apart give `Δ / 2D̄`). 0 where nothing is drawn.
 pub fn depth_spread(g: &Gaussians64, cam: &Camera) -> Vec<f64> {
-    let n = (cam.intrinsics.width * cam.intrinsics.height) as usize;
-    let mut spread = vec![0.0; n];
-    let f = composite(g, cam, 0, [0.0; 3], None, Some(&mut spread));
+    let (mut spread, f) = distortion(g, cam);
     for ((v, a), d) in spread.iter_mut().zip(&f.alpha).zip(&f.depth) {
         *v = if *d > 0.0 { *v / (a * d) } else { 0.0 };
     }
@@ -143,7 +141,7 @@ pub fn depth_spread(g: &Gaussians64, cam: &Camera) -> Vec<f64> {
 }
 
 /// Per pixel, the depth distortion `Σᵢ Σⱼ wᵢ wⱼ |zᵢ − zⱼ|` (`raster::Distortion`'s loss
-/// before its weights), and the render.
+/// before its weights), and the render (SH degree 0, black background).
 pub fn distortion(g: &Gaussians64, cam: &Camera) -> (Vec<f64>, RenderedImage64) {
     let n = (cam.intrinsics.width * cam.intrinsics.height) as usize;
     let mut out = vec![0.0; n];

@@ -140,7 +140,7 @@ pub fn distortion_weights(depth: &[f32], alpha: &[f32], w: f64, out: &mut Vec<f3
     out.resize(depth.len(), 0.0);
     let scale = w / depth.len().max(1) as f64;
     for ((o, &d), &a) in out.iter_mut().zip(depth).zip(alpha) {
-        if a >= 0.5 && d > 0.0 {
+        if a >= MIN_ALPHA && d > 0.0 {
             *o = (scale * a as f64 / d as f64) as f32;
         }
     }
