@@ -173,6 +173,8 @@ impl Plan {
             motion: self.gather_rows(&sp.motion, sp.len()),
             track: crate::splats::first_copies(self.gather_rows(&sp.track, sp.len())),
             life: self.gather_rows(&sp.life, sp.len()),
+            part: self.gather_rows(&sp.part, sp.len()),
+            parts: sp.parts.clone(),
         }
     }
 

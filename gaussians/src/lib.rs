@@ -13,6 +13,7 @@ pub mod export;
 pub mod field;
 pub mod model;
 pub mod motion;
+pub mod parts;
 pub use stagekit::optim;
 pub mod ply;
 pub mod preview;

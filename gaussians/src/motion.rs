@@ -143,17 +143,18 @@ pub(crate) fn at_time<'s>(
 }
 
 /// `deformed` (the Gaussians of `s` deformed by a field) moved along their trajectories
-/// and hidden outside their lives.
+/// and by their parts ([`crate::parts`]), and hidden outside their lives.
 pub(crate) fn with_trajectories<'s>(
     s: &Splats,
     t: f32,
     deformed: Cow<'s, Splats>,
 ) -> Cow<'s, Splats> {
-    if s.motion.is_empty() && s.life.is_empty() {
+    if s.motion.is_empty() && s.life.is_empty() && s.part.is_empty() {
         return deformed;
     }
     let mut out = deformed.into_owned();
     advance(s, t, &mut out);
+    crate::parts::advance(&s.parts, &s.part, t, &mut out);
     Cow::Owned(out)
 }
 

@@ -29,6 +29,11 @@ pub struct Splats {
     /// (`motion::advance` hides it outside: a trajectory fitted over a window of the
     /// tracks, `tracks.window`). Empty when every Gaussian exists at every time.
     pub life: Vec<[f32; 2]>,
+    /// Per Gaussian: the rigid part that moves it ([`crate::parts`]), `parts::NO_PART`
+    /// for none. Empty when there are no parts.
+    pub part: Vec<u32>,
+    /// The parts' poses (shared by their members; empty without parts).
+    pub parts: crate::parts::Parts,
 }
 
 /// A life spanning every time (an entry of [`Splats::life`]).
@@ -66,6 +71,8 @@ impl Clone for Splats {
         self.motion.clone_from(&src.motion);
         self.track.clone_from(&src.track);
         self.life.clone_from(&src.life);
+        self.part.clone_from(&src.part);
+        self.parts.clone_from(&src.parts);
     }
 }
 
@@ -112,6 +119,8 @@ impl Splats {
             motion: Vec::new(),
             track: Vec::new(),
             life: Vec::new(),
+            part: Vec::new(),
+            parts: Default::default(),
         }
     }
 
@@ -134,6 +143,9 @@ impl Splats {
         }
         if !self.life.is_empty() {
             self.life.push(ALWAYS);
+        }
+        if !self.part.is_empty() {
+            self.part.push(crate::parts::NO_PART);
         }
         self.means.push(g.mean);
         self.log_scales.push(g.log_scale);
@@ -194,6 +206,9 @@ pub struct SplatGrads {
     pub radius: Vec<f32>,
     /// The trajectories' gradient (`motion.rs`; empty without them).
     pub motion: Vec<[f32; 6]>,
+    /// The parts' knot poses' gradient (`parts.rs`; empty without parts).
+    pub part_rot: Vec<[f32; 4]>,
+    pub part_shift: Vec<[f32; 3]>,
 }
 
 impl SplatGrads {
@@ -209,6 +224,8 @@ impl SplatGrads {
             screen_grad_norm: vec![0.0; n],
             radius: vec![0.0; n],
             motion: Vec::new(),
+            part_rot: Vec::new(),
+            part_shift: Vec::new(),
         }
     }
 

@@ -115,6 +115,8 @@ fn add_scaled(dst: &mut ModelGrads, src: &ModelGrads, w: f32) {
     add(d.sh_dc.as_flattened_mut(), s.sh_dc.as_flattened());
     add(d.sh_rest.as_flattened_mut(), s.sh_rest.as_flattened());
     add(d.motion.as_flattened_mut(), s.motion.as_flattened());
+    add(d.part_rot.as_flattened_mut(), s.part_rot.as_flattened());
+    add(d.part_shift.as_flattened_mut(), s.part_shift.as_flattened());
     if dst.field.len() == src.field.len() {
         add(&mut dst.field, &src.field);
     } else if dst.field.is_empty() {

@@ -124,6 +124,16 @@ impl MotionTerm<'_> {
         let moves = |k: usize| !self.dynamic_only || self.splats.is_dynamic(idx[k]);
         let along = |k: usize| gaussians::motion::shift(self.splats, idx[k], tau1);
         let x0: Vec<[f32; 3]> = idx.iter().map(|&g| rv.deformed.means[g]).collect();
+        // A rigid part's member moves with its part's pose at t1 (`gaussians::parts`);
+        // the term does not train the poses (their gradient stops here).
+        let parts = &self.splats.parts;
+        let part_poses: Vec<([f32; 4], [f32; 3])> =
+            (0..parts.len()).map(|p| parts.pose(p, tau1)).collect();
+        let part_pose = |k: usize| {
+            let m = *self.splats.part.get(idx[k])?;
+            let (q, t) = *part_poses.get(m as usize)?;
+            Some((q, t, parts.origin[m as usize]))
+        };
         let (field_dx, cache1) = match self.field {
             Some(f) => {
                 let (dl, c1) = Deformation::forward(f, &xs, &[tau1]);
@@ -138,7 +148,11 @@ impl MotionTerm<'_> {
                     _ => [0.0; 3],
                 };
                 let tr = along(k);
-                std::array::from_fn(|c| xs[k][c] + dx[c] + tr[c])
+                let x: [f32; 3] = std::array::from_fn(|c| xs[k][c] + dx[c] + tr[c]);
+                match part_pose(k) {
+                    Some((q, t, o)) => gaussians::parts::place(q, t, o, x, [1.0, 0.0, 0.0, 0.0]).0,
+                    None => x,
+                }
             })
             .collect();
         let k = d.views[i].camera.intrinsics;
@@ -211,6 +225,11 @@ impl MotionTerm<'_> {
         let gv: Vec<f32> = mg.gs_v.iter().map(|g| g * g2).collect();
         let mut gg = GsGrad::default();
         gaussian_flow_backward(cams, &x0, &x1, &fgs, &gu, &gv, &mut gg);
+        for (kk, g) in gg.x1.iter_mut().enumerate() {
+            if let Some((q, _, _)) = part_pose(kk) {
+                *g = gaussians::parts::rotate_back(q, *g);
+            }
+        }
         let n = self.splats.len();
         out.at_view = vec![[0.0; 3]; n];
         out.at_end = vec![[0.0; 3]; n];

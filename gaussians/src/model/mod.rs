@@ -111,7 +111,8 @@ impl Model {
         }
         crate::ply::write(&dir.join(PLY_FILE), &self.splats, info.sh_degree)?;
         if info.has_motion {
-            motion_file::write(&dir.join(MOTION_FILE), motion, life)?;
+            let (part, parts) = (&self.splats.part, &self.splats.parts);
+            motion_file::write_with_parts(&dir.join(MOTION_FILE), motion, life, part, parts)?;
         }
         if info.has_dynamic_flags {
             dynamic_flags::write(&dir.join(FLAGS_FILE), flags)?;
@@ -166,6 +167,7 @@ impl Model {
             let path = dir.join(MOTION_FILE);
             splats.motion = motion_file::read(&path, info.gaussians)?;
             splats.life = motion_file::read_life(&path, info.gaussians)?;
+            (splats.part, splats.parts) = motion_file::read_parts(&path, info.gaussians)?;
         }
         // In memory the model is in the current layout (what `save` writes).
         info.format_version = FORMAT_VERSION;

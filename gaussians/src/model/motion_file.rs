@@ -3,10 +3,14 @@
 //! `[n, 6]` (velocity then acceleration, world units per normalised time, about
 //! [`crate::motion::T0`]), rows in PLY order; and, when the Gaussians have lives
 //! ([`crate::Splats::life`]), a tensor `life`, `F32 [n, 2]` (the normalised time span
-//! each exists in, `[from, to)`). Also the `--init-motion` file of `gaussians train`,
-//! beside an `--init-ply`.
+//! each exists in, `[from, to)`); when some belong to rigid parts ([`crate::parts`]),
+//! `part` (`U32 [n]`, `u32::MAX` for none), `part_knots` (`F32 [K]`), `part_origin`
+//! (`F32 [P, 3]`), `part_rot` (`F32 [P·K, 4]`, w first), `part_shift` (`F32 [P·K, 3]`)
+//! and `part_fixed` (`U32 [1]`, the knot held at the identity). Also the
+//! `--init-motion` file of `gaussians train`, beside an `--init-ply`.
 
 use crate::motion::WIDTH;
+use crate::parts::Parts;
 use safetensors::{Dtype, SafeTensors, tensor::TensorView};
 use scene::error::{Error, IoContext, Result};
 use std::path::Path;
@@ -20,6 +24,29 @@ pub(crate) const LIFE_TENSOR: &str = "life";
 /// Write `motion` (and `life` unless empty) to `path` atomically; refuses non-finite
 /// values.
 pub fn write(path: &Path, motion: &[[f32; WIDTH]], life: &[[f32; 2]]) -> Result<()> {
+    write_with_parts(path, motion, life, &[], &Parts::default())
+}
+
+/// [`write()`] with the rigid parts (`part` one entry per Gaussian, or empty).
+pub fn write_with_parts(
+    path: &Path,
+    motion: &[[f32; WIDTH]],
+    life: &[[f32; 2]],
+    part: &[u32],
+    parts: &Parts,
+) -> Result<()> {
+    if !part.is_empty() {
+        parts
+            .check(part, motion.len())
+            .map_err(|e| Error::invalid(path, e))?;
+    }
+    let poses = (parts.rot.iter().flatten()).chain(parts.shift.iter().flatten());
+    if poses
+        .chain(parts.origin.iter().flatten())
+        .any(|v| !v.is_finite())
+    {
+        return Err(Error::invalid(path, "non-finite part pose"));
+    }
     let rows = (motion.iter().map(|m| m.as_slice())).chain(life.iter().map(|l| l.as_slice()));
     if let Some(i) = rows.clone().position(|m| m.iter().any(|v| !v.is_finite())) {
         return Err(Error::invalid(
@@ -42,9 +69,110 @@ pub fn write(path: &Path, motion: &[[f32; WIDTH]], life: &[[f32; 2]]) -> Result<
     if !life.is_empty() {
         tensors.push((LIFE_TENSOR, view(path, LIFE_TENSOR, 2, &l)?));
     }
+    let u32s = |v: &[u32]| -> Vec<u8> { v.iter().flat_map(|v| v.to_le_bytes()).collect() };
+    let blobs = [
+        (u32s(part), 1),
+        (bytes(&parts.knots), 1),
+        (bytes(parts.origin.as_flattened()), 3),
+        (bytes(parts.rot.as_flattened()), 4),
+        (bytes(parts.shift.as_flattened()), 3),
+        (u32s(&[parts.fixed as u32]), 1),
+    ];
+    if !part.is_empty() {
+        for ((data, width), name) in blobs.iter().zip(PART_TENSORS) {
+            let dtype = if matches!(name, "part" | "part_fixed") {
+                Dtype::U32
+            } else {
+                Dtype::F32
+            };
+            let shape = match *width {
+                1 => vec![data.len() / 4],
+                w => vec![data.len() / 4 / w, w],
+            };
+            let t = TensorView::new(dtype, shape, data)
+                .map_err(|e| Error::invalid(path, format!("{name} tensor: {e}")))?;
+            tensors.push((name, t));
+        }
+    }
     let data = safetensors::serialize(tensors, None)
         .map_err(|e| Error::invalid(path, format!("serialising: {e}")))?;
     scene::atomic::write_bytes_atomic(path, &data)
+}
+
+/// The tensors of the rigid parts, in [`write_with_parts`]'s order.
+const PART_TENSORS: [&str; 6] = [
+    "part",
+    "part_knots",
+    "part_origin",
+    "part_rot",
+    "part_shift",
+    "part_fixed",
+];
+
+/// The rigid parts of `n` Gaussians in a file of [`write_with_parts`] (empty when it has
+/// none); errors name the file and the tensor.
+pub fn read_parts(path: &Path, n: usize) -> Result<(Vec<u32>, Parts)> {
+    let data = std::fs::read(path).at(path)?;
+    let st = SafeTensors::deserialize(&data)
+        .map_err(|e| Error::invalid(path, format!("not a safetensors file: {e}")))?;
+    if st.tensor("part").is_err() {
+        return Ok((Vec::new(), Parts::default()));
+    }
+    let get = |name: &str, dtype: Dtype| -> Result<Vec<[u8; 4]>> {
+        let t = (st.tensor(name))
+            .map_err(|_| Error::invalid(path, format!("missing tensor {name}")))?;
+        if t.dtype() != dtype {
+            return Err(Error::invalid(
+                path,
+                format!("tensor {name}: expected {dtype:?}, found {:?}", t.dtype()),
+            ));
+        }
+        Ok(t.data()
+            .chunks_exact(4)
+            .map(|b| [b[0], b[1], b[2], b[3]])
+            .collect())
+    };
+    let f = |name: &str| -> Result<Vec<f32>> {
+        let v: Vec<f32> = get(name, Dtype::F32)?
+            .into_iter()
+            .map(f32::from_le_bytes)
+            .collect();
+        match v.iter().all(|v| v.is_finite()) {
+            true => Ok(v),
+            false => Err(Error::invalid(
+                path,
+                format!("tensor {name}: a non-finite value"),
+            )),
+        }
+    };
+    let part: Vec<u32> = get("part", Dtype::U32)?
+        .into_iter()
+        .map(u32::from_le_bytes)
+        .collect();
+    let fixed = get("part_fixed", Dtype::U32)?
+        .first()
+        .map_or(0, |b| u32::from_le_bytes(*b));
+    let rows = |v: Vec<f32>, w: usize| -> Vec<Vec<f32>> {
+        v.chunks_exact(w).map(|c| c.to_vec()).collect()
+    };
+    let parts = Parts {
+        knots: f("part_knots")?,
+        origin: rows(f("part_origin")?, 3)
+            .iter()
+            .map(|c| [c[0], c[1], c[2]])
+            .collect(),
+        rot: rows(f("part_rot")?, 4)
+            .iter()
+            .map(|c| [c[0], c[1], c[2], c[3]])
+            .collect(),
+        shift: rows(f("part_shift")?, 3)
+            .iter()
+            .map(|c| [c[0], c[1], c[2]])
+            .collect(),
+        fixed: fixed as usize,
+    };
+    parts.check(&part, n).map_err(|e| Error::invalid(path, e))?;
+    Ok((part, parts))
 }
 
 /// An `F32 [rows, width]` view of `data` (little-endian values).

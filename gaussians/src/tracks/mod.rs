@@ -21,6 +21,7 @@ pub mod init;
 pub mod lift;
 pub mod lk;
 pub mod loss;
+pub mod parts;
 pub mod prior_loss;
 pub mod rigid;
 mod settings;

@@ -87,6 +87,10 @@ pub struct TrackSettings {
     /// depth per pixel, not layers in front and behind whose blend lands on it (which a
     /// new viewpoint parts into copies). 0 = off.
     pub distortion: f64,
+    /// Group the moving tracks' Gaussians into rigid parts that share one motion over the
+    /// recording, a pose per train frame ([`crate::parts`], [`super::parts`]): a part's
+    /// size is then one number the depth prior's frames average into.
+    pub parts: bool,
 }
 
 /// Where the windows of trajectories hand over (`tracks.handover`; [`super::init::windows`]).
@@ -135,6 +139,7 @@ impl Default for TrackSettings {
             rigidity_neighbours: 8,
             rigidity_far: 0,
             distortion: 0.0,
+            parts: false,
         }
     }
 }

@@ -313,6 +313,20 @@ pub(crate) fn initial_splats(
                         source.as_ref(),
                     );
                     let moving = table.len();
+                    if st.parts {
+                        let times: Vec<f64> = images.iter().map(|v| v.time).collect();
+                        let cams: Vec<&scene::Camera> = images.iter().map(|v| v.camera).collect();
+                        let p = crate::tracks::parts::into_parts(
+                            &mut s,
+                            &times,
+                            &cams,
+                            st.moving_pixels,
+                        );
+                        eprintln!(
+                            "tracks: {} rigid parts of {} Gaussians; {} moving Gaussians keep their own trajectories",
+                            p.parts, p.members, p.left
+                        );
+                    }
                     *tracks = crate::tracks::loss::TrackTerm::new(table);
                     tracks.priors = crate::tracks::prior_loss::PriorTerm::new(aligned);
                     (s, found + moving)

@@ -43,6 +43,8 @@ pub struct Trainer {
     pub field: Mlp<f32>,
     pub adam: Adam,
     pub field_adam: Adam,
+    /// The parts' knot poses' optimiser (rotations, translations; [`crate::parts`]).
+    pub parts_adam: Adam,
     pub stats: GradStats,
     pub extent: f32,
     pub iteration: u32,
@@ -106,6 +108,7 @@ impl Trainer {
             field,
             adam,
             field_adam,
+            parts_adam: Adam::default(),
             extent,
             iteration: 0,
             split: None,
@@ -164,6 +167,7 @@ impl Trainer {
             (self.splats.clone(), None)
         };
         crate::motion::advance(&self.splats, t, &mut s);
+        crate::parts::advance(&self.splats.parts, &self.splats.part, t, &mut s);
         (s, d)
     }
 
@@ -202,6 +206,14 @@ impl Trainer {
                 (0..3).for_each(|c| a[c] += b[c]);
             }
         }
+        // The parts' poses, and the Gaussians as the field left them.
+        crate::parts::backward(
+            &self.splats.parts,
+            &self.splats.part,
+            v.time,
+            &v.deformed,
+            g,
+        );
         crate::motion::backward(&self.splats, v.time, &g.means, &mut g.motion);
         out.field.clear();
         if let Some((d, cache)) = &v.deltas {
@@ -452,6 +464,7 @@ impl Trainer {
         settings.size.field_probe = 0;
         let mut t = Trainer::new(settings, self.splats.clone(), self.extent);
         t.adam = self.adam.clone();
+        t.parts_adam = self.parts_adam.clone();
         t.stats = self.stats.clone();
         t.iteration = self.iteration;
         (t.split, t.tracks) = (self.split, self.tracks.clone());
@@ -465,6 +478,7 @@ impl Trainer {
         self.field = p.field;
         self.adam = p.adam;
         self.field_adam = p.field_adam;
+        self.parts_adam = p.parts_adam;
         self.stats = p.stats;
         self.iteration = p.iteration;
         // Buffers sized for the old field.
@@ -501,6 +515,25 @@ impl Trainer {
         if !sp.motion.is_empty() && g.motion.len() == sp.motion.len() {
             self.adam
                 .step(6, sp.motion.as_flattened_mut(), g.motion.as_flattened());
+        }
+        let parts = &mut sp.parts;
+        if !parts.rot.is_empty() && g.part_rot.len() == parts.rot.len() {
+            let n = parts.rot.len();
+            if self.parts_adam.groups.len() != 2 || self.parts_adam.groups[0].m.len() != 4 * n {
+                self.parts_adam = Adam::default();
+                self.parts_adam
+                    .add_group("part_rot", s.rotation_lr, 1e-15, 4, 4 * n);
+                self.parts_adam
+                    .add_group("part_shift", 0.0, 1e-15, 3, 3 * n);
+            }
+            self.parts_adam.groups[1].lr = pos.at(it as u64);
+            let a = &mut self.parts_adam;
+            a.step(0, parts.rot.as_flattened_mut(), g.part_rot.as_flattened());
+            a.step(
+                1,
+                parts.shift.as_flattened_mut(),
+                g.part_shift.as_flattened(),
+            );
         }
     }
 

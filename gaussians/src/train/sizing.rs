@@ -265,6 +265,12 @@ pub fn gather(s: &Splats, keep: &[usize]) -> Splats {
         } else {
             Vec::new()
         },
+        part: if s.part.len() == s.len() {
+            keep.iter().map(|&i| s.part[i]).collect()
+        } else {
+            Vec::new()
+        },
+        parts: s.parts.clone(),
     }
 }
 

@@ -61,6 +61,7 @@ impl super::Trainer {
             None
         };
         crate::motion::advance_living(&self.splats, t, life_t, &mut deformed);
+        crate::parts::advance(&self.splats.parts, &self.splats.part, t, &mut deformed);
         let (image, state) = r.render_reusing(
             &deformed,
             camera,

@@ -1,0 +1,274 @@
+//! Rigid parts from the tracks init's trajectories (`tracks.parts`; [`crate::parts`]).
+//!
+//! The init leaves each moving track a Gaussian on a quadratic trajectory, over the
+//! recording or over a window of frames. Here the moving Gaussians that lie together
+//! become parts: at each train frame (a knot) the Gaussians whose trajectory was
+//! fitted there (their life and one frame either side) are joined to those within
+//! `PART_REACH` times the median nearest distance; a component of at least
+//! `MIN_MEMBERS` is a part. Its pose at each knot is the rigid motion (Horn's method)
+//! that takes its members' canonical centres (their centres at the knot nearest the
+//! recording's middle, or carried there through the poses already found, knot by knot
+//! outwards) onto where their trajectories put them; a member whose trajectory strays
+//! from its part's motion by more than `tracks.moving_pixels` (median over its knots)
+//! leaves the part and keeps its own trajectory. The members then move with their part
+//! over the whole recording (no life, no trajectory of their own).
+
+use crate::parts::{self, NO_PART, Parts};
+use crate::splats::{ALWAYS, Splats};
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use scene::Camera;
+use std::num::NonZeroUsize;
+
+/// Neighbours within this many median nearest distances are joined.
+const PART_REACH: f64 = 3.0;
+/// Neighbours searched per Gaussian and knot.
+const NEAREST: usize = 8;
+/// The fewest members of a part.
+const MIN_MEMBERS: usize = 12;
+
+/// What [`into_parts`] made.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PartsSummary {
+    pub parts: usize,
+    pub members: usize,
+    /// Moving Gaussians left with their own trajectories.
+    pub left: usize,
+}
+
+/// Union–find with path halving.
+fn find(up: &mut [usize], mut i: usize) -> usize {
+    while up[i] != i {
+        up[i] = up[up[i]];
+        i = up[i];
+    }
+    i
+}
+
+/// Turn the moving Gaussians of `s` (a trajectory, [`crate::motion::has_trajectory`])
+/// into rigid parts with knots at the train frames (`times` normalised, `cameras` the
+/// frames'), where they group; `pixels` the largest median misfit of a member.
+pub fn into_parts(s: &mut Splats, times: &[f64], cameras: &[&Camera], pixels: f64) -> PartsSummary {
+    let n_knots = times.len();
+    let movers: Vec<usize> = (0..s.len())
+        .filter(|&i| s.motion.get(i).is_some_and(crate::motion::has_trajectory))
+        .collect();
+    if movers.len() < MIN_MEMBERS || n_knots < 2 {
+        return PartsSummary {
+            left: movers.len(),
+            ..Default::default()
+        };
+    }
+    let t0 = crate::motion::T0 as f64;
+    let at = |i: usize, k: usize| -> [f64; 3] {
+        let d = crate::motion::shift(s, i, times[k] as f32);
+        std::array::from_fn(|a| s.means[i][a] as f64 + d[a] as f64)
+    };
+    // Knots a mover's trajectory was fitted at: its life's and one either side.
+    let valid = |i: usize| -> Vec<bool> {
+        let l = s.life.get(i).copied().unwrap_or(ALWAYS);
+        let inside: Vec<bool> = (times.iter())
+            .map(|&t| t >= l[0] as f64 - 1e-6 && t <= l[1] as f64 + 1e-6)
+            .collect();
+        (0..n_knots)
+            .map(|k| inside[k] || (k > 0 && inside[k - 1]) || inside.get(k + 1) == Some(&true))
+            .collect()
+    };
+    let valid: Vec<Vec<bool>> = movers.iter().map(|&i| valid(i)).collect();
+    let pos: Vec<Vec<[f64; 3]>> = (movers.iter())
+        .map(|&i| (0..n_knots).map(|k| at(i, k)).collect())
+        .collect();
+    // Per knot: the movers fitted there, their nearest distances, then the joins.
+    let mut up: Vec<usize> = (0..movers.len()).collect();
+    let mut nearest = Vec::new();
+    let mut trees = Vec::new();
+    for k in 0..n_knots {
+        let here: Vec<usize> = (0..movers.len()).filter(|&m| valid[m][k]).collect();
+        if here.len() < 2 {
+            trees.push(None);
+            continue;
+        }
+        let pts: Vec<[f64; 3]> = here.iter().map(|&m| pos[m][k]).collect();
+        let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&pts).expect("finite");
+        for p in &pts {
+            let two = NonZeroUsize::new(2).expect("2");
+            let found = tree
+                .query(p)
+                .nearest_n::<SquaredEuclidean<f64>>(two)
+                .execute();
+            if let Some(q) = found.get(1) {
+                nearest.push(q.distance.sqrt());
+            }
+        }
+        trees.push(Some((here, pts, tree)));
+    }
+    nearest.sort_by(f64::total_cmp);
+    let reach = PART_REACH * nearest.get(nearest.len() / 2).copied().unwrap_or(0.0);
+    let k1 = NonZeroUsize::new(NEAREST + 1).expect("positive");
+    // Two neighbours move together: from this knot to every other knot both were
+    // fitted at, their displacements differ by at most `pixels` seen from here.
+    let together = |i: usize, j: usize, k: usize| {
+        let Some((_, z)) = cameras[k].project_world(pos[i][k].into()) else {
+            return false;
+        };
+        let px = cameras[k].intrinsics.fx / z.max(1e-9);
+        (0..n_knots)
+            .filter(|&c| c != k && valid[i][c] && valid[j][c])
+            .all(|c| {
+                let d: [f64; 3] = std::array::from_fn(|a| {
+                    (pos[i][c][a] - pos[i][k][a]) - (pos[j][c][a] - pos[j][k][a])
+                });
+                (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt() * px <= pixels
+            })
+    };
+    for (k, slot) in trees.iter().enumerate() {
+        let Some((here, pts, tree)) = slot else {
+            continue;
+        };
+        for (a, p) in pts.iter().enumerate() {
+            let found = tree
+                .query(p)
+                .nearest_n::<SquaredEuclidean<f64>>(k1)
+                .execute();
+            for q in found.iter().filter(|q| q.distance.sqrt() <= reach) {
+                let (i, j) = (here[a], here[q.item as usize]);
+                if i != j && together(i, j, k) {
+                    let (x, y) = (find(&mut up, i), find(&mut up, j));
+                    up[x] = y;
+                }
+            }
+        }
+    }
+    let mut groups: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
+    for m in 0..movers.len() {
+        groups.entry(find(&mut up, m)).or_default().push(m);
+    }
+    let reference = (0..n_knots)
+        .min_by(|&a, &b| (times[a] - t0).abs().total_cmp(&(times[b] - t0).abs()))
+        .expect("knots");
+    let mut out = Parts {
+        knots: times.iter().map(|&t| t as f32).collect(),
+        fixed: reference,
+        ..Default::default()
+    };
+    let mut member = vec![NO_PART; s.len()];
+    let mut canonical = vec![[0.0f64; 3]; s.len()];
+    for (_, group) in groups {
+        if group.len() < MIN_MEMBERS {
+            continue;
+        }
+        let misfit = |poses: &[([f64; 4], [f64; 3])], canon: &[Option<[f64; 3]>], m: usize| {
+            let Some(c) = canon[m] else {
+                return f64::INFINITY;
+            };
+            let mut e: Vec<f64> = (0..n_knots)
+                .filter(|&k| valid[m][k])
+                .filter_map(|k| {
+                    let (q, t) = poses[k];
+                    let r = parts::rotate(q, c);
+                    let x: [f64; 3] = std::array::from_fn(|a| r[a] + t[a]);
+                    let a = cameras[k].project_world(x.into())?.0;
+                    let b = cameras[k].project_world(pos[m][k].into())?.0;
+                    Some((a - b).length())
+                })
+                .collect();
+            e.sort_by(f64::total_cmp);
+            e.get(e.len() / 2).copied().unwrap_or(f64::INFINITY)
+        };
+        let (poses, canon) = chain(&group, &valid, &pos, reference);
+        let kept: Vec<usize> = (group.iter().copied())
+            .filter(|&m| misfit(&poses, &canon, m) <= pixels)
+            .collect();
+        if kept.len() < MIN_MEMBERS {
+            continue;
+        }
+        let (poses, canon) = chain(&kept, &valid, &pos, reference);
+        let p = out.origin.len() as u32;
+        let cs: Vec<[f64; 3]> = kept.iter().filter_map(|&m| canon[m]).collect();
+        let o: [f64; 3] =
+            std::array::from_fn(|a| cs.iter().map(|c| c[a]).sum::<f64>() / cs.len() as f64);
+        out.origin.push(o.map(|v| v as f32));
+        for (q, t) in &poses {
+            // x = R a + t = R(a − o) + o + T  ⇒  T = t + R o − o.
+            let ro = parts::rotate(*q, o);
+            out.rot.push(q.map(|v| v as f32));
+            out.shift
+                .push(std::array::from_fn(|a| (t[a] + ro[a] - o[a]) as f32));
+        }
+        for &m in &kept {
+            if let Some(c) = canon[m] {
+                member[movers[m]] = p;
+                canonical[movers[m]] = c;
+            }
+        }
+    }
+    let members = member.iter().filter(|&&m| m != NO_PART).count();
+    let summary = PartsSummary {
+        parts: out.origin.len(),
+        members,
+        left: movers.len() - members,
+    };
+    if members == 0 {
+        return summary;
+    }
+    for (i, &m) in member.iter().enumerate() {
+        if m != NO_PART {
+            s.means[i] = canonical[i].map(|v| v as f32);
+            s.motion[i] = [0.0; 6];
+            if let Some(l) = s.life.get_mut(i) {
+                *l = ALWAYS;
+            }
+        }
+    }
+    s.part = member;
+    s.parts = out;
+    summary
+}
+
+/// One group's pose per knot and its members' canonical centres: the identity at
+/// `reference` (canonical = the centres there), then knot by knot outwards the rigid
+/// motion of the members with a canonical centre onto their centres at that knot (the
+/// previous knot's when fewer than three are fitted there), after which the members
+/// first fitted there get their canonical centre through it.
+#[allow(clippy::type_complexity)]
+fn chain(
+    group: &[usize],
+    valid: &[Vec<bool>],
+    pos: &[Vec<[f64; 3]>],
+    reference: usize,
+) -> (Vec<([f64; 4], [f64; 3])>, Vec<Option<[f64; 3]>>) {
+    let n_knots = valid.first().map_or(0, |v| v.len());
+    let mut canon: Vec<Option<[f64; 3]>> = vec![None; pos.len()];
+    let mut poses = vec![([1.0, 0.0, 0.0, 0.0], [0.0; 3]); n_knots];
+    for &m in group {
+        if valid[m][reference] {
+            canon[m] = Some(pos[m][reference]);
+        }
+    }
+    let order = (reference + 1..n_knots)
+        .map(|k| (k, k - 1))
+        .chain((0..reference).rev().map(|k| (k, k + 1)));
+    for (k, prev) in order {
+        let (a, b): (Vec<[f64; 3]>, Vec<[f64; 3]>) = (group.iter())
+            .filter(|&&m| valid[m][k])
+            .filter_map(|&m| canon[m].map(|c| (c, pos[m][k])))
+            .unzip();
+        poses[k] = match parts::kabsch(&a, &b) {
+            Some((mut q, t)) => {
+                let p = poses[prev].0;
+                if (0..4).map(|i| q[i] * p[i]).sum::<f64>() < 0.0 {
+                    q = q.map(|v| -v);
+                }
+                (q, t)
+            }
+            None => poses[prev],
+        };
+        let (q, t) = poses[k];
+        for &m in group {
+            if canon[m].is_none() && valid[m][k] {
+                let x = pos[m][k];
+                canon[m] = Some(parts::rotate_back(q, std::array::from_fn(|a| x[a] - t[a])));
+            }
+        }
+    }
+    (poses, canon)
+}
