@@ -124,6 +124,10 @@ pub struct DeformSettings {
     /// shadow moving over a still floor; the static ones keep their geometry).
     /// Nothing when the warm-up's field already has one or the warm-up kept no field.
     pub field_color: bool,
+    /// Train the rigid parts' poses (`gaussians.tracks.parts`, `gaussians::parts`) in
+    /// the joint training; off, they keep the warm-up's (the members' own parameters
+    /// still train).
+    pub train_part_poses: bool,
     /// Record the losses every this many iterations in the report.
     pub log_every: u32,
 }
@@ -161,6 +165,7 @@ impl Default for DeformSettings {
             densify: true,
             regrow: true,
             field_color: false,
+            train_part_poses: true,
             log_every: 10,
         }
     }

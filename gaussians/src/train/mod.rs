@@ -45,6 +45,8 @@ pub struct Trainer {
     pub field_adam: Adam,
     /// The parts' knot poses' optimiser (rotations, translations; [`crate::parts`]).
     pub parts_adam: Adam,
+    /// Keep the parts' poses as they are (the members' own parameters still train).
+    pub hold_part_poses: bool,
     pub stats: GradStats,
     pub extent: f32,
     pub iteration: u32,
@@ -109,6 +111,7 @@ impl Trainer {
             adam,
             field_adam,
             parts_adam: Adam::default(),
+            hold_part_poses: false,
             extent,
             iteration: 0,
             split: None,
@@ -517,7 +520,8 @@ impl Trainer {
                 .step(6, sp.motion.as_flattened_mut(), g.motion.as_flattened());
         }
         let parts = &mut sp.parts;
-        if !parts.rot.is_empty() && g.part_rot.len() == parts.rot.len() {
+        let train = !self.hold_part_poses;
+        if train && !parts.rot.is_empty() && g.part_rot.len() == parts.rot.len() {
             let n = parts.rot.len();
             if self.parts_adam.groups.len() != 2 || self.parts_adam.groups[0].m.len() != 4 * n {
                 self.parts_adam = Adam::default();
