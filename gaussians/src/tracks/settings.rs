@@ -89,7 +89,8 @@ pub struct TrackSettings {
     pub distortion: f64,
     /// Group the moving tracks' Gaussians into rigid parts that share one motion over the
     /// recording, a pose per train frame ([`crate::parts`], [`super::parts`]): a part's
-    /// size is then one number the depth prior's frames average into.
+    /// size is then one number the depth prior's frames average into. On by default
+    /// (BENCHMARKS.md, "Rigid parts").
     pub parts: bool,
 }
 
@@ -139,7 +140,7 @@ impl Default for TrackSettings {
             rigidity_neighbours: 8,
             rigidity_far: 0,
             distortion: 0.0,
-            parts: false,
+            parts: true,
         }
     }
 }
