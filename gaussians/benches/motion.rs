@@ -6,12 +6,8 @@
 //! Prints a table and writes `target/bench-results/motion.json`.
 
 use gaussians::{Gaussian, Splats, motion};
-use std::time::Instant;
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
+mod common;
+use common::time;
 
 /// `n` Gaussians, every `every`-th with a trajectory (none when `every` is 0), each with
 /// a life.
@@ -49,19 +45,6 @@ fn backward_all_rows(s: &Splats, t: f32, g: &[[f32; 3]], out: &mut Vec<[f32; 6]>
         .for_each(|(o, g, _)| {
             *o = std::array::from_fn(|k| g[k % 3] * if k < 3 { tau } else { tau * tau })
         });
-}
-
-fn time(reps: usize, mut f: impl FnMut()) -> f64 {
-    f();
-    median(
-        (0..reps)
-            .map(|_| {
-                let t0 = Instant::now();
-                f();
-                t0.elapsed().as_secs_f64() * 1e3
-            })
-            .collect(),
-    )
 }
 
 fn main() {
@@ -109,12 +92,5 @@ fn main() {
             }));
         }
     }
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/bench-results");
-    std::fs::create_dir_all(&dir).expect("bench-results dir");
-    let json = serde_json::to_vec_pretty(&serde_json::json!({
-        "bench": "motion", "threads": rayon::current_num_threads(),
-        "rows": rows
-    }))
-    .unwrap();
-    scene::atomic::write_bytes_atomic(&dir.join("motion.json"), &json).expect("write json");
+    common::write_rows("motion", rows);
 }

@@ -5,12 +5,8 @@
 
 use gaussians::parts::{NO_PART, Parts};
 use gaussians::{Gaussian, SplatGrads, Splats, parts};
-use std::time::Instant;
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
+mod common;
+use common::time;
 
 /// `n` Gaussians, every `every`-th in one of 8 parts (none when `every` is 0).
 fn model(n: usize, every: usize) -> Splats {
@@ -46,19 +42,6 @@ fn model(n: usize, every: usize) -> Splats {
     s
 }
 
-fn time(reps: usize, mut f: impl FnMut()) -> f64 {
-    f();
-    median(
-        (0..reps)
-            .map(|_| {
-                let t0 = Instant::now();
-                f();
-                t0.elapsed().as_secs_f64() * 1e3
-            })
-            .collect(),
-    )
-}
-
 fn main() {
     let reps = 21;
     let mut rows = Vec::new();
@@ -92,11 +75,5 @@ fn main() {
             }));
         }
     }
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/bench-results");
-    std::fs::create_dir_all(&dir).expect("bench-results dir");
-    let json = serde_json::to_vec_pretty(&serde_json::json!({
-        "bench": "parts", "threads": rayon::current_num_threads(), "rows": rows
-    }))
-    .unwrap();
-    scene::atomic::write_bytes_atomic(&dir.join("parts.json"), &json).expect("write json");
+    common::write_rows("parts", rows);
 }
