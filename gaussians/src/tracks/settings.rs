@@ -89,7 +89,8 @@ pub struct TrackSettings {
     pub distortion: f64,
     /// Group the moving tracks' Gaussians into rigid parts that share one motion over the
     /// recording, a pose per train frame ([`crate::parts`], [`super::parts`]): a part's
-    /// size is then one number the depth prior's frames average into. On by default
+    /// size is then one number the depth prior's frames average into. Off by default:
+    /// it gains on every measured row but `fast` 8 fps, whose test frames lose 0.7 dB
     /// (BENCHMARKS.md, "Rigid parts").
     pub parts: bool,
 }
@@ -140,7 +141,7 @@ impl Default for TrackSettings {
             rigidity_neighbours: 8,
             rigidity_far: 0,
             distortion: 0.0,
-            parts: true,
+            parts: false,
         }
     }
 }
