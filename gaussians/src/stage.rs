@@ -332,9 +332,7 @@ pub fn train(
                 ),
             ));
         }
-        splats.motion = crate::model::motion_file::read(m, splats.len())?;
-        splats.life = crate::model::motion_file::read_life(m, splats.len())?;
-        (splats.part, splats.parts) = crate::model::motion_file::read_parts(m, splats.len())?;
+        crate::model::motion_file::read_into(m, &mut splats)?;
     }
     let cams: Vec<_> = views.iter().map(|v| v.camera).collect();
     let extent = scene_extent(&settings, &cams);

@@ -165,9 +165,7 @@ impl Model {
         }
         if info.has_motion {
             let path = dir.join(MOTION_FILE);
-            splats.motion = motion_file::read(&path, info.gaussians)?;
-            splats.life = motion_file::read_life(&path, info.gaussians)?;
-            (splats.part, splats.parts) = motion_file::read_parts(&path, info.gaussians)?;
+            motion_file::read_into(&path, &mut splats)?;
         }
         // In memory the model is in the current layout (what `save` writes).
         info.format_version = FORMAT_VERSION;

@@ -70,29 +70,30 @@ pub fn write_with_parts(
         tensors.push((LIFE_TENSOR, view(path, LIFE_TENSOR, 2, &l)?));
     }
     let u32s = |v: &[u32]| -> Vec<u8> { v.iter().flat_map(|v| v.to_le_bytes()).collect() };
-    let blobs = [
-        (u32s(part), 1),
-        (bytes(&parts.knots), 1),
-        (bytes(parts.origin.as_flattened()), 3),
-        (bytes(parts.rot.as_flattened()), 4),
-        (bytes(parts.shift.as_flattened()), 3),
-        (u32s(&[parts.fixed as u32]), 1),
-    ];
-    if !part.is_empty() {
-        for ((data, width), name) in blobs.iter().zip(PART_TENSORS) {
-            let dtype = if matches!(name, "part" | "part_fixed") {
-                Dtype::U32
-            } else {
-                Dtype::F32
-            };
-            let shape = match *width {
-                1 => vec![data.len() / 4],
-                w => vec![data.len() / 4 / w, w],
-            };
-            let t = TensorView::new(dtype, shape, data)
-                .map_err(|e| Error::invalid(path, format!("{name} tensor: {e}")))?;
-            tensors.push((name, t));
-        }
+    let blobs = match part.is_empty() {
+        true => Vec::new(),
+        false => vec![
+            (u32s(part), 1),
+            (bytes(&parts.knots), 1),
+            (bytes(parts.origin.as_flattened()), 3),
+            (bytes(parts.rot.as_flattened()), 4),
+            (bytes(parts.shift.as_flattened()), 3),
+            (u32s(&[parts.fixed as u32]), 1),
+        ],
+    };
+    for ((data, width), name) in blobs.iter().zip(PART_TENSORS) {
+        let dtype = if matches!(name, "part" | "part_fixed") {
+            Dtype::U32
+        } else {
+            Dtype::F32
+        };
+        let shape = match *width {
+            1 => vec![data.len() / 4],
+            w => vec![data.len() / 4 / w, w],
+        };
+        let t = TensorView::new(dtype, shape, data)
+            .map_err(|e| Error::invalid(path, format!("{name} tensor: {e}")))?;
+        tensors.push((name, t));
     }
     let data = safetensors::serialize(tensors, None)
         .map_err(|e| Error::invalid(path, format!("serialising: {e}")))?;
@@ -112,9 +113,30 @@ const PART_TENSORS: [&str; 6] = [
 /// The rigid parts of `n` Gaussians in a file of [`write_with_parts`] (empty when it has
 /// none); errors name the file and the tensor.
 pub fn read_parts(path: &Path, n: usize) -> Result<(Vec<u32>, Parts)> {
+    with_file(path, |st| parts_from(st, path, n))
+}
+
+/// The trajectories, lives and rigid parts of `n` Gaussians into `s`, from one reading of
+/// the file (what [`read`], [`read_life`] and [`read_parts`] give apart).
+pub fn read_into(path: &Path, s: &mut crate::Splats) -> Result<()> {
+    let n = s.len();
+    with_file(path, |st| {
+        s.motion = motion_from(st, path, n)?;
+        s.life = life_from(st, path, n)?;
+        (s.part, s.parts) = parts_from(st, path, n)?;
+        Ok(())
+    })
+}
+
+/// `f` on the file at `path` read as safetensors.
+fn with_file<R>(path: &Path, f: impl FnOnce(&SafeTensors) -> Result<R>) -> Result<R> {
     let data = std::fs::read(path).at(path)?;
     let st = SafeTensors::deserialize(&data)
         .map_err(|e| Error::invalid(path, format!("not a safetensors file: {e}")))?;
+    f(&st)
+}
+
+fn parts_from(st: &SafeTensors, path: &Path, n: usize) -> Result<(Vec<u32>, Parts)> {
     if st.tensor("part").is_err() {
         return Ok((Vec::new(), Parts::default()));
     }
@@ -152,23 +174,16 @@ pub fn read_parts(path: &Path, n: usize) -> Result<(Vec<u32>, Parts)> {
     let fixed = get("part_fixed", Dtype::U32)?
         .first()
         .map_or(0, |b| u32::from_le_bytes(*b));
-    let rows = |v: Vec<f32>, w: usize| -> Vec<Vec<f32>> {
-        v.chunks_exact(w).map(|c| c.to_vec()).collect()
-    };
+    fn rows<const W: usize>(v: Vec<f32>) -> Vec<[f32; W]> {
+        v.chunks_exact(W)
+            .map(|c| std::array::from_fn(|k| c[k]))
+            .collect()
+    }
     let parts = Parts {
         knots: f("part_knots")?,
-        origin: rows(f("part_origin")?, 3)
-            .iter()
-            .map(|c| [c[0], c[1], c[2]])
-            .collect(),
-        rot: rows(f("part_rot")?, 4)
-            .iter()
-            .map(|c| [c[0], c[1], c[2], c[3]])
-            .collect(),
-        shift: rows(f("part_shift")?, 3)
-            .iter()
-            .map(|c| [c[0], c[1], c[2]])
-            .collect(),
+        origin: rows(f("part_origin")?),
+        rot: rows(f("part_rot")?),
+        shift: rows(f("part_shift")?),
         fixed: fixed as usize,
     };
     parts.check(&part, n).map_err(|e| Error::invalid(path, e))?;
@@ -184,9 +199,10 @@ fn view<'d>(path: &Path, name: &str, width: usize, data: &'d [u8]) -> Result<Ten
 /// The lives of `n` Gaussians in a file of [`write()`]; empty when it has none. Errors
 /// name the file (not safetensors, wrong dtype or shape, a non-finite value).
 pub fn read_life(path: &Path, n: usize) -> Result<Vec<[f32; 2]>> {
-    let data = std::fs::read(path).at(path)?;
-    let st = SafeTensors::deserialize(&data)
-        .map_err(|e| Error::invalid(path, format!("not a safetensors file: {e}")))?;
+    with_file(path, |st| life_from(st, path, n))
+}
+
+fn life_from(st: &SafeTensors, path: &Path, n: usize) -> Result<Vec<[f32; 2]>> {
     let Ok(t) = st.tensor(LIFE_TENSOR) else {
         return Ok(Vec::new());
     };
@@ -216,9 +232,10 @@ pub fn read_life(path: &Path, n: usize) -> Result<Vec<[f32; 2]>> {
 /// writes an `F32 [n, 6]` tensor `motion`); errors name the file (missing, not
 /// safetensors, wrong tensor, dtype or shape, a non-finite value).
 pub fn read(path: &Path, n: usize) -> Result<Vec<[f32; WIDTH]>> {
-    let data = std::fs::read(path).at(path)?;
-    let st = SafeTensors::deserialize(&data)
-        .map_err(|e| Error::invalid(path, format!("not a safetensors file: {e}")))?;
+    with_file(path, |st| motion_from(st, path, n))
+}
+
+fn motion_from(st: &SafeTensors, path: &Path, n: usize) -> Result<Vec<[f32; WIDTH]>> {
     let t = st
         .tensor(MOTION_TENSOR)
         .map_err(|_| Error::invalid(path, format!("missing tensor {MOTION_TENSOR}")))?;

@@ -81,6 +81,7 @@ pub fn into_parts(s: &mut Splats, times: &[f64], cameras: &[&Camera], pixels: f6
     let mut up: Vec<usize> = (0..movers.len()).collect();
     let mut nearest = Vec::new();
     let mut trees = Vec::new();
+    let two = NonZeroUsize::new(2).expect("2");
     for k in 0..n_knots {
         let here: Vec<usize> = (0..movers.len()).filter(|&m| valid[m][k]).collect();
         if here.len() < 2 {
@@ -90,7 +91,6 @@ pub fn into_parts(s: &mut Splats, times: &[f64], cameras: &[&Camera], pixels: f6
         let pts: Vec<[f64; 3]> = here.iter().map(|&m| pos[m][k]).collect();
         let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&pts).expect("finite");
         for p in &pts {
-            let two = NonZeroUsize::new(2).expect("2");
             let found = tree
                 .query(p)
                 .nearest_n::<SquaredEuclidean<f64>>(two)
