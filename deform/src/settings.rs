@@ -124,12 +124,13 @@ pub struct DeformSettings {
     /// shadow moving over a still floor; the static ones keep their geometry).
     /// Nothing when the warm-up's field already has one or the warm-up kept no field.
     pub field_color: bool,
-    /// Train the rigid parts' poses (`gaussians.tracks.parts`, `gaussians::parts`) in
-    /// the joint training; off (the default), they keep the warm-up's and the members'
-    /// own parameters still train. Trained, the joint training lost what the parts gave
-    /// the warm-up (`rigid` 4 fps: moving novel pixels 14.56 → 13.52 dB, test frames
-    /// 29.21 → 29.02; held: 14.37 and 30.84; BENCHMARKS.md, "Rigid parts").
-    pub train_part_poses: bool,
+    /// The rigid parts' poses' learning rates in the joint training
+    /// (`gaussians.tracks.parts`, `gaussians::parts`), as a share of the warm-up's; 0
+    /// (the default) keeps the warm-up's poses while the members' own parameters train.
+    /// At the warm-up's rates the joint training lost what the parts gave the warm-up
+    /// (`rigid` 4 fps: moving novel pixels 14.56 → 13.52 dB, test frames 29.21 → 29.02;
+    /// held: 14.37 and 30.84; BENCHMARKS.md, "Rigid parts").
+    pub part_pose_lr: f64,
     /// Record the losses every this many iterations in the report.
     pub log_every: u32,
 }
@@ -167,7 +168,7 @@ impl Default for DeformSettings {
             densify: true,
             regrow: true,
             field_color: false,
-            train_part_poses: false,
+            part_pose_lr: 0.0,
             log_every: 10,
         }
     }
@@ -229,6 +230,7 @@ impl DeformSettings {
         finite_nonneg("schedule.gamma1", self.schedule.gamma1)?;
         finite_nonneg("schedule.gamma2_max", self.schedule.gamma2_max)?;
         finite_nonneg("posenet_lr", self.posenet_lr)?;
+        finite_nonneg("part_pose_lr", self.part_pose_lr)?;
         if self.posenet_lr > 0.0
             && !(self.posenet_lr_final.is_finite() && self.posenet_lr_final > 0.0)
         {

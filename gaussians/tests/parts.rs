@@ -283,6 +283,81 @@ fn the_init_groups_two_moving_blobs_and_finds_their_motion() {
     }
 }
 
+/// Two clumps too far apart to join as neighbours but on the same trajectory (one
+/// rigid body seen in pieces), fitted in the first two windows only, and a third clump
+/// on its own trajectory over the whole recording: the pieces merge into one part that
+/// lives over their windows' union (not after them, where its pose was never seen), the
+/// third is a part of its own that always lives.
+#[test]
+fn pieces_on_one_motion_merge_and_a_part_lives_while_its_members_did() {
+    let mut r = Lcg(11);
+    let times = [0.0, 0.25, 0.5, 0.75, 1.0];
+    let early = [[f32::MIN, 0.25], [0.25, 0.5]];
+    let all = [[f32::MIN, 0.25], [0.25, 0.5], [0.5, 0.75], [0.75, f32::MAX]];
+    let (v, a) = ([0.6f32, 0.1, 0.0], [0.0f32, 0.4, 0.2]);
+    type Clump<'a> = ([f32; 3], [f32; 3], [f32; 3], &'a [[f32; 2]]);
+    let clumps: [Clump; 3] = [
+        ([-1.0, 0.0, -5.0], v, a, &early),
+        ([-0.2, 0.0, -5.0], v, a, &early),
+        ([1.2, 0.3, -6.0], [-0.3, 0.0, 0.5], [0.5, 0.0, 0.0], &all),
+    ];
+    let mut s = Splats::default();
+    s.push(Gaussian::isotropic([0.0, 0.0, -20.0], -2.0, 0.0, [0.0; 3]));
+    s.motion.push([0.0; 6]);
+    s.life.push(ALWAYS);
+    let mut clump_of = vec![usize::MAX];
+    for (c, (centre, v, a, lives)) in clumps.iter().enumerate() {
+        for &life in lives.iter() {
+            for _ in 0..30 {
+                let off = r.arr::<3>().map(|x| 0.1 * x as f32);
+                s.push(Gaussian::isotropic(
+                    std::array::from_fn(|i| centre[i] + off[i]),
+                    -3.0,
+                    0.0,
+                    [0.0; 3],
+                ));
+                *s.motion.last_mut().unwrap() = [v[0], v[1], v[2], a[0], a[1], a[2]];
+                *s.life.last_mut().unwrap() = life;
+                clump_of.push(c);
+            }
+        }
+    }
+    let cam = scene::Camera {
+        intrinsics: scene::Intrinsics {
+            width: 96,
+            height: 96,
+            fx: 80.0,
+            fy: 80.0,
+            cx: 48.0,
+            cy: 48.0,
+            distortion: None,
+        },
+        cam_to_world: Default::default(),
+    };
+    let cams = [&cam; 5];
+    let sum = gaussians::tracks::parts::into_parts(&mut s, &times, &cams, 2.0);
+    assert_eq!((sum.parts, sum.members, sum.left), (2, 240, 0), "{sum:?}");
+    let first = |c: usize| clump_of.iter().position(|&k| k == c).unwrap();
+    let (pieces, other) = (s.part[first(0)], s.part[first(2)]);
+    assert_ne!(pieces, other);
+    for (i, &c) in clump_of.iter().enumerate().skip(1) {
+        let want = if c == 2 { other } else { pieces };
+        assert_eq!(s.part[i], want, "Gaussian {i} of clump {c}");
+        let life = if c == 2 { ALWAYS } else { [f32::MIN, 0.5] };
+        assert_eq!(s.life[i], life, "Gaussian {i}");
+    }
+    // The merged part's translation from the middle frame at the knots its pieces saw.
+    for &t in &times[..4] {
+        let tau = t as f32 - 0.5;
+        let (_, sh) = s.parts.pose(pieces as usize, t as f32);
+        let want: [f32; 3] = std::array::from_fn(|k| v[k] * tau + a[k] * tau * tau);
+        assert!(
+            (0..3).all(|k| (sh[k] - want[k]).abs() < 1e-4),
+            "{sh:?} against {want:?} at {t}"
+        );
+    }
+}
+
 #[test]
 fn the_motion_file_keeps_the_parts_and_names_a_wrong_one() {
     let mut r = Lcg(9);

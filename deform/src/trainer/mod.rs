@@ -162,7 +162,7 @@ impl JointTrainer {
             None => inner.settings.deform = false,
         }
         inner.iteration = done;
-        inner.hold_part_poses = !settings.train_part_poses;
+        inner.part_pose_lr = settings.part_pose_lr;
         inner.tracks = gaussians::tracks::loss::TrackTerm::new(d.tracks.clone());
         inner.tracks.priors = gaussians::tracks::prior_loss::PriorTerm::new(d.priors.clone());
         let posenet = settings

@@ -45,8 +45,10 @@ pub struct Trainer {
     pub field_adam: Adam,
     /// The parts' knot poses' optimiser (rotations, translations; [`crate::parts`]).
     pub parts_adam: Adam,
-    /// Keep the parts' poses as they are (the members' own parameters still train).
-    pub hold_part_poses: bool,
+    /// The parts' poses' learning rates as a share of the Gaussians' rotation and
+    /// position rates: 1 in the warm-up; 0 keeps them as they are (the members' own
+    /// parameters still train).
+    pub part_pose_lr: f64,
     pub stats: GradStats,
     pub extent: f32,
     pub iteration: u32,
@@ -111,7 +113,7 @@ impl Trainer {
             adam,
             field_adam,
             parts_adam: Adam::default(),
-            hold_part_poses: false,
+            part_pose_lr: 1.0,
             extent,
             iteration: 0,
             split: None,
@@ -520,7 +522,8 @@ impl Trainer {
                 .step(6, sp.motion.as_flattened_mut(), g.motion.as_flattened());
         }
         let parts = &mut sp.parts;
-        let train = !self.hold_part_poses;
+        let share = self.part_pose_lr;
+        let train = share > 0.0;
         if train && !parts.rot.is_empty() && g.part_rot.len() == parts.rot.len() {
             let n = parts.rot.len();
             if self.parts_adam.groups.len() != 2 || self.parts_adam.groups[0].m.len() != 4 * n {
@@ -530,7 +533,8 @@ impl Trainer {
                 self.parts_adam
                     .add_group("part_shift", 0.0, 1e-15, 3, 3 * n);
             }
-            self.parts_adam.groups[1].lr = pos.at(it as u64);
+            self.parts_adam.groups[0].lr = share * s.rotation_lr;
+            self.parts_adam.groups[1].lr = share * pos.at(it as u64);
             let a = &mut self.parts_adam;
             a.step(0, parts.rot.as_flattened_mut(), g.part_rot.as_flattened());
             a.step(
