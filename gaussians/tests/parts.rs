@@ -285,11 +285,10 @@ fn the_init_groups_two_moving_blobs_and_finds_their_motion() {
 
 /// Two clumps too far apart to join as neighbours but on the same trajectory (one
 /// rigid body seen in pieces), fitted in the first two windows only, and a third clump
-/// on its own trajectory over the whole recording: the pieces merge into one part that
-/// lives over their windows' union (not after them, where its pose was never seen), the
-/// third is a part of its own that always lives.
+/// on its own trajectory over the whole recording: the pieces merge into one part, the
+/// third is a part of its own, every member lives over the whole recording.
 #[test]
-fn pieces_on_one_motion_merge_and_a_part_lives_while_its_members_did() {
+fn pieces_on_one_motion_merge_into_one_part() {
     let mut r = Lcg(11);
     let times = [0.0, 0.25, 0.5, 0.75, 1.0];
     let early = [[f32::MIN, 0.25], [0.25, 0.5]];
@@ -343,8 +342,7 @@ fn pieces_on_one_motion_merge_and_a_part_lives_while_its_members_did() {
     for (i, &c) in clump_of.iter().enumerate().skip(1) {
         let want = if c == 2 { other } else { pieces };
         assert_eq!(s.part[i], want, "Gaussian {i} of clump {c}");
-        let life = if c == 2 { ALWAYS } else { [f32::MIN, 0.5] };
-        assert_eq!(s.life[i], life, "Gaussian {i}");
+        assert_eq!(s.life[i], ALWAYS, "Gaussian {i}");
     }
     // The merged part's translation from the middle frame at the knots its pieces saw.
     for &t in &times[..4] {

@@ -12,10 +12,8 @@
 //! from its part's motion by more than `tracks.moving_pixels` (median over its knots)
 //! leaves the part and keeps its own trajectory. A part most of whose members (a
 //! [`MERGE_FIT`] share) a larger part's poses fit as well joins it. The members then
-//! move with their part (no trajectory of their own) while any of them lived: a part
-//! of windowed tracks lives over the union of their windows, as its poses outside the
-//! knots its members were fitted at are only held, not seen (`fast` 8 fps's warm-up:
-//! novel views 17.21 → 17.39 dB, BENCHMARKS "Rigid parts").
+//! move with their part over the whole recording (no life, no trajectory of their own;
+//! living over their windows' union only lost end to end, BENCHMARKS "Rigid parts").
 
 use crate::parts::{self, NO_PART, Parts};
 use crate::splats::{ALWAYS, Splats};
@@ -198,15 +196,7 @@ pub fn into_parts(s: &mut Splats, times: &[f64], cameras: &[&Camera], pixels: f6
     };
     let mut member = vec![NO_PART; s.len()];
     let mut canonical = vec![[0.0f64; 3]; s.len()];
-    let mut lives = Vec::with_capacity(found.len());
     for g in &found {
-        // A part lives while any of its members did (windowed tracks: their windows).
-        let life = (g.members.iter())
-            .map(|&m| s.life.get(movers[m]).copied().unwrap_or(ALWAYS))
-            .fold([f32::INFINITY, f32::NEG_INFINITY], |a, l| {
-                [a[0].min(l[0]), a[1].max(l[1])]
-            });
-        lives.push(life);
         let p = out.origin.len() as u32;
         let cs: Vec<[f64; 3]> = g.members.iter().filter_map(|&m| g.canon[m]).collect();
         let o: [f64; 3] =
@@ -240,7 +230,7 @@ pub fn into_parts(s: &mut Splats, times: &[f64], cameras: &[&Camera], pixels: f6
             s.means[i] = canonical[i].map(|v| v as f32);
             s.motion[i] = [0.0; 6];
             if let Some(l) = s.life.get_mut(i) {
-                *l = lives[m as usize];
+                *l = ALWAYS;
             }
         }
     }
