@@ -10,10 +10,8 @@
 //! recording's middle, or carried there through the poses already found, knot by knot
 //! outwards) onto where their trajectories put them; a member whose trajectory strays
 //! from its part's motion by more than `tracks.moving_pixels` (median over its knots)
-//! leaves the part and keeps its own trajectory. A part most of whose members (a
-//! [`MERGE_FIT`] share) a larger part's poses fit as well joins it. The members then
-//! move with their part over the whole recording (no life, no trajectory of their own;
-//! living over their windows' union only lost end to end, BENCHMARKS "Rigid parts").
+//! leaves the part and keeps its own trajectory. The members then move with their part
+//! over the whole recording (no life, no trajectory of their own).
 
 use crate::parts::{self, NO_PART, Parts};
 use crate::splats::{ALWAYS, Splats};
@@ -27,8 +25,6 @@ const PART_REACH: f64 = 3.0;
 const NEAREST: usize = 8;
 /// The fewest members of a part.
 const MIN_MEMBERS: usize = 12;
-/// A part joins a larger one whose poses fit this share of its members.
-const MERGE_FIT: f64 = 0.8;
 
 /// What [`into_parts`] made.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -156,39 +152,11 @@ pub fn into_parts(s: &mut Splats, times: &[f64], cameras: &[&Camera], pixels: f6
         reference,
         pixels,
     };
-    // Seeds: the components, largest first, less their misfits.
-    let mut seeds: Vec<Vec<usize>> = groups
-        .into_values()
+    // The components of at least MIN_MEMBERS, less their misfits.
+    let found: Vec<Group> = (groups.into_values())
         .filter(|g| g.len() >= MIN_MEMBERS)
+        .filter_map(|g| fit.settle(g))
         .collect();
-    seeds.sort_by_key(|g| std::cmp::Reverse(g.len()));
-    let mut found: Vec<Group> = seeds.iter().filter_map(|g| fit.settle(g.clone())).collect();
-    // Merge: a part whose members move, most of them, by a larger part's poses joins it
-    // (one rigid body cut into pieces by noisy neighbour tests).
-    let mut j = 1;
-    while j < found.len() {
-        let into = (0..j).find(|&i| {
-            let fits = (found[j].members.iter())
-                .filter(|&&m| fit.misfit_under(&found[i].poses, m) <= pixels)
-                .count();
-            fits as f64 >= MERGE_FIT * found[j].members.len() as f64
-        });
-        match into {
-            Some(i) => {
-                let mut all = found[i].members.clone();
-                all.extend_from_slice(&found[j].members);
-                found.remove(j);
-                match fit.settle(all) {
-                    Some(g) => found[i] = g,
-                    None => {
-                        found.remove(i);
-                    }
-                }
-                j = 1;
-            }
-            None => j += 1,
-        }
-    }
     let mut out = Parts {
         knots: times.iter().map(|&t| t as f32).collect(),
         fixed: reference,
@@ -276,20 +244,6 @@ impl Fit<'_> {
             .collect();
         e.sort_by(f64::total_cmp);
         e.get(e.len() / 2).copied().unwrap_or(f64::INFINITY)
-    }
-
-    /// [`Self::misfit`] of a mover not placed by `poses`: its canonical centre taken
-    /// back through the pose of its fitted knot nearest the reference.
-    fn misfit_under(&self, poses: &[([f64; 4], [f64; 3])], m: usize) -> f64 {
-        let k = (0..poses.len())
-            .filter(|&k| self.valid[m][k])
-            .min_by_key(|&k| k.abs_diff(self.reference));
-        let c = k.map(|k| {
-            let (q, t) = poses[k];
-            let x = self.pos[m][k];
-            parts::rotate_back(q, std::array::from_fn(|a| x[a] - t[a]))
-        });
-        self.misfit(poses, c, m)
     }
 
     /// Poses of `members`, then again without those straying more than `pixels`;
