@@ -324,4 +324,19 @@ mod tests {
         };
         assert_eq!(set.iterations_for(&frames(4.0), davis), 1234);
     }
+
+    #[test]
+    fn the_part_pose_rate_is_a_share_of_at_least_zero() {
+        let ok = DeformSettings::default();
+        assert_eq!(ok.part_pose_lr, 0.0, "held by default");
+        assert_eq!(ok.validate(), Ok(()));
+        for bad in [-0.1, f64::NAN, f64::INFINITY] {
+            let s = DeformSettings {
+                part_pose_lr: bad,
+                ..DeformSettings::default()
+            };
+            let e = s.validate().unwrap_err();
+            assert!(e.starts_with("part_pose_lr must be finite"), "{e}");
+        }
+    }
 }
