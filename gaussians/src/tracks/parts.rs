@@ -145,18 +145,6 @@ pub fn into_parts(s: &mut Splats, times: &[f64], cameras: &[&Camera], pixels: f6
     let reference = (0..n_knots)
         .min_by(|&a, &b| (times[a] - t0).abs().total_cmp(&(times[b] - t0).abs()))
         .expect("knots");
-    let fit = Fit {
-        valid: &valid,
-        pos: &pos,
-        cameras,
-        reference,
-        pixels,
-    };
-    // The components of at least MIN_MEMBERS, less their misfits.
-    let found: Vec<Group> = (groups.into_values())
-        .filter(|g| g.len() >= MIN_MEMBERS)
-        .filter_map(|g| fit.settle(g))
-        .collect();
     let mut out = Parts {
         knots: times.iter().map(|&t| t as f32).collect(),
         fixed: reference,
@@ -164,21 +152,50 @@ pub fn into_parts(s: &mut Splats, times: &[f64], cameras: &[&Camera], pixels: f6
     };
     let mut member = vec![NO_PART; s.len()];
     let mut canonical = vec![[0.0f64; 3]; s.len()];
-    for g in &found {
+    for (_, group) in groups {
+        if group.len() < MIN_MEMBERS {
+            continue;
+        }
+        let misfit = |poses: &[([f64; 4], [f64; 3])], canon: &[Option<[f64; 3]>], m: usize| {
+            let Some(c) = canon[m] else {
+                return f64::INFINITY;
+            };
+            let mut e: Vec<f64> = (0..n_knots)
+                .filter(|&k| valid[m][k])
+                .filter_map(|k| {
+                    let (q, t) = poses[k];
+                    let r = parts::rotate(q, c);
+                    let x: [f64; 3] = std::array::from_fn(|a| r[a] + t[a]);
+                    let a = cameras[k].project_world(x.into())?.0;
+                    let b = cameras[k].project_world(pos[m][k].into())?.0;
+                    Some((a - b).length())
+                })
+                .collect();
+            e.sort_by(f64::total_cmp);
+            e.get(e.len() / 2).copied().unwrap_or(f64::INFINITY)
+        };
+        let (poses, canon) = chain(&group, &valid, &pos, reference);
+        let kept: Vec<usize> = (group.iter().copied())
+            .filter(|&m| misfit(&poses, &canon, m) <= pixels)
+            .collect();
+        if kept.len() < MIN_MEMBERS {
+            continue;
+        }
+        let (poses, canon) = chain(&kept, &valid, &pos, reference);
         let p = out.origin.len() as u32;
-        let cs: Vec<[f64; 3]> = g.members.iter().filter_map(|&m| g.canon[m]).collect();
+        let cs: Vec<[f64; 3]> = kept.iter().filter_map(|&m| canon[m]).collect();
         let o: [f64; 3] =
             std::array::from_fn(|a| cs.iter().map(|c| c[a]).sum::<f64>() / cs.len() as f64);
         out.origin.push(o.map(|v| v as f32));
-        for (q, t) in &g.poses {
+        for (q, t) in &poses {
             // x = R a + t = R(a − o) + o + T  ⇒  T = t + R o − o.
             let ro = parts::rotate(*q, o);
             out.rot.push(q.map(|v| v as f32));
             out.shift
                 .push(std::array::from_fn(|a| (t[a] + ro[a] - o[a]) as f32));
         }
-        for &m in &g.members {
-            if let Some(c) = g.canon[m] {
+        for &m in &kept {
+            if let Some(c) = canon[m] {
                 member[movers[m]] = p;
                 canonical[movers[m]] = c;
             }
@@ -205,65 +222,6 @@ pub fn into_parts(s: &mut Splats, times: &[f64], cameras: &[&Camera], pixels: f6
     s.part = member;
     s.parts = out;
     summary
-}
-
-/// A part being built: its members (indices into the movers), poses per knot, and the
-/// movers' canonical centres under those poses.
-struct Group {
-    members: Vec<usize>,
-    poses: Vec<([f64; 4], [f64; 3])>,
-    canon: Vec<Option<[f64; 3]>>,
-}
-
-/// The movers' fitted centres and what a fit is measured against.
-struct Fit<'a> {
-    valid: &'a [Vec<bool>],
-    pos: &'a [Vec<[f64; 3]>],
-    cameras: &'a [&'a Camera],
-    reference: usize,
-    pixels: f64,
-}
-
-impl Fit<'_> {
-    /// Median reprojection distance over the knots `m` was fitted at between its centres
-    /// and where `poses` carry its canonical centre (`canon`; infinite without one).
-    fn misfit(&self, poses: &[([f64; 4], [f64; 3])], c: Option<[f64; 3]>, m: usize) -> f64 {
-        let Some(c) = c else {
-            return f64::INFINITY;
-        };
-        let mut e: Vec<f64> = (0..poses.len())
-            .filter(|&k| self.valid[m][k])
-            .filter_map(|k| {
-                let (q, t) = poses[k];
-                let r = parts::rotate(q, c);
-                let x: [f64; 3] = std::array::from_fn(|a| r[a] + t[a]);
-                let a = self.cameras[k].project_world(x.into())?.0;
-                let b = self.cameras[k].project_world(self.pos[m][k].into())?.0;
-                Some((a - b).length())
-            })
-            .collect();
-        e.sort_by(f64::total_cmp);
-        e.get(e.len() / 2).copied().unwrap_or(f64::INFINITY)
-    }
-
-    /// Poses of `members`, then again without those straying more than `pixels`;
-    /// `None` when fewer than [`MIN_MEMBERS`] stay.
-    fn settle(&self, members: Vec<usize>) -> Option<Group> {
-        let (poses, canon) = chain(&members, self.valid, self.pos, self.reference);
-        let kept: Vec<usize> = (members.into_iter())
-            .filter(|&m| self.misfit(&poses, canon[m], m) <= self.pixels)
-            .collect();
-        if kept.len() < MIN_MEMBERS {
-            return None;
-        }
-        let (poses, canon) = chain(&kept, self.valid, self.pos, self.reference);
-        let members = kept.into_iter().filter(|&m| canon[m].is_some()).collect();
-        Some(Group {
-            members,
-            poses,
-            canon,
-        })
-    }
 }
 
 /// One group's pose per knot and its members' canonical centres: the identity at
