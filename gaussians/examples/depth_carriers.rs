@@ -20,9 +20,11 @@
 //! a pixel lie, relative) on the object's pixels and on the still objects' (ids 1–2, the
 //! presets' floor and wall: a layer in front or behind that averages to the right depth).
 
+mod common;
+
+use common::fail;
 use gaussians::model::Model;
 use gaussians::{Rasterizer, Splats, TileRasterizer};
-use std::path::Path;
 
 fn quartiles(mut e: Vec<f64>) -> [f64; 3] {
     if e.is_empty() {
@@ -40,19 +42,7 @@ struct Frame {
 }
 
 fn main() {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    if args.len() < 2 {
-        eprintln!("usage: depth_carriers SCENE MODEL_DIR [OBJECT_ID]");
-        std::process::exit(2);
-    }
-    let root = Path::new(&args[0]);
-    let fail = |what: String| -> ! {
-        eprintln!("{what}");
-        std::process::exit(1)
-    };
-    let model =
-        Model::load(Path::new(&args[1])).unwrap_or_else(|e| fail(format!("{}: {e}", args[1])));
-    let sc = scene::Scene::open(root).unwrap_or_else(|e| fail(format!("{e}")));
+    let (args, root, sc, model) = common::open("depth_carriers SCENE MODEL_DIR [OBJECT_ID]");
     let id: u16 = args.get(2).map_or(3, |s| {
         s.parse()
             .unwrap_or_else(|_| fail(format!("OBJECT_ID {s}: not a number")))

@@ -11,22 +11,13 @@
 //! more than 30 % counts as `hidden`), and the median signed relative depth error of
 //! those on the part's main object. Then the same for the moving Gaussians in no part.
 
-use gaussians::model::Model;
+mod common;
+
+use common::fail;
 use std::collections::BTreeMap;
-use std::path::Path;
 
 fn main() {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let fail = |what: String| -> ! {
-        eprintln!("{what}");
-        std::process::exit(1)
-    };
-    if args.len() < 2 {
-        fail("usage: parts_objects SCENE MODEL_DIR".into());
-    }
-    let root = Path::new(&args[0]);
-    let model = Model::load(Path::new(&args[1])).unwrap_or_else(|e| fail(format!("{e}")));
-    let sc = scene::Scene::open(root).unwrap_or_else(|e| fail(format!("{e}")));
+    let (_, root, sc, model) = common::open("parts_objects SCENE MODEL_DIR");
     let (w, h) = (
         sc.train.camera.width as usize,
         sc.train.camera.height as usize,

@@ -22,7 +22,9 @@
 //! middle position goes. `OUT.png`: the middle train frame ×4 with a dot where each
 //! moving Gaussian living then projects, red on a still object, green on a moving one.
 
-use gaussians::model::Model;
+mod common;
+
+use common::fail;
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -53,37 +55,23 @@ struct Row {
 }
 
 fn main() {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let fail = |what: String| -> ! {
-        eprintln!("{what}");
-        std::process::exit(1)
-    };
-    if args.len() < 2 {
-        fail("usage: tracks_truth SCENE MODEL_DIR".into());
-    }
-    let root = Path::new(&args[0]);
-    let model = Model::load(Path::new(&args[1])).unwrap_or_else(|e| fail(format!("{e}")));
-    let sc = scene::Scene::open(root).unwrap_or_else(|e| fail(format!("{e}")));
-    let text = std::fs::read_to_string(root.join("synth.json"))
-        .unwrap_or_else(|e| fail(format!("{}: {e}", root.join("synth.json").display())));
+    let (args, root, sc, model) = common::open("tracks_truth SCENE MODEL_DIR [OUT.png]");
+    let path = root.join("synth.json");
+    let text =
+        std::fs::read_to_string(&path).unwrap_or_else(|e| fail(format!("{}: {e}", path.display())));
     let cfg: synth::SynthConfig =
-        serde_json::from_str(&text).unwrap_or_else(|e| fail(format!("synth.json: {e}")));
+        serde_json::from_str(&text).unwrap_or_else(|e| fail(format!("{}: {e}", path.display())));
     let world = synth::SynthWorld::new(&cfg).unwrap_or_else(|e| fail(e));
     let s = &model.splats;
     let frames = &sc.train.frames;
     let at: Vec<_> = frames.iter().map(|f| model.at(f.time as f32)).collect();
     let mut rows: BTreeMap<usize, Row> = BTreeMap::new();
-    let mut movers = 0;
-    for i in 0..s.len() {
-        if !s
-            .motion
-            .get(i)
-            .is_some_and(gaussians::motion::has_trajectory)
-        {
-            continue;
-        }
-        movers += 1;
-        let life = s.life.get(i).copied().unwrap_or(gaussians::splats::ALWAYS);
+    let life = |i: usize| s.life.get(i).copied().unwrap_or(gaussians::splats::ALWAYS);
+    let movers: Vec<usize> = (0..s.len())
+        .filter(|&i| (s.motion.get(i)).is_some_and(gaussians::motion::has_trajectory))
+        .collect();
+    for &i in &movers {
+        let life = life(i);
         let alive: Vec<usize> = (0..frames.len())
             .filter(|&k| gaussians::motion::alive(life, frames[k].time as f32))
             .collect();
@@ -154,25 +142,28 @@ fn main() {
     // The tracks themselves, before any lifting: where the true surface point under a
     // track's middle position goes, against where Lucas–Kanade followed it.
     let file = Path::new(&args[1]).join(gaussians::tracks::file::TRACKS_FILE);
-    if let Ok((ids, table)) = gaussians::tracks::file::read(&file, s.len(), frames.len()) {
-        for &id in &ids {
-            let Some(row) = table.get(id as usize) else {
-                continue;
-            };
-            let seen: Vec<usize> = (0..row.len()).filter(|&k| row[k].is_some()).collect();
-            let Some(&mid) = seen.get(seen.len() / 2) else {
-                continue;
-            };
-            let ts = frames[mid].timestamp;
-            let Some(hit) = world.cast(ts, row[mid].expect("seen")) else {
-                continue;
-            };
-            let r = rows.entry(hit.object + 1).or_default();
-            for &k in seen.iter().filter(|&&k| k != mid) {
-                let ts = frames[k].timestamp;
-                let truth = world.material_to_world(hit.object, hit.local, ts);
-                if let Some((q, _)) = world.camera_at(ts).project_world(truth) {
-                    r.lk_px.push(q.distance(row[k].expect("seen")));
+    match gaussians::tracks::file::read(&file, s.len(), frames.len()) {
+        Err(e) => eprintln!("no tracks' error from the truth: {e}"),
+        Ok((ids, table)) => {
+            for &id in &ids {
+                let Some(row) = table.get(id as usize) else {
+                    continue;
+                };
+                let seen: Vec<usize> = (0..row.len()).filter(|&k| row[k].is_some()).collect();
+                let Some(&mid) = seen.get(seen.len() / 2) else {
+                    continue;
+                };
+                let ts = frames[mid].timestamp;
+                let Some(hit) = world.cast(ts, row[mid].expect("seen")) else {
+                    continue;
+                };
+                let r = rows.entry(hit.object + 1).or_default();
+                for &k in seen.iter().filter(|&&k| k != mid) {
+                    let ts = frames[k].timestamp;
+                    let truth = world.material_to_world(hit.object, hit.local, ts);
+                    if let Some((q, _)) = world.camera_at(ts).project_world(truth) {
+                        r.lk_px.push(q.distance(row[k].expect("seen")));
+                    }
                 }
             }
         }
@@ -188,16 +179,10 @@ fn main() {
         let mut big =
             image::imageops::resize(&img, 4 * w, 4 * h, image::imageops::FilterType::Nearest);
         let cam = world.camera_at(f.timestamp);
-        for i in 0..s.len() {
-            let life = s.life.get(i).copied().unwrap_or(gaussians::splats::ALWAYS);
-            if !s
-                .motion
-                .get(i)
-                .is_some_and(gaussians::motion::has_trajectory)
-                || !gaussians::motion::alive(life, f.time as f32)
-            {
-                continue;
-            }
+        for &i in movers
+            .iter()
+            .filter(|&&i| gaussians::motion::alive(life(i), f.time as f32))
+        {
             let p = glam::Vec3::from(at[k].means[i]).as_dvec3();
             let Some((px, _)) = cam.project_world(p) else {
                 continue;
@@ -221,7 +206,8 @@ fn main() {
             .unwrap_or_else(|e| fail(format!("{out}: {e}")));
     }
     println!(
-        "{movers} Gaussians with a trajectory; by the object under them at their middle frame:"
+        "{} Gaussians with a trajectory; by the object under them at their middle frame:",
+        movers.len()
     );
     println!(
         "object (moves) | count | in front / on / behind (10 %) | of on, behind: near an edge | depth err at middle, median % | tied: px err away, median | depth err away, median % / median |.| | trajectory's largest shift, px: quartiles | tracks' error from the truth, px: median, > 2 px"
@@ -231,10 +217,9 @@ fn main() {
         let abs: Vec<f64> = r.depth_away.iter().map(|e| e.abs()).collect();
         let mut sh = r.shift_px.clone();
         sh.sort_by(f64::total_cmp);
-        let q = |f: f64| {
-            sh.get((f * (sh.len() - 1) as f64) as usize)
-                .copied()
-                .unwrap_or(f64::NAN)
+        let q = |f: f64| match sh.len() {
+            0 => f64::NAN,
+            n => sh[(f * (n - 1) as f64) as usize],
         };
         println!(
             "{o} ({}) | {n} | {:.0} / {:.0} / {:.0} % | {} / {} | {:+.1} | {:.2} | {:+.1} / {:.1} | {:.1} {:.1} {:.1} | {:.2}, {:.0} %",
