@@ -22,17 +22,9 @@
 
 mod common;
 
-use common::fail;
+use common::{fail, quartiles};
 use gaussians::model::Model;
 use gaussians::{Rasterizer, Splats, TileRasterizer};
-
-fn quartiles(mut e: Vec<f64>) -> [f64; 3] {
-    if e.is_empty() {
-        return [f64::NAN; 3];
-    }
-    e.sort_by(f64::total_cmp);
-    [0.25, 0.5, 0.75].map(|f| e[((e.len() - 1) as f64 * f) as usize])
-}
 
 struct Frame {
     depth: Vec<f32>,

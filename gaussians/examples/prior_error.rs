@@ -12,15 +12,10 @@
 //! (%) per frame and over all frames, and the signed median error 2 px or more inside
 //! each moving object per frame (what one scale per object and frame would remove).
 
-use std::path::Path;
+mod common;
 
-fn median(mut v: Vec<f64>) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    let k = v.len() / 2;
-    *v.select_nth_unstable_by(k, f64::total_cmp).1
-}
+use common::median;
+use std::path::Path;
 
 fn main() -> scene::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();

@@ -24,17 +24,9 @@
 
 mod common;
 
-use common::fail;
+use common::{fail, median, quartiles};
 use std::collections::BTreeMap;
 use std::path::Path;
-
-fn median(mut v: Vec<f64>) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    let k = v.len() / 2;
-    *v.select_nth_unstable_by(k, f64::total_cmp).1
-}
 
 #[derive(Default)]
 struct Row {
@@ -215,12 +207,7 @@ fn main() {
     for (o, r) in &rows {
         let n = r.front + r.on + r.behind;
         let abs: Vec<f64> = r.depth_away.iter().map(|e| e.abs()).collect();
-        let mut sh = r.shift_px.clone();
-        sh.sort_by(f64::total_cmp);
-        let q = |f: f64| match sh.len() {
-            0 => f64::NAN,
-            n => sh[(f * (n - 1) as f64) as usize],
-        };
+        let [q1, q2, q3] = quartiles(r.shift_px.clone());
         println!(
             "{o} ({}) | {n} | {:.0} / {:.0} / {:.0} % | {} / {} | {:+.1} | {:.2} | {:+.1} / {:.1} | {:.1} {:.1} {:.1} | {:.2}, {:.0} %",
             cfg.objects[o - 1].moves(),
@@ -233,9 +220,9 @@ fn main() {
             median(r.px_away.clone()),
             100.0 * median(r.depth_away.clone()),
             100.0 * median(abs),
-            q(0.25),
-            q(0.5),
-            q(0.75),
+            q1,
+            q2,
+            q3,
             median(r.lk_px.clone()),
             100.0 * r.lk_px.iter().filter(|&&e| e > 2.0).count() as f64
                 / r.lk_px.len().max(1) as f64,
