@@ -8,8 +8,8 @@
 //! cargo run --release -p degs-gaussians --example tracks_truth -- SCENE MODEL_DIR [OUT.png]
 //! ```
 //!
-//! Every Gaussian with a trajectory is projected into the train frame in the middle of
-//! its life; the true surface under its pixel (`SynthWorld::cast`) names the object and
+//! Every Gaussian with a trajectory or in a rigid part is projected into the train
+//! frame in the middle of its life; the true surface under its pixel (`SynthWorld::cast`) names the object and
 //! its depth. Per object: how many Gaussians project onto it, the fraction in front of
 //! its surface by more than 10 %, on it, behind it (and of those on and behind, how many
 //! lie within 2 px of another object: an outline), their median signed depth error, and
@@ -59,8 +59,15 @@ fn main() {
     let at: Vec<_> = frames.iter().map(|f| model.at(f.time as f32)).collect();
     let mut rows: BTreeMap<usize, Row> = BTreeMap::new();
     let life = |i: usize| s.life.get(i).copied().unwrap_or(gaussians::splats::ALWAYS);
+    // The Gaussians with a trajectory, and the members of rigid parts (`tracks.parts`),
+    // which move with their part over the whole recording.
+    let in_part = |i: usize| {
+        s.part
+            .get(i)
+            .is_some_and(|&p| p != gaussians::parts::NO_PART)
+    };
     let movers: Vec<usize> = (0..s.len())
-        .filter(|&i| (s.motion.get(i)).is_some_and(gaussians::motion::has_trajectory))
+        .filter(|&i| (s.motion.get(i)).is_some_and(gaussians::motion::has_trajectory) || in_part(i))
         .collect();
     for &i in &movers {
         let life = life(i);
@@ -198,8 +205,9 @@ fn main() {
             .unwrap_or_else(|e| fail(format!("{out}: {e}")));
     }
     println!(
-        "{} Gaussians with a trajectory; by the object under them at their middle frame:",
-        movers.len()
+        "{} Gaussians with a trajectory or in a rigid part ({} in parts); by the object under them at their middle frame:",
+        movers.len(),
+        movers.iter().filter(|&&i| in_part(i)).count()
     );
     println!(
         "object (moves) | count | in front / on / behind (10 %) | of on, behind: near an edge | depth err at middle, median % | tied: px err away, median | depth err away, median % / median |.| | trajectory's largest shift, px: quartiles | tracks' error from the truth, px: median, > 2 px"

@@ -14,6 +14,7 @@
 //! far apart for Lucas–Kanade: −4.5 dB on `fast`, BENCHMARKS.md "Tracks lifted to
 //! trajectories") and adds the moving tracks' Gaussians.
 
+pub mod bundle;
 pub mod depth;
 pub mod events;
 pub mod file;

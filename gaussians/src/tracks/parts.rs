@@ -10,8 +10,12 @@
 //! recording's middle, or carried there through the poses already found, knot by knot
 //! outwards) onto where their trajectories put them; a member whose trajectory strays
 //! from its part's motion by more than `tracks.moving_pixels` (median over its knots)
-//! leaves the part and keeps its own trajectory. The members then move with their part
-//! over the whole recording (no life, no trajectory of their own).
+//! leaves the part and keeps its own trajectory. With the tracks' pixels and the depth
+//! priors ([`Evidence`]), the poses and the members' canonical centres are then bundle
+//! adjusted ([`super::bundle`]) to where the members were seen and to the prior's depths
+//! there, and a member whose median reprojection error stays over `tracks.moving_pixels`
+//! leaves too. The members then move with their part over the whole recording (no life,
+//! no trajectory of their own).
 
 use crate::parts::{self, NO_PART, Parts};
 use crate::splats::{ALWAYS, Splats};
@@ -25,6 +29,20 @@ const PART_REACH: f64 = 3.0;
 const NEAREST: usize = 8;
 /// The fewest members of a part.
 const MIN_MEMBERS: usize = 12;
+
+/// Huber threshold of the bundle adjustment, pixels.
+const HUBER_PX: f64 = 1.0;
+/// Levenberg–Marquardt steps of the bundle adjustment.
+const BUNDLE_STEPS: usize = 30;
+
+/// Where the moving tracks were seen, for the bundle adjustment: `table` the tracks'
+/// camera pixels per train frame (rows indexed by `Splats::track`), `depths` each
+/// frame's aligned prior (empty: none), `depth_sigma` as `tracks.depth_sigma`.
+pub struct Evidence<'a> {
+    pub table: &'a super::loss::Table,
+    pub depths: &'a [Option<super::depth::Aligned>],
+    pub depth_sigma: f64,
+}
 
 /// What [`into_parts`] made.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -46,8 +64,16 @@ fn find(up: &mut [usize], mut i: usize) -> usize {
 
 /// Turn the moving Gaussians of `s` (a trajectory, [`crate::motion::has_trajectory`])
 /// into rigid parts with knots at the train frames (`times` normalised, `cameras` the
-/// frames'), where they group; `pixels` the largest median misfit of a member.
-pub fn into_parts(s: &mut Splats, times: &[f64], cameras: &[&Camera], pixels: f64) -> PartsSummary {
+/// frames'), where they group; `pixels` the largest median misfit of a member. With
+/// `evidence` (and a depth row for every member on average), each part is bundle
+/// adjusted to it.
+pub fn into_parts(
+    s: &mut Splats,
+    times: &[f64],
+    cameras: &[&Camera],
+    pixels: f64,
+    evidence: Option<&Evidence>,
+) -> PartsSummary {
     let n_knots = times.len();
     let movers: Vec<usize> = (0..s.len())
         .filter(|&i| s.motion.get(i).is_some_and(crate::motion::has_trajectory))
@@ -181,7 +207,22 @@ pub fn into_parts(s: &mut Splats, times: &[f64], cameras: &[&Camera], pixels: f6
         if kept.len() < MIN_MEMBERS {
             continue;
         }
-        let (poses, canon) = chain(&kept, &valid, &pos, reference);
+        let (mut poses, mut canon) = chain(&kept, &valid, &pos, reference);
+        let mut kept = kept;
+        if let Some(ev) = evidence {
+            let track = |m: usize| {
+                s.track
+                    .get(movers[m])
+                    .and_then(|&r| ev.table.get(r as usize))
+            };
+            kept.retain(|&m| track(m).is_some());
+            kept = adjust(
+                &kept, &track, ev, cameras, reference, pixels, &mut poses, &mut canon,
+            );
+            if kept.len() < MIN_MEMBERS {
+                continue;
+            }
+        }
         let p = out.origin.len() as u32;
         let cs: Vec<[f64; 3]> = kept.iter().filter_map(|&m| canon[m]).collect();
         let o: [f64; 3] =
@@ -222,6 +263,93 @@ pub fn into_parts(s: &mut Splats, times: &[f64], cameras: &[&Camera], pixels: f6
     s.part = member;
     s.parts = out;
     summary
+}
+
+/// Bundle adjust one part's `poses` and its members' canonical centres `canon` (those of
+/// `kept`) to `ev`, then once more without the members whose median reprojection error
+/// is over `pixels`; returns the members kept. Unchanged when the members have fewer
+/// depth rows than members (the scale along the rays would be free).
+#[allow(clippy::too_many_arguments)]
+fn adjust<'t>(
+    kept: &[usize],
+    track: &dyn Fn(usize) -> Option<&'t Vec<Option<glam::DVec2>>>,
+    ev: &Evidence,
+    cameras: &[&Camera],
+    reference: usize,
+    pixels: f64,
+    poses: &mut [([f64; 4], [f64; 3])],
+    canon: &mut [Option<[f64; 3]>],
+) -> Vec<usize> {
+    use super::bundle::{self, Seen};
+    use glam::{DQuat, DVec3};
+    let mut kept: Vec<usize> = kept
+        .iter()
+        .copied()
+        .filter(|&m| canon[m].is_some())
+        .collect();
+    let seen_of = |m: usize| -> Vec<Seen> {
+        let row = track(m).expect("kept members have a track");
+        (row.iter().enumerate())
+            .filter_map(|(k, p)| {
+                let pixel = (*p)?;
+                let depth = ev.depths.get(k).and_then(|d| d.as_ref()?.at(pixel));
+                Some(Seen {
+                    knot: k,
+                    pixel,
+                    depth,
+                })
+            })
+            .collect()
+    };
+    let mut seen: Vec<Vec<Seen>> = kept.iter().map(|&m| seen_of(m)).collect();
+    let depth_rows = seen.iter().flatten().filter(|o| o.depth.is_some()).count();
+    if ev.depth_sigma <= 0.0 || depth_rows < kept.len() {
+        return kept;
+    }
+    let mut bp: Vec<bundle::Pose> = (poses.iter())
+        .map(|(q, t)| {
+            (
+                DQuat::from_xyzw(q[1], q[2], q[3], q[0]),
+                DVec3::from_array(*t),
+            )
+        })
+        .collect();
+    let mut points: Vec<DVec3> = kept
+        .iter()
+        .map(|&m| DVec3::from_array(canon[m].expect("kept")))
+        .collect();
+    for round in 0..2 {
+        let problem = bundle::Problem {
+            cameras,
+            seen: &seen,
+            fixed: reference,
+            depth_sigma: ev.depth_sigma,
+            huber: HUBER_PX,
+        };
+        let _ = bundle::adjust(&problem, &mut bp, &mut points, BUNDLE_STEPS);
+        if round == 1 {
+            break;
+        }
+        let keep: Vec<bool> = (bundle::misfit(&problem, &bp, &points).iter())
+            .map(|&e| e <= pixels)
+            .collect();
+        if keep.iter().all(|&k| k) {
+            break;
+        }
+        let mut i = 0;
+        kept.retain(|_| (keep[i], i += 1).0);
+        let mut i = 0;
+        seen.retain(|_| (keep[i], i += 1).0);
+        let mut i = 0;
+        points.retain(|_| (keep[i], i += 1).0);
+    }
+    for (slot, (q, t)) in poses.iter_mut().zip(&bp) {
+        *slot = ([q.w, q.x, q.y, q.z], t.to_array());
+    }
+    for (&m, a) in kept.iter().zip(&points) {
+        canon[m] = Some(a.to_array());
+    }
+    kept
 }
 
 /// One group's pose per knot and its members' canonical centres: the identity at

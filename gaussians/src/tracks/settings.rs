@@ -93,6 +93,12 @@ pub struct TrackSettings {
     /// it gains on every measured row but `fast` 8 fps, whose test frames lose 0.7 dB
     /// (BENCHMARKS.md, "Rigid parts").
     pub parts: bool,
+    /// With `parts`, bundle adjust each part ([`super::bundle`]): its poses and its
+    /// members' centres fitted to the tracks' pixels and to the prior's depths, in place
+    /// of the poses chained from the members' trajectories. Off by default: closer to
+    /// the truth before training but lower end to end on the three rows measured
+    /// (BENCHMARKS.md, "A bundle adjustment per rigid part").
+    pub bundle: bool,
 }
 
 /// Where the windows of trajectories hand over (`tracks.handover`; [`super::init::windows`]).
@@ -142,6 +148,7 @@ impl Default for TrackSettings {
             rigidity_far: 0,
             distortion: 0.0,
             parts: false,
+            bundle: false,
         }
     }
 }

@@ -316,11 +316,17 @@ pub(crate) fn initial_splats(
                     if st.parts {
                         let times: Vec<f64> = images.iter().map(|v| v.time).collect();
                         let cams: Vec<&scene::Camera> = images.iter().map(|v| v.camera).collect();
+                        let evidence = crate::tracks::parts::Evidence {
+                            table: &table,
+                            depths: &aligned,
+                            depth_sigma: st.depth_sigma,
+                        };
                         let p = crate::tracks::parts::into_parts(
                             &mut s,
                             &times,
                             &cams,
                             st.moving_pixels,
+                            st.bundle.then_some(&evidence),
                         );
                         eprintln!(
                             "tracks: {} rigid parts of {} Gaussians; {} moving Gaussians keep their own trajectories",
