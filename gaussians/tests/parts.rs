@@ -4,20 +4,8 @@
 use gaussians::parts::{self, NO_PART, Parts};
 use gaussians::splats::{ALWAYS, Gaussian, Splats};
 
-/// A small deterministic generator (no dependency on the code under test).
-struct Lcg(u64);
-impl Lcg {
-    fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        ((self.0 >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-    }
-    fn arr<const N: usize>(&mut self) -> [f64; N] {
-        std::array::from_fn(|_| self.next())
-    }
-}
+mod lcg;
+use lcg::Lcg;
 
 fn dot<const N: usize>(a: [f64; N], b: [f64; N]) -> f64 {
     (0..N).map(|i| a[i] * b[i]).sum()
