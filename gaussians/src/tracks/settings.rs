@@ -96,8 +96,8 @@ pub struct TrackSettings {
     /// With `parts`, bundle adjust each part ([`super::bundle`]): its poses and its
     /// members' centres fitted to the tracks' pixels and to the prior's depths, in place
     /// of the poses chained from the members' trajectories. Off by default: closer to
-    /// the truth before training but lower end to end on the three rows measured
-    /// (BENCHMARKS.md, "A bundle adjustment per rigid part").
+    /// the truth before training, but end to end a tie on `rigid` 4 fps and a loss on
+    /// `fast` 8 and `nonrigid` 4 fps (BENCHMARKS.md, "A bundle adjustment per rigid part").
     pub bundle: bool,
 }
 
