@@ -1,8 +1,8 @@
-//! Bundle adjustment of one rigid part (`tracks.parts`, [`super::parts`]): the members'
-//! points in the part's frame and one pose per knot, fitted to where the members were
-//! seen (their tracks' camera pixels) and to the depth prior at those pixels.
+//! Bundle adjustment of one rigid part (`tracks.bundle`, called by `tracks::parts`): the
+//! members' points in the part's frame and one pose per knot, fitted to where the members
+//! were seen (their tracks' camera pixels) and to the depth prior at those pixels.
 //!
-//! Why: the poses [`super::parts`] chains from the members' lifted trajectories inherit
+//! Why: the poses `tracks::parts` chains from the members' lifted trajectories inherit
 //! each trajectory's own error (a track's depth rows are its own pixels' prior values).
 //! One rigid motion seen by a moving camera is a multi-view problem in the part's frame:
 //! the pixels fix the shape and the motion up to one scale per part (scaling the part
