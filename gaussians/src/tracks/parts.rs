@@ -330,18 +330,16 @@ fn adjust<'t>(
         if round == 1 {
             break;
         }
-        let keep: Vec<bool> = (bundle::misfit(&problem, &bp, &points).iter())
-            .map(|&e| e <= pixels)
+        let fit: Vec<usize> = (bundle::misfit(&problem, &bp, &points).iter().enumerate())
+            .filter(|&(_, &e)| e <= pixels)
+            .map(|(j, _)| j)
             .collect();
-        if keep.iter().all(|&k| k) {
+        if fit.len() == kept.len() {
             break;
         }
-        let mut i = 0;
-        kept.retain(|_| (keep[i], i += 1).0);
-        let mut i = 0;
-        seen.retain(|_| (keep[i], i += 1).0);
-        let mut i = 0;
-        points.retain(|_| (keep[i], i += 1).0);
+        kept = fit.iter().map(|&j| kept[j]).collect();
+        seen = fit.iter().map(|&j| std::mem::take(&mut seen[j])).collect();
+        points = fit.iter().map(|&j| points[j]).collect();
     }
     for (slot, (q, t)) in poses.iter_mut().zip(&bp) {
         *slot = ([q.w, q.x, q.y, q.z], t.to_array());
