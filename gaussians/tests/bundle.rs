@@ -323,3 +323,27 @@ fn a_frames_scale_error_is_pooled_not_followed() {
     );
     assert!(follow.iter().all(|f| f.abs() < 0.4), "{follow:?}");
 }
+
+#[test]
+fn a_rescaled_part_keeps_its_pixels_and_its_reference_pose() {
+    let mut r = Lcg(11);
+    let (cams, poses, points) = world(&mut r);
+    let refs: Vec<&Camera> = cams.iter().collect();
+    let (mut p2, mut a2) = (poses.clone(), points.clone());
+    // Knot 2's pose is not the identity: the gauge must hold there too.
+    let s = 1.07;
+    bundle::rescale(&refs, 2, &mut p2, &mut a2, s);
+    assert_eq!(p2[2].0, poses[2].0);
+    assert!((p2[2].1 - poses[2].1).length() < 1e-12);
+    for (a, b) in points.iter().zip(&a2) {
+        for k in 0..cams.len() {
+            let (u, z) = cams[k].project_world(poses[k].0 * *a + poses[k].1).unwrap();
+            let (v, w) = cams[k].project_world(p2[k].0 * *b + p2[k].1).unwrap();
+            assert!((u - v).length() < 1e-9, "knot {k}: pixel {u} became {v}");
+            assert!((w / z - s).abs() < 1e-12, "knot {k}: depth {z} became {w}");
+        }
+    }
+    // Still rigid: distances between points scale by s.
+    let d = |p: &[DVec3]| (p[0] - p[1]).length();
+    assert!((d(&a2) / d(&points) - s).abs() < 1e-12);
+}

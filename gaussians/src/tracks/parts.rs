@@ -13,9 +13,10 @@
 //! leaves the part and keeps its own trajectory. With the tracks' pixels and the depth
 //! priors ([`Evidence`]), the poses and the members' canonical centres are then bundle
 //! adjusted ([`super::bundle`]) to where the members were seen and to the prior's depths
-//! there, and a member whose median reprojection error stays over `tracks.moving_pixels`
-//! leaves too. The members then move with their part over the whole recording (no life,
-//! no trajectory of their own).
+//! there, a member whose median reprojection error stays over `tracks.moving_pixels`
+//! leaves too, and the part is scaled about each frame's camera centre to its lifted
+//! members' median depth at the reference knot (every pixel stays). The members then
+//! move with their part over the whole recording (no life, no trajectory of their own).
 
 use crate::parts::{self, NO_PART, Parts};
 use crate::splats::{ALWAYS, Splats};
@@ -318,6 +319,14 @@ fn adjust<'t>(
         .iter()
         .map(|&m| DVec3::from_array(canon[m].expect("kept")))
         .collect();
+    // The lifted trajectories' depths at the reference knot, of the members seen there
+    // (the pose there is held, so a point's depth there is its canonical centre's).
+    let (q0, t0) = bp[reference];
+    let depth_there = |a: DVec3| -cameras[reference].cam_to_world.to_camera(q0 * a + t0).z;
+    let seen_there = |s: &[Seen]| s.iter().any(|o| o.knot == reference);
+    let mut lifted: Vec<Option<f64>> = (seen.iter().zip(&points))
+        .map(|(s, &a)| seen_there(s).then(|| depth_there(a)))
+        .collect();
     for round in 0..2 {
         let problem = bundle::Problem {
             cameras,
@@ -339,7 +348,21 @@ fn adjust<'t>(
         }
         kept = fit.iter().map(|&j| kept[j]).collect();
         seen = fit.iter().map(|&j| std::mem::take(&mut seen[j])).collect();
+        lifted = fit.iter().map(|&j| lifted[j]).collect();
         points = fit.iter().map(|&j| points[j]).collect();
+    }
+    // The part's size from the lifted trajectories at the reference knot, the middle of
+    // their fits: the adjustment's own distance is the prior's mean over the frames, whose
+    // error is one scale per frame (BENCHMARKS.md, "A bundle adjustment per rigid part");
+    // the lifts' leans on each track's smooth motion as well. Every pixel stays.
+    let mut ratios: Vec<f64> = (points.iter().zip(&lifted))
+        .filter_map(|(&a, z)| Some((z.as_ref()? / depth_there(a)).ln()))
+        .filter(|r| r.is_finite())
+        .collect();
+    if !ratios.is_empty() {
+        ratios.sort_by(f64::total_cmp);
+        let s = ratios[ratios.len() / 2].exp();
+        bundle::rescale(cameras, reference, &mut bp, &mut points, s);
     }
     for (slot, (q, t)) in poses.iter_mut().zip(&bp) {
         *slot = ([q.w, q.x, q.y, q.z], t.to_array());
