@@ -96,9 +96,9 @@ pub struct TrackSettings {
     /// With `parts`, bundle adjust each part ([`super::bundle`]): its poses and its
     /// members' centres fitted to the tracks' pixels and to the prior's depths, in place
     /// of the poses chained from the members' trajectories, then scaled to the lifts'
-    /// depth at the middle frame. On by default (it acts only with `parts`): +0.34 to
-    /// +0.56 dB on the moving novel pixels of `rigid` and `nonrigid` 4 fps, a tie on
-    /// `fast` 8 fps (BENCHMARKS.md, "The adjusted part at the lifts' distance").
+    /// depth at the middle frame. On by default (it acts only with `parts`): +0.16 to
+    /// +0.56 dB on the moving novel pixels of `rigid` and `nonrigid` at 4 and 8 fps, a
+    /// tie on `fast` (BENCHMARKS.md, "The adjusted part at the lifts' distance").
     pub bundle: bool,
 }
 
