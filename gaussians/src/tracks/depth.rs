@@ -84,7 +84,8 @@ fn robust_line(pairs: &[(f64, f64)]) -> Option<(f64, f64)> {
     (a.is_finite() && a > 0.0 && b.is_finite()).then_some((a, b))
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
+/// The median of `v` (NaN when empty).
+pub(super) fn median(mut v: Vec<f64>) -> f64 {
     if v.is_empty() {
         return f64::NAN;
     }

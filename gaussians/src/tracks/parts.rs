@@ -319,14 +319,6 @@ fn adjust<'t>(
         .iter()
         .map(|&m| DVec3::from_array(canon[m].expect("kept")))
         .collect();
-    // The lifted trajectories' depths at the reference knot, of the members seen there
-    // (the pose there is held, so a point's depth there is its canonical centre's).
-    let (q0, t0) = bp[reference];
-    let depth_there = |a: DVec3| -cameras[reference].cam_to_world.to_camera(q0 * a + t0).z;
-    let seen_there = |s: &[Seen]| s.iter().any(|o| o.knot == reference);
-    let mut lifted: Vec<Option<f64>> = (seen.iter().zip(&points))
-        .map(|(s, &a)| seen_there(s).then(|| depth_there(a)))
-        .collect();
     for round in 0..2 {
         let problem = bundle::Problem {
             cameras,
@@ -348,22 +340,27 @@ fn adjust<'t>(
         }
         kept = fit.iter().map(|&j| kept[j]).collect();
         seen = fit.iter().map(|&j| std::mem::take(&mut seen[j])).collect();
-        lifted = fit.iter().map(|&j| lifted[j]).collect();
         points = fit.iter().map(|&j| points[j]).collect();
     }
     // The part's size from the lifted trajectories at the reference knot, the middle of
     // their fits: the adjustment's own distance is the prior's mean over the frames, whose
     // error is one scale per frame, and the lifts' was nearer the truth there (−1.5
     // against −3.0 % on `rigid` 4 fps's box; BENCHMARKS.md, "A bundle adjustment per
-    // rigid part"). Every pixel stays.
-    let mut ratios: Vec<f64> = (points.iter().zip(&lifted))
-        .filter_map(|(&a, z)| Some((z.as_ref()? / depth_there(a)).ln()))
+    // rigid part"). Every pixel stays. `canon` still holds the chained (lifted) centres,
+    // and the pose at the reference knot is held, so depths there compare directly.
+    let (q0, t0) = bp[reference];
+    let depth_there = |a: DVec3| -cameras[reference].cam_to_world.to_camera(q0 * a + t0).z;
+    let ratios: Vec<f64> = (kept.iter().zip(&seen).zip(&points))
+        .filter(|((_, s), _)| s.iter().any(|o| o.knot == reference))
+        .map(|((&m, _), &a)| {
+            let lifted = DVec3::from_array(canon[m].expect("kept"));
+            (depth_there(lifted) / depth_there(a)).ln()
+        })
         .filter(|r| r.is_finite())
         .collect();
-    if !ratios.is_empty() {
-        ratios.sort_by(f64::total_cmp);
-        let s = ratios[ratios.len() / 2].exp();
-        bundle::rescale(cameras, reference, &mut bp, &mut points, s);
+    let s = super::depth::median(ratios);
+    if s.is_finite() {
+        bundle::rescale(cameras, reference, &mut bp, &mut points, s.exp());
     }
     for (slot, (q, t)) in poses.iter_mut().zip(&bp) {
         *slot = ([q.w, q.x, q.y, q.z], t.to_array());
