@@ -139,6 +139,7 @@ fn main() {
                             depth: Some(&d_depth),
                             alpha: None,
                             distortion: None,
+                            anchor: None,
                         },
                         &mut g,
                     );

@@ -1,7 +1,8 @@
 //! Every gradient of the tile rasterizer (means, quaternions, log-scales, opacity
 //! logits, SH DC and rest, camera twist) against central finite differences of the f64
-//! reference, for losses on colour, depth and alpha, and for the depth distortion
-//! (`raster::Distortion`). Relative error per group, norm-wise.
+//! reference, for losses on colour, depth and alpha, for the depth distortion
+//! (`raster::Distortion`) and for the depths pulled to an anchor (`raster::Anchor`).
+//! Relative error per group, norm-wise.
 //!
 //! Scenes keep the cut-offs out of the way: opacity logits ≥ −0.5 (so α never falls to
 //! 1/255 inside the 3σ ellipse), ≤ 1.2 (α < 0.99), few layers (T stays above 1e-4), and
@@ -10,7 +11,7 @@
 mod raster_common;
 
 use gaussians::raster::reference::{self, Gaussians64};
-use gaussians::raster::{Distortion, Planes, TileRasterizer, apply_twist};
+use gaussians::raster::{Anchor, Distortion, Planes, TileRasterizer, apply_twist};
 use gaussians::{Rasterizer, SplatGrads, Splats};
 use glam::DVec3;
 use raster_common::*;
@@ -25,8 +26,12 @@ enum Target {
     Depth,
     Alpha,
     Distortion,
+    Anchor,
     All,
 }
+
+/// The anchor's σ: small enough that some Gaussians lie beyond one unit of Huber.
+const SIGMA: f64 = 0.08;
 
 struct Weights {
     rgb: Vec<f64>,
@@ -34,6 +39,9 @@ struct Weights {
     alpha: Vec<f64>,
     /// The distortion's λ per pixel (≥ 0).
     dist: Vec<f64>,
+    /// The anchor's λ per pixel (≥ 0) and its depth per pixel (about the scene's).
+    anchor: Vec<f64>,
+    z_hat: Vec<f64>,
 }
 
 fn weights(rng: &mut Rng, np: usize, t: Target) -> Weights {
@@ -50,6 +58,11 @@ fn weights(rng: &mut Rng, np: usize, t: Target) -> Weights {
             .iter()
             .map(|v| v.abs())
             .collect(),
+        anchor: w(matches!(t, Target::Anchor | Target::All), np)
+            .iter()
+            .map(|v| v.abs())
+            .collect(),
+        z_hat: (0..np).map(|_| rng.uni(3.2, 4.8)).collect(),
     }
 }
 
@@ -57,7 +70,12 @@ fn loss(g: &Gaussians64, cam: &Camera, sh: u32, bg: [f64; 3], w: &Weights) -> f6
     let f = reference::render(g, cam, sh, bg);
     let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
     let (dist, _) = reference::distortion(g, cam);
-    dot(&f.rgb, &w.rgb) + dot(&f.depth, &w.depth) + dot(&f.alpha, &w.alpha) + dot(&dist, &w.dist)
+    let anchored = reference::anchored(g, cam, &w.z_hat, SIGMA);
+    dot(&f.rgb, &w.rgb)
+        + dot(&f.depth, &w.depth)
+        + dot(&f.alpha, &w.alpha)
+        + dot(&dist, &w.dist)
+        + dot(&anchored, &w.anchor)
 }
 
 const GROUPS: [&str; 6] = [
@@ -105,12 +123,18 @@ fn check_scene(s: &Splats, cam: &Camera, sh: u32, bg: [f32; 3], w: &Weights) -> 
     let (image, st) = r.render_full(s, cam, sh, bg);
     let f32v = |v: &[f64]| v.iter().map(|&x| x as f32).collect::<Vec<f32>>();
     let lam = f32v(&w.dist);
+    let (lam_a, z_hat) = (f32v(&w.anchor), f32v(&w.z_hat));
     let planes = Planes {
         depth: Some(&f32v(&w.depth)),
         alpha: Some(&f32v(&w.alpha)),
         distortion: Some(Distortion {
             weight: &lam,
             depth: &image.depth,
+        }),
+        anchor: Some(Anchor {
+            weight: &lam_a,
+            depth: &z_hat,
+            sigma: SIGMA as f32,
         }),
     };
     let (g, pose) = r.backward_view(s, cam, &st, &f32v(&w.rgb), planes);
@@ -189,8 +213,10 @@ fn run(target: Target, seeds: std::ops::Range<u64>, sh: u32) {
         let w = weights(&mut rng, 37 * 29, target);
         let bg = [0.3, 0.6, 0.1];
         for c in check_scene(&s, &cam, sh, bg, &w) {
-            let zero = matches!(target, Target::Depth | Target::Alpha | Target::Distortion)
-                && c.name.starts_with("sh");
+            let zero = matches!(
+                target,
+                Target::Depth | Target::Alpha | Target::Distortion | Target::Anchor
+            ) && c.name.starts_with("sh");
             eprintln!(
                 "{target:?} seed {seed} {}: rel {:.2e} (|fd| {:.3e})",
                 c.name, c.rel, c.norm
@@ -237,6 +263,13 @@ fn gradients_of_alpha_loss_match_finite_differences() {
 #[test]
 fn gradients_of_the_depth_distortion_match_finite_differences() {
     run(Target::Distortion, 24..29, 3);
+}
+
+/// The anchor's gradient: every blended depth's Huber against the per-pixel sum of the
+/// reference.
+#[test]
+fn gradients_of_the_depth_anchor_match_finite_differences() {
+    run(Target::Anchor, 29..34, 3);
 }
 
 #[test]

@@ -72,6 +72,7 @@ fn render_and_backward_into_reused_buffers_match_fresh_ones() {
                 depth: Some(&d_depth),
                 alpha: None,
                 distortion: None,
+                anchor: None,
             },
             &mut grads,
         );

@@ -8,7 +8,7 @@ use super::alpha::{ALPHA_MAX, eval_alpha};
 use super::forward::{BackScratch, Plane, RenderState, TILE, lane_bits, row_span};
 use super::project::ScreenGrad;
 use super::project_backward_lanes::{Outs, Shared, backward_span};
-use super::rasterizer::{Distortion, Planes};
+use super::rasterizer::{Anchor, Distortion, Planes};
 use super::simd::{self, F4, Lanes, Mask};
 use crate::splats::{SplatGrads, Splats};
 use glam::{DMat3, DVec3};
@@ -21,6 +21,7 @@ struct PixelGrads<'a> {
     d_depth: Option<&'a [f32]>,
     d_alpha: Option<&'a [f32]>,
     distortion: Option<Distortion<'a>>,
+    anchor: Option<Anchor<'a>>,
 }
 
 /// Back to front over one tile's list with the widest lanes this CPU has.
@@ -68,6 +69,8 @@ fn tile_backward_lanes<V: Lanes>(
     // Σ w·z (`D`), and `ahead` = Σ w·z over the entries in front of the current one
     // (`D` less those behind it, walked back).
     let (mut lam, mut a_tot, mut d_tot, mut ahead) = (z, z, z, z);
+    // The anchor's (`Planes::anchor`): its weight λ, depth ẑ and 1/(σẑ).
+    let (mut lam_a, mut z_hat, mut inv_sz) = (z, z, z);
     let mut max_last = 0u32;
     for y in r[2]..r[3] {
         for x in r[0]..r[1] {
@@ -91,9 +94,17 @@ fn tile_backward_lanes<V: Lanes>(
                 d_tot[ty][tx] = dist.depth[pix];
                 ahead[ty][tx] = dist.depth[pix];
             }
+            if let Some(an) = &g.anchor {
+                let zh = an.depth[pix];
+                let on = an.weight[pix] > 0.0 && zh > 0.0;
+                lam_a[ty][tx] = if on { an.weight[pix] } else { 0.0 };
+                z_hat[ty][tx] = zh;
+                inv_sz[ty][tx] = if on { 1.0 / (an.sigma * zh) } else { 0.0 };
+            }
         }
     }
     let distortion = g.distortion.is_some();
+    let anchor = g.anchor.is_some();
     // Entries behind every pixel's last contributor get no gradient.
     out[max_last as usize..].fill([0.0; 10]);
     let n = V::N;
@@ -159,6 +170,17 @@ fn tile_backward_lanes<V: Lanes>(
                     let gz = wgt * (s(2.0) * front + wgt - at);
                     acc[3] = twice.mul_add(gz, acc[3]);
                 }
+                if anchor {
+                    // L = λ Σᵢ wᵢ H(rᵢ), r = (z − ẑ)/(σẑ): ∂L/∂w_k = λ H(r_k) joins d·c as
+                    // one more channel, ∂L/∂z_k = λ w_k H'(r_k)/(σẑ) the depth's.
+                    let la = V::load(&lam_a[ro][l.clone()]);
+                    let iv = V::load(&inv_sz[ro][l.clone()]);
+                    let r = (cv[3] - V::load(&z_hat[ro][l.clone()])) * iv;
+                    let hp = r.max(s(-1.0)).min(s(1.0));
+                    let h = hp * (r - s(0.5) * hp);
+                    dc = la.mul_add(h, dc);
+                    acc[3] = (la * wgt * iv).mul_add(hp, acc[3]);
+                }
                 let bh = V::load(&behind[ro][l.clone()]);
                 // ∂L/∂α = T·(d·c) − (d·behind)/(1 − α).
                 let ga = t_in * dc - bh * inv;
@@ -222,6 +244,7 @@ pub(crate) fn backward_into(
         depth: d_depth,
         alpha: d_alpha,
         distortion,
+        anchor,
     } = planes;
     let (w, h) = (st.cam.width, st.cam.height);
     assert_eq!(
@@ -242,11 +265,16 @@ pub(crate) fn backward_into(
         distortion.is_none_or(|d| d.weight.len() == w * h && d.depth.len() == w * h),
         "backward: the distortion's planes must be H×W"
     );
+    assert!(
+        anchor.is_none_or(|a| a.weight.len() == w * h && a.depth.len() == w * h),
+        "backward: the anchor's planes must be H×W"
+    );
     let pg = PixelGrads {
         d_rgb,
         d_depth,
         d_alpha,
         distortion,
+        anchor,
     };
     let mut guard = st.back.lock().unwrap_or_else(|e| e.into_inner());
     let BackScratch {

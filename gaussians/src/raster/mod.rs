@@ -36,7 +36,7 @@ pub mod simd;
 pub use alpha::{ALPHA_MAX, ALPHA_MIN, CULL_OPACITY, LOW_PASS, NEAR, SIGMA_CUTOFF, T_MIN};
 pub use contribution::add_contributions;
 pub use forward::{Projected, RenderState, TILE};
-pub use rasterizer::{Distortion, Planes, Rasterizer, RenderedImage};
+pub use rasterizer::{Anchor, Distortion, Planes, Rasterizer, RenderedImage};
 
 use crate::splats::{SplatGrads, Splats};
 use glam::{DQuat, DVec3};
@@ -91,6 +91,7 @@ impl TileRasterizer {
             depth: d_depth,
             alpha: d_alpha,
             distortion: None,
+            anchor: None,
         };
         backward::backward(s, cam, state, d_rgb, planes)
     }

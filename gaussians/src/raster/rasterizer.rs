@@ -53,6 +53,8 @@ pub struct Planes<'a> {
     pub alpha: Option<&'a [f32]>,
     /// The depth distortion's weight per pixel, where one is on ([`Distortion`]).
     pub distortion: Option<Distortion<'a>>,
+    /// Every blended Gaussian's depth pulled to a depth per pixel ([`Anchor`]).
+    pub anchor: Option<Anchor<'a>>,
 }
 
 /// The depth distortion of Mip-NeRF 360 and 2DGS as a loss, `Σ_p λ_p Σᵢ Σⱼ wᵢ wⱼ |zᵢ − zⱼ|`
@@ -67,12 +69,29 @@ pub struct Distortion<'a> {
     pub depth: &'a [f32],
 }
 
+/// Each blended Gaussian's depth against a depth per pixel, as a loss:
+/// `Σ_p λ_p Σᵢ wᵢ H((zᵢ − ẑ_p)/(σ ẑ_p))` over the blending weights `wᵢ = αᵢ Tᵢ` and the
+/// Gaussians' view depths, `H` Huber at 1 (`raster::reference::anchored` is its f64
+/// value). Where the blended depth `Σ wᵢ zᵢ` can land on `ẑ` with layers in front and
+/// behind, this asks every layer to lie there (the ray-termination loss of DS-NeRF,
+/// Deng et al. 2022, on the Gaussians' weights).
+#[derive(Clone, Copy, Debug)]
+pub struct Anchor<'a> {
+    /// `λ_p` per pixel (`H×W`, 0 where the pixel has no depth).
+    pub weight: &'a [f32],
+    /// `ẑ_p` per pixel (`H×W`).
+    pub depth: &'a [f32],
+    /// `σ`, the relative depth difference that is one unit of `H`.
+    pub sigma: f32,
+}
+
 impl Planes<'_> {
     /// No loss on depth or alpha.
     pub const NONE: Planes<'static> = Planes {
         depth: None,
         alpha: None,
         distortion: None,
+        anchor: None,
     };
 }
 

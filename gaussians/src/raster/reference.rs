@@ -117,13 +117,13 @@ pub fn render(
     sh_degree: u32,
     background: [f64; 3],
 ) -> RenderedImage64 {
-    composite(g, cam, sh_degree, background, None, None)
+    composite(g, cam, sh_degree, background, None, None, None)
 }
 
 /// Each Gaussian's blending weight `Σ_pixels αᵢ·Tᵢ` in the render of `g` at `cam`.
 pub fn contributions(g: &Gaussians64, cam: &Camera) -> Vec<f64> {
     let mut w = vec![0.0; g.means.len()];
-    composite(g, cam, 0, [0.0; 3], Some(&mut w), None);
+    composite(g, cam, 0, [0.0; 3], Some(&mut w), None, None);
     w
 }
 
@@ -145,8 +145,33 @@ pub fn depth_spread(g: &Gaussians64, cam: &Camera) -> Vec<f64> {
 pub fn distortion(g: &Gaussians64, cam: &Camera) -> (Vec<f64>, RenderedImage64) {
     let n = (cam.intrinsics.width * cam.intrinsics.height) as usize;
     let mut out = vec![0.0; n];
-    let f = composite(g, cam, 0, [0.0; 3], None, Some(&mut out));
+    let f = composite(g, cam, 0, [0.0; 3], None, Some(&mut out), None);
     (out, f)
+}
+
+/// Per pixel, `Σᵢ wᵢ H((zᵢ − ẑ_p)/(σ ẑ_p))` over the blending weights and centre depths,
+/// `H` Huber at 1 (`raster::Anchor`'s loss before its weights; 0 where `ẑ_p ≤ 0`).
+pub fn anchored(g: &Gaussians64, cam: &Camera, z_hat: &[f64], sigma: f64) -> Vec<f64> {
+    let mut out = vec![0.0; z_hat.len()];
+    composite(
+        g,
+        cam,
+        0,
+        [0.0; 3],
+        None,
+        None,
+        Some((z_hat, sigma, &mut out)),
+    );
+    out
+}
+
+/// Huber at 1: `r²/2` up to 1, `|r| − ½` beyond.
+fn huber(r: f64) -> f64 {
+    if r.abs() <= 1.0 {
+        0.5 * r * r
+    } else {
+        r.abs() - 0.5
+    }
 }
 
 /// The render, and when `weights` is given each Gaussian's `α·T` summed into it.
@@ -157,6 +182,7 @@ fn composite(
     background: [f64; 3],
     mut weights: Option<&mut Vec<f64>>,
     mut spread: Option<&mut Vec<f64>>,
+    mut anchor: Option<(&[f64], f64, &mut Vec<f64>)>,
 ) -> RenderedImage64 {
     let (w, h) = (
         cam.intrinsics.width as usize,
@@ -202,6 +228,12 @@ fn composite(
                     rgb[c] += alpha * t * s.color[c];
                 }
                 let wi = alpha * t;
+                if let Some((z_hat, sigma, out)) = anchor.as_mut() {
+                    let zh = z_hat[y * w + x];
+                    if zh > 0.0 {
+                        out[y * w + x] += wi * huber((s.depth - zh) / (*sigma * zh));
+                    }
+                }
                 pairs += wi * (s.depth * (1.0 - t) - depth);
                 depth += wi * s.depth;
                 if let Some(wts) = weights.as_deref_mut() {

@@ -22,7 +22,7 @@
 //! tell: the rendering loss lets their Gaussians slide along the rays (DESIGN §5).
 
 use super::depth::Aligned;
-use crate::raster::{Distortion, Planes, RenderedImage};
+use crate::raster::{Anchor, Distortion, Planes, RenderedImage};
 
 /// Alpha below which a pixel is not compared (the render shows nothing there).
 pub const MIN_ALPHA: f32 = 0.5;
@@ -82,6 +82,8 @@ pub struct PriorTerm {
     d_alpha: Vec<f32>,
     /// The distortion's weights at the last view.
     lambda: Vec<f32>,
+    /// The anchor's weights at the last view.
+    lambda_anchor: Vec<f32>,
     /// `L_depth` and the pixels it compared at the last view.
     pub last: (f64, usize),
     /// The mean relative difference `|D/α − z|/z` over those pixels.
@@ -99,7 +101,8 @@ impl PriorTerm {
     /// The gradient planes of `L_depth` at train view `view` of its render `image`
     /// ([`at_view`]; not where the term is off, the view has no prior or a size other
     /// than the prior's, a coarse view) and of the depth distortion (`tracks.distortion`,
-    /// [`distortion_weights`]); `None` when neither is on.
+    /// [`distortion_weights`]) and of the prior on every blended depth
+    /// (`tracks.depth_samples`, [`anchor_weights`]); `None` when none is on.
     pub fn gradient<'a>(
         &'a mut self,
         image: &'a RenderedImage,
@@ -108,9 +111,21 @@ impl PriorTerm {
     ) -> Option<Planes<'a>> {
         (self.last, self.last_rel_error) = ((0.0, 0), 0.0);
         let map = (self.maps.get(view).and_then(Option::as_ref))
-            .filter(|m| (m.width, m.height) == (image.width, image.height))
-            .filter(|_| st.depth_weight > 0.0);
-        if let Some(map) = map {
+            .filter(|m| (m.width, m.height) == (image.width, image.height));
+        let anchor = (map.filter(|_| st.depth_samples > 0.0)).map(|m| {
+            anchor_weights(
+                &image.alpha,
+                &m.z,
+                st.depth_samples,
+                &mut self.lambda_anchor,
+            );
+            Anchor {
+                weight: &self.lambda_anchor,
+                depth: &m.z,
+                sigma: st.depth_samples_sigma as f32,
+            }
+        });
+        if let Some(map) = map.filter(|_| st.depth_weight > 0.0) {
             let (w, s) = (st.depth_weight, st.depth_sigma);
             let (dd, da) = (&mut self.d_depth, &mut self.d_alpha);
             let (loss, count, rel) = at_view(&image.depth, &image.alpha, &map.z, w, s, dd, da);
@@ -124,11 +139,30 @@ impl PriorTerm {
             }
         });
         let prior = self.last.1 > 0;
-        (prior || distortion.is_some()).then_some(Planes {
+        (prior || distortion.is_some() || anchor.is_some()).then_some(Planes {
             depth: prior.then_some(&self.d_depth[..]),
             alpha: prior.then_some(&self.d_alpha[..]),
             distortion,
+            anchor,
         })
+    }
+}
+
+/// The anchor's weight per pixel (`raster::Anchor`): `w / N` on the `N` pixels that
+/// `L_depth` compares (the prior has a depth, the render covers: `α ≥ ½`), 0 elsewhere,
+/// so that one layer at the pixel costs what `L_depth` does.
+pub fn anchor_weights(alpha: &[f32], prior: &[f32], w: f64, out: &mut Vec<f32>) {
+    let on = |p: usize| prior[p] > 0.0 && prior[p].is_finite() && alpha[p] >= MIN_ALPHA;
+    let n = (0..prior.len()).filter(|&p| on(p)).count();
+    out.clear();
+    out.resize(prior.len(), 0.0);
+    if n > 0 {
+        let lam = (w / n as f64) as f32;
+        for (p, o) in out.iter_mut().enumerate() {
+            if on(p) {
+                *o = lam;
+            }
+        }
     }
 }
 

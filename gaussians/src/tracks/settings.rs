@@ -87,6 +87,15 @@ pub struct TrackSettings {
     /// depth per pixel, not layers in front and behind whose blend lands on it (which a
     /// new viewpoint parts into copies). 0 = off.
     pub distortion: f64,
+    /// Weight of the prior's depth on every Gaussian blended into a pixel, not only on
+    /// their blend (`raster::Anchor`, [`super::prior_loss::anchor_weights`]): where
+    /// `L_depth` lets a front and a back layer average to the prior's depth, this pulls
+    /// each layer to it, in the warm-up and the joint training. 0 = off.
+    pub depth_samples: f64,
+    /// The relative depth difference that is one unit of `depth_samples`' Huber: within
+    /// it a layer is pulled in proportion (so the prior's own error, a few %, pulls
+    /// little), beyond it with a constant force.
+    pub depth_samples_sigma: f64,
     /// Group the moving tracks' Gaussians into rigid parts that share one motion over the
     /// recording, a pose per train frame ([`crate::parts`], [`super::parts`]): a part's
     /// size is then one number the depth prior's frames average into. Off by default:
@@ -148,6 +157,8 @@ impl Default for TrackSettings {
             rigidity_neighbours: 8,
             rigidity_far: 0,
             distortion: 0.0,
+            depth_samples: 0.0,
+            depth_samples_sigma: 0.3,
             parts: false,
             bundle: true,
         }
@@ -208,12 +219,15 @@ impl TrackSettings {
             || !(self.window_s.is_finite() && self.window_s >= 0.0)
             || !(self.rigidity.is_finite() && self.rigidity >= 0.0)
             || !(self.distortion.is_finite() && self.distortion >= 0.0)
+            || !(self.depth_samples.is_finite() && self.depth_samples >= 0.0)
+            || !(self.depth_samples_sigma.is_finite() && self.depth_samples_sigma > 0.0)
             || !(1..=64).contains(&self.rigidity_neighbours)
             || self.rigidity_far > 64
         {
             return Err(
                 "tracks: thresholds and huber_px must be positive, ridge, min_texture, \
-                 weight, depth_sigma, depth_ridge, depth_weight, window_s, rigidity and distortion finite and ≥ 0, \
+                 weight, depth_sigma, depth_ridge, depth_weight, window_s, rigidity, distortion and depth_samples finite and ≥ 0, \
+                 depth_samples_sigma positive, \
                  rigidity_neighbours 1..=64, rigidity_far 0..=64"
                     .into(),
             );
