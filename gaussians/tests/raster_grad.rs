@@ -33,6 +33,11 @@ enum Target {
 /// The anchor's σ: small enough that some Gaussians lie beyond one unit of Huber.
 const SIGMA: f64 = 0.08;
 
+/// The anchor's factor per Gaussian: 0, ½ and 1 in turn.
+fn factors(n: usize) -> Vec<f64> {
+    (0..n).map(|i| (i % 3) as f64 / 2.0).collect()
+}
+
 struct Weights {
     rgb: Vec<f64>,
     depth: Vec<f64>,
@@ -70,7 +75,7 @@ fn loss(g: &Gaussians64, cam: &Camera, sh: u32, bg: [f64; 3], w: &Weights) -> f6
     let f = reference::render(g, cam, sh, bg);
     let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
     let (dist, _) = reference::distortion(g, cam);
-    let anchored = reference::anchored(g, cam, &w.z_hat, SIGMA);
+    let anchored = reference::anchored(g, cam, &w.z_hat, SIGMA, &factors(g.means.len()));
     dot(&f.rgb, &w.rgb)
         + dot(&f.depth, &w.depth)
         + dot(&f.alpha, &w.alpha)
@@ -124,6 +129,7 @@ fn check_scene(s: &Splats, cam: &Camera, sh: u32, bg: [f32; 3], w: &Weights) -> 
     let f32v = |v: &[f64]| v.iter().map(|&x| x as f32).collect::<Vec<f32>>();
     let lam = f32v(&w.dist);
     let (lam_a, z_hat) = (f32v(&w.anchor), f32v(&w.z_hat));
+    let m = f32v(&factors(s.len()));
     let planes = Planes {
         depth: Some(&f32v(&w.depth)),
         alpha: Some(&f32v(&w.alpha)),
@@ -135,6 +141,7 @@ fn check_scene(s: &Splats, cam: &Camera, sh: u32, bg: [f32; 3], w: &Weights) -> 
             weight: &lam_a,
             depth: &z_hat,
             sigma: SIGMA as f32,
+            gaussians: &m,
         }),
     };
     let (g, pose) = r.backward_view(s, cam, &st, &f32v(&w.rgb), planes);

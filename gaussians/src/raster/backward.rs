@@ -105,6 +105,7 @@ fn tile_backward_lanes<V: Lanes>(
     }
     let distortion = g.distortion.is_some();
     let anchor = g.anchor.is_some();
+    let factors = g.anchor.map_or(&[][..], |a| a.gaussians);
     // Entries behind every pixel's last contributor get no gradient.
     out[max_last as usize..].fill([0.0; 10]);
     let n = V::N;
@@ -120,6 +121,12 @@ fn tile_backward_lanes<V: Lanes>(
         let cv = [s(col[0]), s(col[1]), s(col[2]), s(dep)];
         let u4 = s(u);
         let kk = s(k as f32);
+        // The anchor's factor of this Gaussian (`Anchor::gaussians`, by its Splats index).
+        let factor = if anchor {
+            factors.get(p.id[gi] as usize).copied().unwrap_or(1.0)
+        } else {
+            0.0
+        };
         // Colour and depth gradients, and the moments of the α gradient (below).
         let mut acc = [s(0.0); 4];
         let mut mom = [s(0.0); 6];
@@ -170,10 +177,10 @@ fn tile_backward_lanes<V: Lanes>(
                     let gz = wgt * (s(2.0) * front + wgt - at);
                     acc[3] = twice.mul_add(gz, acc[3]);
                 }
-                if anchor {
-                    // L = λ Σᵢ wᵢ H(rᵢ), r = (z − ẑ)/(σẑ): ∂L/∂w_k = λ H(r_k) joins d·c as
-                    // one more channel, ∂L/∂z_k = λ w_k H'(r_k)/(σẑ) the depth's.
-                    let la = V::load(&lam_a[ro][l.clone()]);
+                if factor != 0.0 {
+                    // L = λ Σᵢ mᵢ wᵢ H(rᵢ), r = (z − ẑ)/(σẑ): ∂L/∂w_k = λ m_k H(r_k) joins
+                    // d·c as one more channel, ∂L/∂z_k = λ m_k w_k H'(r_k)/(σẑ) the depth's.
+                    let la = V::load(&lam_a[ro][l.clone()]) * s(factor);
                     let iv = V::load(&inv_sz[ro][l.clone()]);
                     let r = (cv[3] - V::load(&z_hat[ro][l.clone()])) * iv;
                     let hp = r.max(s(-1.0)).min(s(1.0));
@@ -268,6 +275,10 @@ pub(crate) fn backward_into(
     assert!(
         anchor.is_none_or(|a| a.weight.len() == w * h && a.depth.len() == w * h),
         "backward: the anchor's planes must be H×W"
+    );
+    assert!(
+        anchor.is_none_or(|a| a.gaussians.is_empty() || a.gaussians.len() == s.len()),
+        "backward: the anchor's factors must be one per Gaussian"
     );
     let pg = PixelGrads {
         d_rgb,

@@ -70,8 +70,8 @@ pub struct Distortion<'a> {
 }
 
 /// Each blended Gaussian's depth against a depth per pixel, as a loss:
-/// `Σ_p λ_p Σᵢ wᵢ H((zᵢ − ẑ_p)/(σ ẑ_p))` over the blending weights `wᵢ = αᵢ Tᵢ` and the
-/// Gaussians' view depths, `H` Huber at 1 (`raster::reference::anchored` is its f64
+/// `Σ_p λ_p Σᵢ mᵢ wᵢ H((zᵢ − ẑ_p)/(σ ẑ_p))` over the blending weights `wᵢ = αᵢ Tᵢ` and the
+/// Gaussians' view depths, `mᵢ` a factor per Gaussian, `H` Huber at 1 (`raster::reference::anchored` is its f64
 /// value). Where the blended depth `Σ wᵢ zᵢ` can land on `ẑ` with layers in front and
 /// behind, this asks every layer to lie there (the ray-termination loss of DS-NeRF,
 /// Deng et al. 2022, on the Gaussians' weights).
@@ -83,6 +83,9 @@ pub struct Anchor<'a> {
     pub depth: &'a [f32],
     /// `σ`, the relative depth difference that is one unit of `H`.
     pub sigma: f32,
+    /// A factor per Gaussian on its share of the loss (as rendered, one per Gaussian;
+    /// empty: 1 for every Gaussian).
+    pub gaussians: &'a [f32],
 }
 
 impl Planes<'_> {

@@ -149,20 +149,33 @@ pub fn distortion(g: &Gaussians64, cam: &Camera) -> (Vec<f64>, RenderedImage64) 
     (out, f)
 }
 
-/// Per pixel, `Σᵢ wᵢ H((zᵢ − ẑ_p)/(σ ẑ_p))` over the blending weights and centre depths,
-/// `H` Huber at 1 (`raster::Anchor`'s loss before its weights; 0 where `ẑ_p ≤ 0`).
-pub fn anchored(g: &Gaussians64, cam: &Camera, z_hat: &[f64], sigma: f64) -> Vec<f64> {
+/// Per pixel, `Σᵢ mᵢ wᵢ H((zᵢ − ẑ_p)/(σ ẑ_p))` over the blending weights and centre
+/// depths, `mᵢ = factors[i]` (1 for all when empty), `H` Huber at 1 (`raster::Anchor`'s
+/// loss before its weights; 0 where `ẑ_p ≤ 0`).
+pub fn anchored(
+    g: &Gaussians64,
+    cam: &Camera,
+    z_hat: &[f64],
+    sigma: f64,
+    factors: &[f64],
+) -> Vec<f64> {
     let mut out = vec![0.0; z_hat.len()];
-    composite(
-        g,
-        cam,
-        0,
-        [0.0; 3],
-        None,
-        None,
-        Some((z_hat, sigma, &mut out)),
-    );
+    let anchor = Anchor64 {
+        z_hat,
+        sigma,
+        factors,
+        out: &mut out,
+    };
+    composite(g, cam, 0, [0.0; 3], None, None, Some(anchor));
     out
+}
+
+/// [`anchored`]'s inputs and output inside [`composite`].
+struct Anchor64<'a> {
+    z_hat: &'a [f64],
+    sigma: f64,
+    factors: &'a [f64],
+    out: &'a mut Vec<f64>,
 }
 
 /// Huber at 1: `r²/2` up to 1, `|r| − ½` beyond.
@@ -182,7 +195,7 @@ fn composite(
     background: [f64; 3],
     mut weights: Option<&mut Vec<f64>>,
     mut spread: Option<&mut Vec<f64>>,
-    mut anchor: Option<(&[f64], f64, &mut Vec<f64>)>,
+    mut anchor: Option<Anchor64>,
 ) -> RenderedImage64 {
     let (w, h) = (
         cam.intrinsics.width as usize,
@@ -228,10 +241,11 @@ fn composite(
                     rgb[c] += alpha * t * s.color[c];
                 }
                 let wi = alpha * t;
-                if let Some((z_hat, sigma, out)) = anchor.as_mut() {
-                    let zh = z_hat[y * w + x];
+                if let Some(an) = anchor.as_mut() {
+                    let zh = an.z_hat[y * w + x];
+                    let m = an.factors.get(*i).copied().unwrap_or(1.0);
                     if zh > 0.0 {
-                        out[y * w + x] += wi * huber((s.depth - zh) / (*sigma * zh));
+                        an.out[y * w + x] += m * wi * huber((s.depth - zh) / (an.sigma * zh));
                     }
                 }
                 pairs += wi * (s.depth * (1.0 - t) - depth);

@@ -82,8 +82,9 @@ pub struct PriorTerm {
     d_alpha: Vec<f32>,
     /// The distortion's weights at the last view.
     lambda: Vec<f32>,
-    /// The anchor's weights at the last view.
+    /// The anchor's weights at the last view, and its factor per Gaussian.
     lambda_anchor: Vec<f32>,
+    movers: Vec<f32>,
     /// `L_depth` and the pixels it compared at the last view.
     pub last: (f64, usize),
     /// The mean relative difference `|D/α − z|/z` over those pixels.
@@ -102,12 +103,14 @@ impl PriorTerm {
     /// ([`at_view`]; not where the term is off, the view has no prior or a size other
     /// than the prior's, a coarse view) and of the depth distortion (`tracks.distortion`,
     /// [`distortion_weights`]) and of the prior on every blended depth
-    /// (`tracks.depth_samples`, [`anchor_weights`]); `None` when none is on.
+    /// (`tracks.depth_samples`, [`anchor_weights`], on the moving Gaussians of `splats`:
+    /// [`movers`]); `None` when none is on.
     pub fn gradient<'a>(
         &'a mut self,
         image: &'a RenderedImage,
         view: usize,
         st: &super::TrackSettings,
+        splats: &crate::Splats,
     ) -> Option<Planes<'a>> {
         (self.last, self.last_rel_error) = ((0.0, 0), 0.0);
         let map = (self.maps.get(view).and_then(Option::as_ref))
@@ -119,10 +122,12 @@ impl PriorTerm {
                 st.depth_samples,
                 &mut self.lambda_anchor,
             );
+            movers(splats, &mut self.movers);
             Anchor {
                 weight: &self.lambda_anchor,
                 depth: &m.z,
                 sigma: st.depth_samples_sigma as f32,
+                gaussians: &self.movers,
             }
         });
         if let Some(map) = map.filter(|_| st.depth_weight > 0.0) {
@@ -146,6 +151,19 @@ impl PriorTerm {
             anchor,
         })
     }
+}
+
+/// The anchor's factor per Gaussian: 1 for the moving ones (a part's member, or a
+/// trajectory of its own), 0 for the others. The still scene's depth is pinned by
+/// parallax, and over the whole image the term lost (BENCHMARKS.md, "The prior on every
+/// blended depth").
+pub fn movers(s: &crate::Splats, out: &mut Vec<f32>) {
+    out.clear();
+    out.extend((0..s.len()).map(|i| {
+        let parted = s.part.get(i).is_some_and(|&p| p != crate::parts::NO_PART);
+        let own = s.motion.get(i).is_some_and(crate::motion::has_trajectory);
+        if parted || own { 1.0 } else { 0.0 }
+    }));
 }
 
 /// The anchor's weight per pixel (`raster::Anchor`): `w / N` on the `N` pixels that

@@ -87,10 +87,11 @@ pub struct TrackSettings {
     /// depth per pixel, not layers in front and behind whose blend lands on it (which a
     /// new viewpoint parts into copies). 0 = off.
     pub distortion: f64,
-    /// Weight of the prior's depth on every Gaussian blended into a pixel, not only on
-    /// their blend (`raster::Anchor`, [`super::prior_loss::anchor_weights`]): where
-    /// `L_depth` lets a front and a back layer average to the prior's depth, this pulls
-    /// each layer to it, in the warm-up and the joint training. 0 = off.
+    /// Weight of the prior's depth on every moving Gaussian blended into a pixel, not only
+    /// on the blend (`raster::Anchor`, [`super::prior_loss::anchor_weights`], the movers
+    /// [`super::prior_loss::movers`]): where `L_depth` lets a front and a back layer
+    /// average to the prior's depth, this pulls each layer to it, in the warm-up and the
+    /// joint training. 0 = off.
     pub depth_samples: f64,
     /// The relative depth difference that is one unit of `depth_samples`' Huber: within
     /// it a layer is pulled in proportion (so the prior's own error, a few %, pulls

@@ -332,7 +332,8 @@ impl Trainer {
         } else {
             (None, d_means)
         };
-        let planes = (priors.gradient(&rendered.image, k, st)).unwrap_or(Planes::NONE);
+        let planes =
+            (priors.gradient(&rendered.image, k, st, &self.splats)).unwrap_or(Planes::NONE);
         let mut g = self.view_backward(r, &rendered, &grad, planes, d_field);
         if let Some(d) = d_own {
             crate::motion::add_centre_gradient(&self.splats, view.time, d, &mut g.splats);

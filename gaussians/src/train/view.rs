@@ -106,7 +106,8 @@ impl super::Trainer {
     ) -> ModelGrads {
         let mut priors = std::mem::take(&mut self.tracks.priors);
         priors.last = (0.0, 0);
-        let planes = view.and_then(|k| priors.gradient(&v.image, k, &self.settings.tracks));
+        let st = &self.settings.tracks;
+        let planes = view.and_then(|k| priors.gradient(&v.image, k, st, &self.splats));
         let mut g = self.view_backward(r, v, d_rgb, planes.unwrap_or_default(), d_means);
         self.tracks.priors = priors;
         if view.is_some() {
