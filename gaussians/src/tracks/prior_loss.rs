@@ -27,6 +27,12 @@ use crate::raster::{Anchor, Distortion, Planes, RenderedImage};
 /// Alpha below which a pixel is not compared (the render shows nothing there).
 pub const MIN_ALPHA: f32 = 0.5;
 
+/// Whether `L_depth` (and the anchor) compare a pixel: the prior has a depth there and
+/// the render covers it.
+fn compared(prior: f32, alpha: f32) -> bool {
+    prior > 0.0 && prior.is_finite() && alpha >= MIN_ALPHA
+}
+
 /// `L_depth` of one view: its rendered `depth` and `alpha` against the aligned `prior`
 /// (`H×W` each, 0 for no prior), weight `weight`, relative scale `sigma`. Writes
 /// `∂L/∂depth` and `∂L/∂alpha` into `d_depth` and `d_alpha` (resized; zero off the
@@ -50,7 +56,7 @@ pub fn at_view(
     d_depth.resize(n, 0.0);
     d_alpha.clear();
     d_alpha.resize(n, 0.0);
-    let on = |p: usize| prior[p] > 0.0 && prior[p].is_finite() && alpha[p] >= MIN_ALPHA;
+    let on = |p: usize| compared(prior[p], alpha[p]);
     let count = (0..n).filter(|&p| on(p)).count();
     if count == 0 || weight <= 0.0 || sigma <= 0.0 {
         return (0.0, 0, 0.0);
@@ -170,7 +176,7 @@ pub fn movers(s: &crate::Splats, out: &mut Vec<f32>) {
 /// `L_depth` compares (the prior has a depth, the render covers: `α ≥ ½`), 0 elsewhere,
 /// so that one layer at the pixel costs what `L_depth` does.
 pub fn anchor_weights(alpha: &[f32], prior: &[f32], w: f64, out: &mut Vec<f32>) {
-    let on = |p: usize| prior[p] > 0.0 && prior[p].is_finite() && alpha[p] >= MIN_ALPHA;
+    let on = |p: usize| compared(prior[p], alpha[p]);
     let n = (0..prior.len()).filter(|&p| on(p)).count();
     out.clear();
     out.resize(prior.len(), 0.0);
