@@ -10,7 +10,12 @@
 //! recording's middle, or carried there through the poses already found, knot by knot
 //! outwards) onto where their trajectories put them; a member whose trajectory strays
 //! from its part's motion by more than `tracks.moving_pixels` (median over its knots)
-//! leaves the part and keeps its own trajectory. With the tracks' pixels and the depth
+//! leaves the part and keeps its own trajectory. A group is made a part only when at
+//! every knot at least a third of its members' trajectories were fitted there
+//! ([`MIN_SEEN_SHARE`]): on extreme motion the tracks are windows of a few frames, and
+//! a group of them chained from window to window held a mix of objects and of still
+//! points, its poses at most knots guessed (BENCHMARKS.md, "Parts only where their
+//! motion was seen"). With the tracks' pixels and the depth
 //! priors ([`Evidence`]), the poses and the members' canonical centres are then bundle
 //! adjusted ([`super::bundle`]) to where the members were seen and to the prior's depths
 //! there, a member whose median reprojection error stays over `tracks.moving_pixels`
@@ -30,6 +35,13 @@ const PART_REACH: f64 = 3.0;
 const NEAREST: usize = 8;
 /// The fewest members of a part.
 const MIN_MEMBERS: usize = 12;
+/// The least share of a part's members whose trajectories were fitted at each knot: a
+/// part whose members were each followed over a few frames only holds poses chained
+/// from window to window, and its motion at a knot few of them saw is a guess. Between
+/// the groups measured (BENCHMARKS.md, "Parts only where their motion was seen"):
+/// `fast` 8 fps's at most 0.26, the objects' on `rigid`, `nonrigid` and `moderate` at
+/// least 0.48.
+const MIN_SEEN_SHARE: f64 = 1.0 / 3.0;
 
 /// Huber threshold of the bundle adjustment, pixels.
 const HUBER_PX: f64 = 1.0;
@@ -52,6 +64,9 @@ pub struct PartsSummary {
     pub members: usize,
     /// Moving Gaussians left with their own trajectories.
     pub left: usize,
+    /// Groups that were not made parts because at some knot under [`MIN_SEEN_SHARE`] of
+    /// their members had been fitted.
+    pub unseen: usize,
 }
 
 /// Union–find with path halving.
@@ -179,6 +194,7 @@ pub fn into_parts(
     };
     let mut member = vec![NO_PART; s.len()];
     let mut canonical = vec![[0.0f64; 3]; s.len()];
+    let mut unseen = 0;
     for (_, group) in groups {
         if group.len() < MIN_MEMBERS {
             continue;
@@ -224,6 +240,14 @@ pub fn into_parts(
                 continue;
             }
         }
+        let seen_everywhere = (0..n_knots).all(|k| {
+            let fitted = kept.iter().filter(|&&m| valid[m][k]).count();
+            fitted as f64 >= MIN_SEEN_SHARE * kept.len() as f64
+        });
+        if !seen_everywhere {
+            unseen += 1;
+            continue;
+        }
         let p = out.origin.len() as u32;
         let cs: Vec<[f64; 3]> = kept.iter().filter_map(|&m| canon[m]).collect();
         let o: [f64; 3] =
@@ -248,6 +272,7 @@ pub fn into_parts(
         parts: out.origin.len(),
         members,
         left: movers.len() - members,
+        unseen,
     };
     if members == 0 {
         return summary;

@@ -332,6 +332,12 @@ pub(crate) fn initial_splats(
                             "tracks: {} rigid parts of {} Gaussians; {} moving Gaussians keep their own trajectories",
                             p.parts, p.members, p.left
                         );
+                        if p.unseen > 0 {
+                            eprintln!(
+                                "tracks: {} groups not made parts: at some frame under a third of their members had been followed",
+                                p.unseen
+                            );
+                        }
                     }
                     *tracks = crate::tracks::loss::TrackTerm::new(table);
                     tracks.priors = crate::tracks::prior_loss::PriorTerm::new(aligned);
