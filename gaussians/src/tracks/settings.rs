@@ -102,8 +102,8 @@ pub struct TrackSettings {
     /// size is then one number the depth prior's frames average into. A group is made a
     /// part only when a third of its members were followed at every train frame, so
     /// extreme motion, whose tracks are windows of a few frames, keeps its own
-    /// trajectories. On by default: +1.1 to +1.4 dB on the moving novel pixels of `rigid`,
-    /// `nonrigid` and `moderate`, `fast` unchanged (BENCHMARKS.md, "Parts only where
+    /// trajectories. On by default: +0.6 to +1.7 dB on the moving novel pixels of `rigid`,
+    /// `nonrigid` and `moderate`, `fast` 8 fps unchanged (BENCHMARKS.md, "Parts only where
     /// their motion was seen").
     pub parts: bool,
     /// With `parts`, bundle adjust each part ([`super::bundle`]): its poses and its
