@@ -77,6 +77,7 @@ fn record(root: &Path, name: &str, stages: &[(&str, &str, f64, &str)]) -> RunRec
         error: None,
         log: None,
         progress: None,
+        warnings: Vec::new(),
     }];
     for (stage, key, built, report) in stages {
         let entry = root.join(stage).join(key);

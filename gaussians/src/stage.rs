@@ -145,6 +145,12 @@ pub struct TrainReport {
     /// scenes; [`crate::trajectory`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub trajectory: Option<crate::trajectory::TrajectoryError>,
+    /// What the tracks init did (absent for the other inits and with a PLY).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tracks_init: Option<crate::train::init::TracksSummary>,
+    /// What a user must know about this result, in words (`degs run` and `degs eval`
+    /// print them): the moving objects placed without a depth prior.
+    pub warnings: Vec<String>,
 }
 
 /// Planar RGB of a frame's image, checked against the camera size.
@@ -314,13 +320,19 @@ pub fn train(
     )?;
     phases.start("init");
     let mut tracks = crate::tracks::loss::TrackTerm::default();
-    let (mut splats, init_surface_points, init_ply_dropped_transparent) = init::initial_splats(
+    let initial = init::initial_splats(
         &settings,
         &views,
         args.init_ply.as_deref(),
         &mut tracks,
         &scene,
     )?;
+    let (mut splats, init_surface_points, init_ply_dropped_transparent) = (
+        initial.splats,
+        initial.surface_points,
+        initial.dropped_transparent,
+    );
+    let tracks_init = initial.tracks;
     if let (Some(m), Some(p)) = (&args.init_motion, &args.init_ply) {
         if init_ply_dropped_transparent > 0 {
             return Err(Error::invalid(
@@ -403,6 +415,10 @@ pub fn train(
         test,
         novel,
         trajectory: crate::trajectory::trajectory_error(&model, &scene),
+        warnings: tracks_init
+            .as_ref()
+            .map_or(Vec::new(), |t| t.warnings.clone()),
+        tracks_init,
         settings,
     };
     write_json_atomic(&out.path().join("report.json"), &report)?;

@@ -267,6 +267,9 @@ pub fn execute(command: Command) -> Result<()> {
                 (None, Some(why)) => eprintln!("[degs] {why}"),
                 (None, None) => {}
             }
+            for w in &m.warnings {
+                eprintln!("[degs] {w}");
+            }
             eprintln!("[degs] wrote {}", dir.join("metrics.json").display());
             Ok(())
         }
@@ -289,6 +292,9 @@ fn run(experiment: &Path, place: &Where, opts: &RunOptions, quiet: bool) -> Resu
     let ctx = place.context()?;
     let exp = Experiment::load_checked(experiment, &ctx)?;
     let record = run::run(&exp, &ctx, opts, &Progress::new(quiet))?;
+    for w in runner::record::warning_lines(&record.stages) {
+        eprintln!("[degs] {w}");
+    }
     match record.stages.iter().find(|s| s.action == Action::Failed) {
         Some(f) => Err(anyhow!(
             "stage {} failed: {} (log: {})",

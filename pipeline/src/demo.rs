@@ -72,6 +72,9 @@ pub struct DemoSummary {
     /// `video/preview.gif` and its frames; None when it could not be made (said then).
     pub video: Option<PathBuf>,
     pub wall_s: f64,
+    /// What the stages say a user must know about the result (`warning (STAGE): …`).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -223,6 +226,7 @@ pub fn demo(opts: &DemoOptions, ctx: &Context, progress: &Progress) -> Result<De
         charts,
         video,
         wall_s: record.wall_s,
+        warnings: runner::record::warning_lines(&record.stages),
     };
     scene::atomic::write_json_atomic(&out.join("summary.json"), &summary)?;
     Ok(summary)
@@ -434,6 +438,9 @@ pub fn format_summary(s: &DemoSummary) -> String {
         s.out.join("runs/demo/run.json").display().to_string(),
     );
     line("wall time:", format!("{:.2} s", s.wall_s));
+    for w in &s.warnings {
+        t += &format!("\n{w}\n");
+    }
     t
 }
 

@@ -107,6 +107,7 @@ fn stage(name: &str, action: Action) -> StageRecord {
         error: None,
         log: Some(PathBuf::from(format!("/cache/runs/tiny/{name}.log"))),
         progress: None,
+        warnings: Vec::new(),
     }
 }
 

@@ -115,6 +115,13 @@ pub fn eval_run_with(
         .map(|s| (s.stage.clone(), s.built_wall_s.unwrap_or(s.wall_s)))
         .collect();
     metrics.total_stage_s = metrics.stage_s.iter().map(|(_, t)| t).sum();
+    let mut stages = record.stages.clone();
+    for s in stages.iter_mut().filter(|s| s.action.has_output()) {
+        if let Some(entry) = &s.entry {
+            s.warnings = crate::record::report_warnings(entry);
+        }
+    }
+    metrics.warnings = crate::record::warning_lines(&stages);
     for sheet in [
         &mut metrics.novel_sheet,
         &mut metrics.test_sheet,

@@ -78,6 +78,10 @@ pub struct StageRecord {
     /// ends. Absent for stages that said none (and in records of older runners).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub progress: Option<crate::stage_progress::StageProgress>,
+    /// What its `report.json` says a user must know about its result (its `warnings`,
+    /// [`report_warnings`]); `degs run` and `degs eval` print them.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
 }
 
 /// A whole run.
@@ -108,6 +112,31 @@ impl RunRecord {
     pub fn stage(&self, name: &str) -> Option<&StageRecord> {
         self.stages.iter().find(|s| s.stage == name)
     }
+}
+
+/// The `warnings` (an array of strings) of the `report.json` in a stage's output
+/// directory `entry`; none when it has no report or the report says none.
+pub fn report_warnings(entry: &Path) -> Vec<String> {
+    let Ok(bytes) = std::fs::read(entry.join("report.json")) else {
+        return Vec::new();
+    };
+    let Ok(v) = serde_json::from_slice::<serde_json::Value>(&bytes) else {
+        return Vec::new();
+    };
+    (v.get("warnings")
+        .and_then(|w| w.as_array())
+        .into_iter()
+        .flatten())
+    .filter_map(|w| w.as_str().map(str::to_string))
+    .collect()
+}
+
+/// The lines `degs run` and `degs eval` print for the stages' warnings, one per warning
+/// (`warning (STAGE): …`).
+pub fn warning_lines(stages: &[StageRecord]) -> Vec<String> {
+    (stages.iter())
+        .flat_map(|s| (s.warnings.iter()).map(move |w| format!("warning ({}): {w}", s.stage)))
+        .collect()
 }
 
 pub(crate) fn now_unix() -> u64 {

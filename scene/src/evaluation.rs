@@ -119,6 +119,10 @@ pub struct Metrics {
     pub total_stage_s: f64,
     #[serde(default)]
     pub stage_s: Vec<(String, f64)>,
+    /// What the run's stages say a user must know about these figures, `warning
+    /// (STAGE): …` (filled in by `degs eval` from their reports' `warnings`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize)]

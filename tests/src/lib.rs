@@ -71,7 +71,13 @@ impl Workspace {
     /// `degs ARGS --cache <cache> --stages <bin dir>`, with no environment that would
     /// point it elsewhere.
     pub fn degs(&self, args: &[&str]) -> Output {
+        self.degs_with(args, &[])
+    }
+
+    /// [`Workspace::degs`] with the environment variables `env` set.
+    pub fn degs_with(&self, args: &[&str], env: &[(&str, &str)]) -> Output {
         Command::new(binary("degs"))
+            .envs(env.iter().copied())
             .args(args)
             .arg("--cache")
             .arg(&self.cache)

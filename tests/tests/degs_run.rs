@@ -239,3 +239,64 @@ fn assert_novel_views(dir: &std::path::Path, report: &serde_json::Value) {
         assert!(render.is_file(), "{}", render.display());
     }
 }
+
+/// `rigid` at 64² over 1 s (9 train frames): enough for the tracks init to lift the box
+/// and the ball as moving; the warm-up stopped after its init.
+const MOVING: &str = r#"
+name = "moving"
+
+[scene]
+synth = "rigid"
+
+[scene.settings]
+width = 64
+height = 64
+render_rate_hz = 200
+supersample = 1
+
+[gaussians]
+iterations = 1
+static_iterations = 0
+
+[gaussians.size]
+tolerance_db = 0
+"#;
+
+#[test]
+fn what_a_stage_warns_of_reaches_the_record_the_output_and_eval() {
+    // The scene's box and ball move and it has no depth priors, so the warm-up placed
+    // their Gaussians at a distance nothing gave, and says so in its report: `degs run`
+    // keeps that in the run record and prints it, `degs eval` prints it and writes it
+    // into metrics.json beside the novel views' figures it concerns.
+    let w = Workspace::new();
+    let exp = w.experiment("moving", MOVING);
+    let out = w.degs(&[
+        "run",
+        exp.to_str().unwrap(),
+        "--until",
+        "gaussians",
+        "--quiet",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let record = w.run_record("moving");
+    let report = read_json(&entry(&record, "gaussians").join("report.json"));
+    let said = report["warnings"].as_array().unwrap();
+    assert_eq!(said.len(), 1, "{}", report["tracks_init"]);
+    let text = said[0].as_str().unwrap();
+    assert!(
+        text.contains("without a depth prior") && text.contains("no depth priors"),
+        "{text}"
+    );
+    assert_eq!(
+        stage_record(&record, "gaussians")["warnings"],
+        report["warnings"]
+    );
+    let line = format!("warning (gaussians): {text}");
+    assert!(stderr(&out).contains(&line), "{}", stderr(&out));
+    // (LPIPS is not what this checks.)
+    let out = w.degs_with(&["eval", "moving"], &[("DEGS_LPIPS", "off")]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(stderr(&out).contains(&line), "{}", stderr(&out));
+    let metrics = read_json(&w.cache.join("runs/moving/metrics.json"));
+    assert_eq!(metrics["warnings"], serde_json::json!([line]), "{metrics}");
+}

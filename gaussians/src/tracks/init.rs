@@ -25,8 +25,10 @@ pub struct Image<'a> {
 /// already in `s` stay still. Colour of the start pixel, opacity ½, a footprint of
 /// `stride` pixels at its depth. Returns the added Gaussians' tracks (camera pixels
 /// per view), the table `s.track` indexes (`loss::NONE` for the Gaussians already in
-/// `s`), and the priors as aligned (one per view; empty without priors). With `events`
-/// the tracks are chained through event images between the frames.
+/// `s`), the priors as aligned (one per view; empty without priors), and the largest
+/// share of a reference frame's track starts that lifted to moving Gaussians (how much
+/// of the view moves). With `events` the tracks are chained through event images
+/// between the frames.
 pub(crate) fn add_moving(
     s: &mut Splats,
     views: &[Image],
@@ -34,9 +36,9 @@ pub(crate) fn add_moving(
     st: &TrackSettings,
     priors: Option<&scene::depth_prior::DepthPriors>,
     events: Option<&events::EventSource>,
-) -> (loss::Table, Vec<Option<depth::Aligned>>) {
+) -> (loss::Table, Vec<Option<depth::Aligned>>, f64) {
     let Some(first) = views.first() else {
-        return (Vec::new(), Vec::new());
+        return (Vec::new(), Vec::new(), 0.0);
     };
     let k = &first.camera.intrinsics;
     let (w, h) = (k.width as usize, k.height as usize);
@@ -114,6 +116,15 @@ pub(crate) fn add_moving(
         all.extend(windowed(&frames, stride, st, &aligned, &covered, raws));
         all
     };
+    let mut per_reference = std::collections::HashMap::<usize, usize>::new();
+    for (l, _) in &moving {
+        *per_reference.entry(l.frame).or_default() += 1;
+    }
+    let starts = w.div_ceil(stride.max(1)) * h.div_ceil(stride.max(1));
+    let share = per_reference
+        .values()
+        .max()
+        .map_or(0.0, |&m| m as f64 / starts as f64);
     let t0 = crate::motion::T0 as f64;
     let before = s.len();
     s.motion.resize(before, [0.0; 6]);
@@ -154,7 +165,7 @@ pub(crate) fn add_moving(
         s.track.clear();
         s.life.clear();
     }
-    (table, aligned)
+    (table, aligned, share)
 }
 
 /// One window of the moving tracks' trajectories ([`windows`]).

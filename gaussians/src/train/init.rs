@@ -236,17 +236,93 @@ pub fn stereo_splats(
     (s, found)
 }
 
+/// What the init made ([`initial_splats`]).
+pub(crate) struct Initial {
+    pub splats: Splats,
+    /// Gaussians placed on surfaces (PLY points, stereo points, moving tracks).
+    pub surface_points: usize,
+    /// Fully transparent PLY Gaussians dropped (0 without a PLY).
+    pub dropped_transparent: usize,
+    /// What the tracks init did (`init = "tracks"`, the default's choice).
+    pub tracks: Option<TracksSummary>,
+}
+
+/// What the tracks init did, for the report: the moving Gaussians it placed, the rigid
+/// parts it made of them, the train frames whose depth prior it used, and what a user
+/// must know about the result ([`TracksSummary::warnings`]).
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct TracksSummary {
+    /// Gaussians placed on moving tracks' trajectories.
+    pub moving: usize,
+    /// The largest share of a reference frame's track starts that became moving
+    /// Gaussians (of the middle frame's, and of each window's with `tracks.window`).
+    pub moving_share: f64,
+    /// Rigid parts made of them (`tracks.parts`), their members, and the groups turned
+    /// away because too few of their members were followed at some frame.
+    pub parts: usize,
+    pub part_members: usize,
+    pub groups_not_parts: usize,
+    /// Train frames whose depth prior was aligned to the still scene and used.
+    pub prior_frames: usize,
+    pub train_frames: usize,
+    /// Things the user must know: the moving objects' distance unknown without a prior.
+    pub warnings: Vec<String>,
+}
+
+/// The share of a reference frame's track starts that must lift to moving Gaussians for
+/// the scene to count as having moving objects ([`prior_warnings`]): still scenes
+/// measured 0.4–0.6 % (drifting tracks on the floor and wall, `static` at 48², 64² and
+/// 96²), scenes with moving objects 2.9–6.2 % (`rigid` at 64², every preset at 96²).
+pub const MOVING_SHARE: f64 = 0.015;
+
+/// The warnings of a tracks init that placed `moving` Gaussians on moving tracks (at
+/// most `share` of a reference frame's track starts), with `prior_frames` frames' depth
+/// priors used; `has_priors`: the scene brought maps at all. One moving camera cannot
+/// tell a moving object's distance (DESIGN.md §5, "Depth priors"), so without a prior the
+/// moving objects are placed at a guess and a new viewpoint shows it. A few drifting
+/// tracks on a still scene (under [`MOVING_SHARE`]) are not moving objects.
+pub fn prior_warnings(
+    moving: usize,
+    share: f64,
+    has_priors: bool,
+    prior_frames: usize,
+) -> Vec<String> {
+    if share < MOVING_SHARE || prior_frames > 0 {
+        return Vec::new();
+    }
+    let (why, fix) = if has_priors {
+        (
+            "the scene's depth priors (depth/) were not used: no frame's map agreed with the \
+             still scene (its median error over tracks.depth_sigma, or tracks.depth_sigma = 0)",
+            "Check depth/depth.json's kind against what the maps hold (the log's \"depth \
+             prior:\" line gives each frame's error against the still scene).",
+        )
+    } else {
+        (
+            "the scene has no depth priors (depth/<image stem>.exr and depth/depth.json)",
+            "A monocular depth network's output in depth/ fixes it (Depth Anything's is kind \
+             \"inverse_affine\"; README, \"Scene layout\").",
+        )
+    };
+    vec![format!(
+        "{moving} Gaussians of moving objects ({:.1} % of a frame's tracks) were placed \
+         without a depth prior: {why}. \
+         One moving camera cannot tell how far a moving object is (measured 15-65 % too \
+         near at DAVIS346 size), so from viewpoints off the recorded path the moving \
+         objects will be misplaced and smeared, though the recorded views look right. {fix}",
+        100.0 * share
+    )]
+}
+
 /// Initial Gaussians: the PLY if given (all flagged dynamic), else as `settings.init`
-/// says; with the number of them placed on surfaces (PLY points or stereo points) and
-/// the number of fully transparent PLY Gaussians dropped; the moving tracks' term into
-/// `tracks` (`init = "tracks"`).
+/// says; the moving tracks' term into `tracks` (`init = "tracks"`).
 pub(crate) fn initial_splats(
     settings: &TrainSettings,
     views: &[View],
     ply: Option<&Path>,
     tracks: &mut crate::tracks::loss::TrackTerm,
     scene: &Scene,
-) -> Result<(Splats, usize, usize)> {
+) -> Result<Initial> {
     match ply {
         Some(p) => {
             let r = crate::ply::read_counted(p)?;
@@ -255,8 +331,12 @@ pub(crate) fn initial_splats(
                 return Err(Error::invalid(p, "the point cloud has no Gaussians"));
             }
             s.dynamic = vec![true; s.len()];
-            let n = s.len();
-            Ok((s, n, r.dropped_transparent))
+            Ok(Initial {
+                surface_points: s.len(),
+                splats: s,
+                dropped_transparent: r.dropped_transparent,
+                tracks: None,
+            })
         }
         None => {
             let cams: Vec<_> = views.iter().map(|v| v.camera).collect();
@@ -266,6 +346,7 @@ pub(crate) fn initial_splats(
                 Init::Auto | Init::Tracks => scene::depth_prior::load(&scene.root, &scene.train)?,
                 _ => None,
             };
+            let mut summary = None;
             let (splats, surface) = match settings.init.resolve() {
                 Init::Auto | Init::Stereo => {
                     stereo_splats(views, n, near, far, &settings.stereo, settings.seed)
@@ -304,7 +385,7 @@ pub(crate) fn initial_splats(
                             st.window, st.handover
                         );
                     }
-                    let (table, aligned) = crate::tracks::add_moving(
+                    let (table, aligned, moving_share) = crate::tracks::add_moving(
                         &mut s,
                         &images,
                         stride,
@@ -313,6 +394,23 @@ pub(crate) fn initial_splats(
                         source.as_ref(),
                     );
                     let moving = table.len();
+                    let prior_frames = aligned.iter().flatten().count();
+                    let mut sum = TracksSummary {
+                        moving,
+                        moving_share,
+                        prior_frames,
+                        train_frames: views.len(),
+                        warnings: prior_warnings(
+                            moving,
+                            moving_share,
+                            priors.is_some(),
+                            prior_frames,
+                        ),
+                        ..TracksSummary::default()
+                    };
+                    for w in &sum.warnings {
+                        eprintln!("warning: {w}");
+                    }
                     if st.parts {
                         let times: Vec<f64> = images.iter().map(|v| v.time).collect();
                         let cams: Vec<&scene::Camera> = images.iter().map(|v| v.camera).collect();
@@ -338,7 +436,10 @@ pub(crate) fn initial_splats(
                                 p.unseen
                             );
                         }
+                        (sum.parts, sum.part_members) = (p.parts, p.members);
+                        sum.groups_not_parts = p.unseen;
                     }
+                    summary = Some(sum);
                     *tracks = crate::tracks::loss::TrackTerm::new(table);
                     tracks.priors = crate::tracks::prior_loss::PriorTerm::new(aligned);
                     (s, found + moving)
@@ -349,7 +450,12 @@ pub(crate) fn initial_splats(
                     (random_splats(n, centre, half, settings.seed), 0)
                 }
             };
-            Ok((splats, surface, 0))
+            Ok(Initial {
+                splats,
+                surface_points: surface,
+                dropped_transparent: 0,
+                tracks: summary,
+            })
         }
     }
 }

@@ -83,6 +83,7 @@ fn base_record(n: &Node, i: usize, nodes: &[Node], ctx: &Context) -> StageRecord
         error: None,
         log: None,
         progress: None,
+        warnings: Vec::new(),
     }
 }
 
@@ -160,6 +161,9 @@ pub(crate) fn run_nodes(
     for (rec, st) in record.stages.iter_mut().zip(&states) {
         if let State::Done(a) = st.state {
             rec.action = a;
+        }
+        if let Some(entry) = rec.entry.as_deref().filter(|_| rec.action.has_output()) {
+            rec.warnings = crate::record::report_warnings(entry);
         }
     }
     let failed = record.stages.iter().any(|s| s.action == Action::Failed);

@@ -52,6 +52,7 @@ pub fn stage(name: &str, action: Action, entry: Option<PathBuf>) -> StageRecord 
         error: None,
         log: None,
         progress: None,
+        warnings: Vec::new(),
     }
 }
 
