@@ -76,8 +76,22 @@ impl Pyramid {
 /// texture in two directions (its structure tensor's smaller eigenvalue per pixel is
 /// below `min_eig`), so the displacement is not defined.
 pub fn track(a: &Pyramid, b: &Pyramid, p: Vec2, radius: i32, min_eig: f32) -> Option<Vec2> {
+    track_from(a, b, p, Vec2::ZERO, radius, min_eig)
+}
+
+/// [`track`] started at the displacement `guess` (pixels of the finest level) instead of
+/// none.
+pub fn track_from(
+    a: &Pyramid,
+    b: &Pyramid,
+    p: Vec2,
+    guess: Vec2,
+    radius: i32,
+    min_eig: f32,
+) -> Option<Vec2> {
     let n = ((2 * radius + 1) * (2 * radius + 1)) as f32;
-    let mut d = Vec2::ZERO;
+    let top = a.0.len().min(b.0.len()).max(1) - 1;
+    let mut d = guess / (1 << top) as f32;
     for l in (0..a.0.len().min(b.0.len())).rev() {
         let (ga, gb) = (&a.0[l], &b.0[l]);
         let c = p / (1 << l) as f32;

@@ -18,6 +18,7 @@ pub mod bundle;
 pub mod depth;
 pub mod events;
 pub mod file;
+pub mod fill;
 pub mod init;
 pub mod lift;
 pub mod lk;
@@ -341,6 +342,9 @@ pub(crate) fn raw_tracks_within(
     refs: &[(usize, std::ops::Range<usize>)],
     st: &TrackSettings,
 ) -> Vec<RawTrack> {
+    if st.fill {
+        return fill::raw_tracks_filled(frames, stride, refs, st);
+    }
     let g = &frames[0].pyramid.0[0];
     let (w, h) = (g.width, g.height);
     let stride = stride.max(1);

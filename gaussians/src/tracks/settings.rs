@@ -113,6 +113,10 @@ pub struct TrackSettings {
     /// +0.56 dB on the moving novel pixels of `rigid` and `nonrigid` at 4 and 8 fps, a
     /// tie on `fast` (BENCHMARKS.md, "The adjusted part at the lifts' distance").
     pub bundle: bool,
+    /// A link that fails (lost, or back further than `forward_backward`) is carried by the
+    /// affine motion its neighbours' links agree on ([`super::fill`]) instead of ending
+    /// its track: the tracks of a reference frame advance together, frame by frame.
+    pub fill: bool,
 }
 
 /// Where the windows of trajectories hand over (`tracks.handover`; [`super::init::windows`]).
@@ -165,6 +169,7 @@ impl Default for TrackSettings {
             depth_samples_sigma: 0.3,
             parts: true,
             bundle: true,
+            fill: false,
         }
     }
 }
