@@ -81,13 +81,14 @@ fn a_flat_patch_lucas_kanade_loses_is_carried_by_the_texture_around_it() {
             ((a * v - d * u) / det) as f32,
         )
     };
-    let image = |moved: bool| Grey {
+    // Frame k shows the surface moved k times.
+    let image = |k: usize| Grey {
         width: w,
         height: h,
         data: (0..w * h)
             .map(|i| {
                 let x = Vec2::new((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
-                surface(if moved { back(x) } else { x })
+                surface((0..k).fold(x, |x, _| back(x)))
             })
             .collect(),
     };
@@ -95,23 +96,24 @@ fn a_flat_patch_lucas_kanade_loses_is_carried_by_the_texture_around_it() {
         intrinsics: Intrinsics::from_fov_x(w as u32, h as u32, 1.0),
         cam_to_world: Pose::new(DQuat::IDENTITY, DVec3::ZERO),
     };
-    let frames: Vec<Frame> = [false, true]
-        .iter()
-        .enumerate()
-        .map(|(k, &moved)| Frame {
+    let frames: Vec<Frame> = (0..3)
+        .map(|k| Frame {
             camera: &camera,
             time: k as f64,
-            pyramid: Pyramid::new(image(moved), 3),
+            pyramid: Pyramid::new(image(k), 3),
             between: Vec::new(),
         })
         .collect();
     let st = TrackSettings::default();
-    let filled = TrackSettings { fill: true, ..st };
     let plain = raw_tracks_at(&frames, 1, &[0], &st);
-    let carried = raw_tracks_at(&frames, 1, &[0], &filled);
-    let at = |tracks: &[gaussians::tracks::RawTrack], p: Vec2| {
-        (tracks.iter().find(|t| t.pixel == p)).and_then(|t| t.track[1])
+    let carried = raw_tracks_at(&frames, 1, &[0], &TrackSettings { fill: 2, ..st });
+    let once = raw_tracks_at(&frames, 1, &[0], &TrackSettings { fill: 1, ..st });
+    let track = |tracks: &[gaussians::tracks::RawTrack], p: Vec2| {
+        (tracks.iter().find(|t| t.pixel == p))
+            .map(|t| t.track.clone())
+            .unwrap()
     };
+    let at = |tracks: &[gaussians::tracks::RawTrack], p: Vec2| track(tracks, p)[1];
     // The disc's middle: no texture in any window there. Its neighbours' links, whose
     // windows are half flat, are each off by up to half a pixel, and the map is
     // extrapolated from one side of some of these points: within 0.75 px (a pixel less
@@ -132,6 +134,12 @@ fn a_flat_patch_lucas_kanade_loses_is_carried_by_the_texture_around_it() {
             "{p}: {q} vs {}",
             apply(&MAP, p)
         );
+        // The next link is flat too: carried again where two may be, ended where one.
+        let twice = apply(&MAP, apply(&MAP, p));
+        let q = track(&carried, p)[2].expect("carried a second time");
+        assert!(q.distance(twice) < 1.0, "{p}: {q} vs {twice}");
+        assert_eq!(track(&once, p)[1], at(&carried, p));
+        assert_eq!(track(&once, p)[2], None, "`fill = 1` carries one link");
     }
     // Where Lucas–Kanade follows, filling changes nothing.
     for p in [Vec2::new(20.5, 20.5), Vec2::new(70.5, 30.5)] {

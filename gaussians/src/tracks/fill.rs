@@ -127,7 +127,8 @@ impl Buckets {
 /// Tracks from every `stride`-th pixel of each reference frame `r` of `refs`, over its
 /// span, advanced together frame by frame: a link that fails (lost, outside the image,
 /// or back more than `forward_backward` from where it started) is carried by its
-/// neighbours' links ([`carried`]) instead of ending the track.
+/// neighbours' links ([`carried`]) instead of ending the track, up to `tracks.fill`
+/// links of a track each way from its reference frame.
 pub(crate) fn raw_tracks_filled(
     frames: &[Frame],
     stride: usize,
@@ -148,6 +149,8 @@ pub(crate) fn raw_tracks_filled(
             .flat_map(|y| (0..w).step_by(stride).map(move |x| (x, y)))
             .map(|(x, y)| Vec2::new(x as f32 + 0.5, y as f32 + 0.5))
             .collect();
+        // Links each track had carried so far (per direction).
+        let mut carries = vec![0u32; starts.len()];
         let mut tracks: Vec<Vec<Option<Vec2>>> = (starts.iter())
             .map(|&p| {
                 let mut t = vec![None; frames.len()];
@@ -156,6 +159,7 @@ pub(crate) fn raw_tracks_filled(
             })
             .collect();
         for step in [1isize, -1] {
+            carries.iter_mut().for_each(|c| *c = 0);
             let mut k = r as isize;
             while k + step >= 0 && span.contains(&((k + step) as usize)) {
                 let (from, to) = (k as usize, (k + step) as usize);
@@ -179,17 +183,24 @@ pub(crate) fn raw_tracks_filled(
                     .filter_map(|(t, q)| Some((t[from]?, (*q)?)))
                     .collect();
                 let buckets = Buckets::new(&passed, reach, wf, hf);
-                let next: Vec<Option<Vec2>> = (tracks.par_iter().zip(&checked).enumerate())
-                    .map(|(i, (t, q))| {
-                        let p = t[from]?;
-                        q.or_else(|| {
-                            let seed = (i as u64) << 8 | to as u64;
-                            carried(&buckets.around(p), p, reach, seed).filter(|&q| inside(q))
-                        })
+                let next: Vec<(Option<Vec2>, bool)> = (tracks.par_iter().zip(&checked))
+                    .zip(&carries)
+                    .enumerate()
+                    .map(|(i, ((t, q), &c))| {
+                        let Some(p) = t[from] else {
+                            return (None, false);
+                        };
+                        if q.is_some() || c >= st.fill {
+                            return (*q, false);
+                        }
+                        let seed = (i as u64) << 8 | to as u64;
+                        let q = carried(&buckets.around(p), p, reach, seed).filter(|&q| inside(q));
+                        (q, q.is_some())
                     })
                     .collect();
-                for (t, q) in tracks.iter_mut().zip(next) {
+                for ((t, c), (q, was_carried)) in tracks.iter_mut().zip(&mut carries).zip(next) {
                     t[to] = q;
+                    *c += was_carried as u32;
                 }
                 k += step;
             }

@@ -342,7 +342,7 @@ pub(crate) fn raw_tracks_within(
     refs: &[(usize, std::ops::Range<usize>)],
     st: &TrackSettings,
 ) -> Vec<RawTrack> {
-    if st.fill {
+    if st.fill > 0 {
         return fill::raw_tracks_filled(frames, stride, refs, st);
     }
     let g = &frames[0].pyramid.0[0];

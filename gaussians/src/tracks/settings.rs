@@ -113,10 +113,11 @@ pub struct TrackSettings {
     /// +0.56 dB on the moving novel pixels of `rigid` and `nonrigid` at 4 and 8 fps, a
     /// tie on `fast` (BENCHMARKS.md, "The adjusted part at the lifts' distance").
     pub bundle: bool,
-    /// A link that fails (lost, or back further than `forward_backward`) is carried by the
-    /// affine motion its neighbours' links agree on ([`super::fill`]) instead of ending
-    /// its track: the tracks of a reference frame advance together, frame by frame.
-    pub fill: bool,
+    /// Up to this many links of a track that fail (lost, or back further than
+    /// `forward_backward`) are carried by the affine motion their neighbours' links agree
+    /// on ([`super::fill`]) instead of ending it: the tracks of a reference frame advance
+    /// together, frame by frame. 0 = off.
+    pub fill: u32,
 }
 
 /// Where the windows of trajectories hand over (`tracks.handover`; [`super::init::windows`]).
@@ -169,7 +170,7 @@ impl Default for TrackSettings {
             depth_samples_sigma: 0.3,
             parts: true,
             bundle: true,
-            fill: false,
+            fill: 0,
         }
     }
 }
