@@ -172,10 +172,8 @@ fn main() {
                 .map(|&t| {
                     let at = world.material_to_world(o, hit.local, t);
                     let (q, z) = world.camera_at(t).project_world(at)?;
-                    let seen = world.cast(t, q).is_some_and(|s| s.object == o)
-                        && world
-                            .cast(t, q)
-                            .is_some_and(|s| (s.depth - z).abs() < 0.02 * z);
+                    let seen = (world.cast(t, q))
+                        .is_some_and(|s| s.object == o && (s.depth - z).abs() < 0.02 * z);
                     seen.then(|| Vec2::new(q.x as f32 + 0.5, q.y as f32 + 0.5))
                 })
                 .collect();

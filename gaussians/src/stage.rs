@@ -320,19 +320,19 @@ pub fn train(
     )?;
     phases.start("init");
     let mut tracks = crate::tracks::loss::TrackTerm::default();
-    let initial = init::initial_splats(
+    let init::Initial {
+        mut splats,
+        surface_points: init_surface_points,
+        dropped_transparent: init_ply_dropped_transparent,
+        tracks: tracks_init,
+        warnings,
+    } = init::initial_splats(
         &settings,
         &views,
         args.init_ply.as_deref(),
         &mut tracks,
         &scene,
     )?;
-    let (mut splats, init_surface_points, init_ply_dropped_transparent) = (
-        initial.splats,
-        initial.surface_points,
-        initial.dropped_transparent,
-    );
-    let tracks_init = initial.tracks;
     if let (Some(m), Some(p)) = (&args.init_motion, &args.init_ply) {
         if init_ply_dropped_transparent > 0 {
             return Err(Error::invalid(
@@ -415,9 +415,7 @@ pub fn train(
         test,
         novel,
         trajectory: crate::trajectory::trajectory_error(&model, &scene),
-        warnings: tracks_init
-            .as_ref()
-            .map_or(Vec::new(), |t| t.warnings.clone()),
+        warnings,
         tracks_init,
         settings,
     };

@@ -11,7 +11,7 @@
 //! links of the ball and the flag land mostly right, those of the spinning box mostly
 //! not.
 
-use super::{Frame, RawTrack, TrackSettings, chain, follow};
+use super::{Frame, RawTrack, TrackSettings, chain, checked_link, grid};
 use glam::Vec2;
 use rayon::prelude::*;
 
@@ -75,14 +75,12 @@ pub fn carried(links: &[(Vec2, Vec2)], p: Vec2, reach: f32, seed: u64) -> Option
         let Some(a) = fit_affine(&[near[draw()], near[draw()], near[draw()]]) else {
             continue;
         };
-        let agree = (near.iter())
+        let agree: Vec<(Vec2, Vec2)> = (near.iter())
             .filter(|(u, v)| apply(&a, *u).distance(*v) < INLIER_PX)
-            .count();
-        if agree > best.len() {
-            best = (near.iter())
-                .filter(|(u, v)| apply(&a, *u).distance(*v) < INLIER_PX)
-                .copied()
-                .collect();
+            .copied()
+            .collect();
+        if agree.len() > best.len() {
+            best = agree;
         }
     }
     if best.len() < MIN_INLIERS {
@@ -139,16 +137,11 @@ pub(crate) fn raw_tracks_filled(
     let (w, h) = (g.width, g.height);
     let (wf, hf) = (w as f32, h as f32);
     let inside = |q: Vec2| q.x >= 0.0 && q.y >= 0.0 && q.x < wf && q.y < hf;
-    let stride = stride.max(1);
-    let reach = (FILL_REACH * stride as f32).max(6.0);
+    let reach = (FILL_REACH * stride.max(1) as f32).max(6.0);
     let mut out = Vec::new();
     for (r, span) in refs {
         let r = *r;
-        let starts: Vec<Vec2> = (0..h)
-            .step_by(stride)
-            .flat_map(|y| (0..w).step_by(stride).map(move |x| (x, y)))
-            .map(|(x, y)| Vec2::new(x as f32 + 0.5, y as f32 + 0.5))
-            .collect();
+        let starts: Vec<Vec2> = grid(w, h, stride).collect();
         // Links each track had carried so far (per direction).
         let mut carries = vec![0u32; starts.len()];
         let mut tracks: Vec<Vec<Option<Vec2>>> = (starts.iter())
@@ -163,21 +156,9 @@ pub(crate) fn raw_tracks_filled(
             let mut k = r as isize;
             while k + step >= 0 && span.contains(&((k + step) as usize)) {
                 let (from, to) = (k as usize, (k + step) as usize);
-                let mut links = chain(frames, from, step > 0);
-                let forward: Vec<Option<Vec2>> = (tracks.par_iter())
-                    .map(|t| {
-                        let p = t[from]?;
-                        let q = follow(&links, p, st)?;
-                        inside(q).then_some(q)
-                    })
-                    .collect();
-                links.reverse();
-                let checked: Vec<Option<Vec2>> = (tracks.par_iter().zip(&forward))
-                    .map(|(t, q)| {
-                        let (p, q) = (t[from]?, (*q)?);
-                        let back = follow(&links, q, st)?;
-                        (back.distance(p) <= st.forward_backward).then_some(q)
-                    })
+                let links = chain(frames, from, step > 0);
+                let checked: Vec<Option<Vec2>> = (tracks.par_iter())
+                    .map(|t| checked_link(&links, t[from]?, st))
                     .collect();
                 let passed: Vec<(Vec2, Vec2)> = (tracks.iter().zip(&checked))
                     .filter_map(|(t, q)| Some((t[from]?, (*q)?)))

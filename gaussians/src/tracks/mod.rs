@@ -137,31 +137,40 @@ pub fn track_within(
 ) -> Vec<Option<Vec2>> {
     let mut out = vec![None; frames.len()];
     out[r] = Some(p);
-    let (w, h) = {
-        let g = &frames[r].pyramid.0[0];
-        (g.width as f32, g.height as f32)
-    };
-    let inside = |q: Vec2| q.x >= 0.0 && q.y >= 0.0 && q.x < w && q.y < h;
     for step in [1isize, -1] {
         let mut k = r as isize;
         while (span.start as isize..span.end as isize).contains(&(k + step)) {
-            let mut links = chain(frames, k as usize, step > 0);
             let Some(from) = out[k as usize] else { break };
-            let Some(to) = follow(&links, from, st) else {
+            let Some(to) = checked_link(&chain(frames, k as usize, step > 0), from, st) else {
                 break;
             };
-            links.reverse();
-            let Some(back) = follow(&links, to, st) else {
-                break;
-            };
-            if !inside(to) || back.distance(from) > st.forward_backward {
-                break;
-            }
             k += step;
             out[k as usize] = Some(to);
         }
     }
     out
+}
+
+/// `p` followed through `chain` (a link between two consecutive frames, [`chain`]):
+/// where it lands, kept when it lands in the image and following it back lands within
+/// `forward_backward` of `p` (`None` otherwise).
+fn checked_link(chain: &[&lk::Pyramid], p: Vec2, st: &TrackSettings) -> Option<Vec2> {
+    let g = &chain.last()?.0[0];
+    let q = follow(chain, p, st)?;
+    let inside = q.x >= 0.0 && q.y >= 0.0 && q.x < g.width as f32 && q.y < g.height as f32;
+    let back: Vec<&lk::Pyramid> = chain.iter().rev().copied().collect();
+    (inside && follow(&back, q, st)?.distance(p) <= st.forward_backward).then_some(q)
+}
+
+/// Every `stride`-th pixel of a `w`×`h` frame (Lucas–Kanade coordinates, row by row):
+/// where tracks start.
+fn grid(w: usize, h: usize, stride: usize) -> impl Iterator<Item = Vec2> {
+    let stride = stride.max(1);
+    (0..h).step_by(stride).flat_map(move |y| {
+        (0..w)
+            .step_by(stride)
+            .map(move |x| Vec2::new(x as f32 + 0.5, y as f32 + 0.5))
+    })
 }
 
 /// A lifted track: where it starts (frame, Lucas–Kanade pixel), what it lifted to, and
@@ -347,17 +356,9 @@ pub(crate) fn raw_tracks_within(
     }
     let g = &frames[0].pyramid.0[0];
     let (w, h) = (g.width, g.height);
-    let stride = stride.max(1);
     let starts: Vec<(usize, std::ops::Range<usize>, Vec2)> = refs
         .iter()
-        .flat_map(|(r, span)| {
-            (0..h).step_by(stride).flat_map(move |y| {
-                (0..w).step_by(stride).map(move |x| {
-                    let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
-                    (*r, span.clone(), p)
-                })
-            })
-        })
+        .flat_map(|(r, span)| grid(w, h, stride).map(move |p| (*r, span.clone(), p)))
         .collect();
     starts
         .into_par_iter()

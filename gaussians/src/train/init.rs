@@ -245,11 +245,12 @@ pub(crate) struct Initial {
     pub dropped_transparent: usize,
     /// What the tracks init did (`init = "tracks"`, the default's choice).
     pub tracks: Option<TracksSummary>,
+    /// What a user must know about the result ([`prior_warnings`]).
+    pub warnings: Vec<String>,
 }
 
 /// What the tracks init did, for the report: the moving Gaussians it placed, the rigid
-/// parts it made of them, the train frames whose depth prior it used, and what a user
-/// must know about the result ([`TracksSummary::warnings`]).
+/// parts it made of them, and the train frames whose depth prior it used.
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct TracksSummary {
     /// Gaussians placed on moving tracks' trajectories.
@@ -265,8 +266,6 @@ pub struct TracksSummary {
     /// Train frames whose depth prior was aligned to the still scene and used.
     pub prior_frames: usize,
     pub train_frames: usize,
-    /// Things the user must know: the moving objects' distance unknown without a prior.
-    pub warnings: Vec<String>,
 }
 
 /// The share of a reference frame's track starts that must lift to moving Gaussians for
@@ -336,6 +335,7 @@ pub(crate) fn initial_splats(
                 splats: s,
                 dropped_transparent: r.dropped_transparent,
                 tracks: None,
+                warnings: Vec::new(),
             })
         }
         None => {
@@ -346,7 +346,7 @@ pub(crate) fn initial_splats(
                 Init::Auto | Init::Tracks => scene::depth_prior::load(&scene.root, &scene.train)?,
                 _ => None,
             };
-            let mut summary = None;
+            let (mut summary, mut warnings) = (None, Vec::new());
             let (splats, surface) = match settings.init.resolve() {
                 Init::Auto | Init::Stereo => {
                     stereo_splats(views, n, near, far, &settings.stereo, settings.seed)
@@ -400,15 +400,10 @@ pub(crate) fn initial_splats(
                         moving_share,
                         prior_frames,
                         train_frames: views.len(),
-                        warnings: prior_warnings(
-                            moving,
-                            moving_share,
-                            priors.is_some(),
-                            prior_frames,
-                        ),
                         ..TracksSummary::default()
                     };
-                    for w in &sum.warnings {
+                    warnings = prior_warnings(moving, moving_share, priors.is_some(), prior_frames);
+                    for w in &warnings {
                         eprintln!("warning: {w}");
                     }
                     if st.parts {
@@ -455,6 +450,7 @@ pub(crate) fn initial_splats(
                 surface_points: surface,
                 dropped_transparent: 0,
                 tracks: summary,
+                warnings,
             })
         }
     }
