@@ -258,7 +258,7 @@ fn the_init_groups_two_moving_blobs_and_finds_their_motion() {
     let (mut s, cam) = blobs_model(&lives);
     let cams = [&cam; 5];
     let before = s.clone();
-    let sum = gaussians::tracks::parts::into_parts(&mut s, &times, &cams, 2.0, None);
+    let sum = gaussians::tracks::parts::into_parts(&mut s, &times, &cams, 2.0, None, None);
     assert_eq!((sum.parts, sum.members, sum.left), (2, 240, 0), "{sum:?}");
     assert_eq!(sum.unseen, 0);
     assert_eq!(s.part[0], NO_PART);
@@ -293,7 +293,7 @@ fn a_group_not_seen_at_every_frame_is_not_a_part() {
     let times = [0.0, 0.25, 0.5, 0.75, 1.0];
     let (mut s, cam) = blobs_model(&[[f32::MIN, 0.25], [0.25, 0.5]]);
     let before = s.clone();
-    let sum = gaussians::tracks::parts::into_parts(&mut s, &times, &[&cam; 5], 2.0, None);
+    let sum = gaussians::tracks::parts::into_parts(&mut s, &times, &[&cam; 5], 2.0, None, None);
     assert_eq!((sum.parts, sum.members, sum.left), (0, 0, 120), "{sum:?}");
     assert_eq!(
         sum.unseen, 2,
@@ -446,14 +446,14 @@ fn bundle_case(prior_scale: f64) -> (f64, f64) {
         w
     };
     let mut chained = s.clone();
-    let sum = into_parts(&mut chained, &times, &cam_refs, 2.0, None);
+    let sum = into_parts(&mut chained, &times, &cam_refs, 2.0, None, None);
     assert_eq!((sum.parts, sum.members), (1, 49), "{sum:?}");
     let ev = Evidence {
         table: &table,
         depths: &depths,
         depth_sigma: 0.05,
     };
-    let sum = into_parts(&mut s, &times, &cam_refs, 2.0, Some(&ev));
+    let sum = into_parts(&mut s, &times, &cam_refs, 2.0, Some(&ev), None);
     assert_eq!((sum.parts, sum.members), (1, 49), "{sum:?}");
     (worst(&chained), worst(&s))
 }

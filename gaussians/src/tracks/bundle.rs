@@ -166,7 +166,7 @@ pub fn cost(p: &Problem, poses: &[Pose], scales: &[f64], points: &[DVec3]) -> f6
 
 /// Dense Cholesky solve of `m x = b` (`m` symmetric positive definite, `n × n` row-major);
 /// `None` when it is not.
-fn cholesky_solve(mut m: Vec<f64>, mut b: Vec<f64>, n: usize) -> Option<Vec<f64>> {
+pub(crate) fn cholesky_solve(mut m: Vec<f64>, mut b: Vec<f64>, n: usize) -> Option<Vec<f64>> {
     for j in 0..n {
         let mut d = m[j * n + j];
         for k in 0..j {

@@ -23,6 +23,7 @@ pub mod init;
 pub mod lift;
 pub mod lk;
 pub mod loss;
+pub mod part_motion;
 pub mod parts;
 pub mod prior_loss;
 pub mod rigid;

@@ -15,7 +15,10 @@
 //! ([`MIN_SEEN_SHARE`]): on extreme motion the tracks are windows of a few frames, and
 //! a group of them chained from window to window held a mix of objects and of still
 //! points, its poses at most knots guessed (BENCHMARKS.md, "Parts only where their
-//! motion was seen"). With the tracks' pixels and the depth
+//! motion was seen"). With images to follow them through (`tracks.part_steps`), such a
+//! group is split instead into its members living at the reference knot, joined there by
+//! distance, and each component's poses come from its brightness (`followed_poses`,
+//! [`super::part_motion`]). With the tracks' pixels and the depth
 //! priors ([`Evidence`]), the poses and the members' canonical centres are then bundle
 //! adjusted ([`super::bundle`]) to where the members were seen and to the prior's depths
 //! there, a member whose median reprojection error stays over `tracks.moving_pixels`
@@ -65,8 +68,12 @@ pub struct PartsSummary {
     /// Moving Gaussians left with their own trajectories.
     pub left: usize,
     /// Groups that were not made parts because at some knot under [`MIN_SEEN_SHARE`] of
-    /// their members had been fitted.
+    /// their members had been fitted (and, with images to follow them through, their
+    /// motion was lost there).
     pub unseen: usize,
+    /// Parts whose motion was followed through the images ([`super::part_motion`]):
+    /// groups under `MIN_SEEN_SHARE` when the images are given.
+    pub followed: usize,
 }
 
 /// Union–find with path halving.
@@ -89,6 +96,7 @@ pub fn into_parts(
     cameras: &[&Camera],
     pixels: f64,
     evidence: Option<&Evidence>,
+    brightness: Option<&super::part_motion::Sequence>,
 ) -> PartsSummary {
     let n_knots = times.len();
     let movers: Vec<usize> = (0..s.len())
@@ -116,6 +124,12 @@ pub fn into_parts(
             .collect()
     };
     let valid: Vec<Vec<bool>> = movers.iter().map(|&i| valid(i)).collect();
+    // Whether a mover's own life holds knot `k` (not only the knot either side, where
+    // its trajectory is extrapolated).
+    let lives = |m: usize, k: usize| {
+        let l = s.life.get(movers[m]).copied().unwrap_or(ALWAYS);
+        times[k] >= l[0] as f64 - 1e-6 && times[k] <= l[1] as f64 + 1e-6
+    };
     let pos: Vec<Vec<[f64; 3]>> = (movers.iter())
         .map(|&i| (0..n_knots).map(|k| at(i, k)).collect())
         .collect();
@@ -195,7 +209,50 @@ pub fn into_parts(
     let mut member = vec![NO_PART; s.len()];
     let mut canonical = vec![[0.0f64; 3]; s.len()];
     let mut unseen = 0;
+    let mut followed = 0;
+    let depths: &[Option<super::depth::Aligned>] = evidence.map_or(&[], |e| e.depths);
+    let seen_share = |set: &[usize]| {
+        (0..n_knots).all(|k| {
+            let fitted = set.iter().filter(|&&m| valid[m][k]).count();
+            fitted as f64 >= MIN_SEEN_SHARE * set.len() as f64
+        })
+    };
+    // A group seen at too few knots, with images to follow it through: its members that
+    // live at the reference knot, joined there by distance alone (chained from window to
+    // window, the group mixes objects; the trajectories' motion test split `fast`'s box
+    // into pieces of a dozen members), each component one candidate part.
+    let mut candidates: Vec<(Vec<usize>, bool)> = Vec::new();
     for (_, group) in groups {
+        if group.len() < MIN_MEMBERS {
+            continue;
+        }
+        match (brightness, &trees[reference]) {
+            (Some(_), Some((here, pts, tree))) if !seen_share(&group) => {
+                let inside: std::collections::HashSet<usize> = group.iter().copied().collect();
+                let mut up: Vec<usize> = (0..movers.len()).collect();
+                for (a, p) in (pts.iter().enumerate()).filter(|(a, _)| inside.contains(&here[*a])) {
+                    let found = tree
+                        .query(p)
+                        .nearest_n::<SquaredEuclidean<f64>>(k1)
+                        .execute();
+                    for q in found.iter().filter(|q| q.distance.sqrt() <= reach) {
+                        let (i, j) = (here[a], here[q.item as usize]);
+                        if i != j && inside.contains(&j) {
+                            let (x, y) = (find(&mut up, i), find(&mut up, j));
+                            up[x] = y;
+                        }
+                    }
+                }
+                let mut parts: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
+                for &m in (here.iter()).filter(|&&m| inside.contains(&m) && lives(m, reference)) {
+                    parts.entry(find(&mut up, m)).or_default().push(m);
+                }
+                candidates.extend(parts.into_values().map(|g| (g, true)));
+            }
+            _ => candidates.push((group, false)),
+        }
+    }
+    for (group, by_brightness) in candidates {
         if group.len() < MIN_MEMBERS {
             continue;
         }
@@ -217,16 +274,36 @@ pub fn into_parts(
             e.sort_by(f64::total_cmp);
             e.get(e.len() / 2).copied().unwrap_or(f64::INFINITY)
         };
-        let (poses, canon) = chain(&group, &valid, &pos, reference);
+        let brightness = brightness.filter(|_| by_brightness);
+        let (poses, canon) = match brightness {
+            Some(seq) => match followed_poses(&group, &valid, &pos, reference, seq, depths) {
+                Some(pc) => pc,
+                None => {
+                    unseen += 1;
+                    continue;
+                }
+            },
+            None => chain(&group, &valid, &pos, reference),
+        };
+        // A followed part keeps every member it was followed with: their own trajectories
+        // are windows of a few frames that a third of `fast`'s links put wrong, and
+        // judging the members by them cost the followed parts their gain (BENCHMARKS.md,
+        // "One object's motion, not a point's").
         let kept: Vec<usize> = (group.iter().copied())
-            .filter(|&m| misfit(&poses, &canon, m) <= pixels)
+            .filter(|&m| match by_brightness {
+                true => canon[m].is_some(),
+                false => misfit(&poses, &canon, m) <= pixels,
+            })
             .collect();
         if kept.len() < MIN_MEMBERS {
             continue;
         }
-        let (mut poses, mut canon) = chain(&kept, &valid, &pos, reference);
+        let (mut poses, mut canon) = match brightness {
+            Some(_) => (poses, canon),
+            None => chain(&kept, &valid, &pos, reference),
+        };
         let mut kept = kept;
-        if let Some(ev) = evidence {
+        if let Some(ev) = evidence.filter(|_| brightness.is_none()) {
             let track = |m: usize| {
                 s.track
                     .get(movers[m])
@@ -240,11 +317,9 @@ pub fn into_parts(
                 continue;
             }
         }
-        let seen_everywhere = (0..n_knots).all(|k| {
-            let fitted = kept.iter().filter(|&&m| valid[m][k]).count();
-            fitted as f64 >= MIN_SEEN_SHARE * kept.len() as f64
-        });
-        if !seen_everywhere {
+        if brightness.is_some() {
+            followed += 1;
+        } else if !seen_share(&kept) {
             unseen += 1;
             continue;
         }
@@ -273,6 +348,7 @@ pub fn into_parts(
         members,
         left: movers.len() - members,
         unseen,
+        followed,
     };
     if members == 0 {
         return summary;
@@ -443,4 +519,94 @@ fn chain(
         }
     }
     (poses, canon)
+}
+
+/// A group's poses per knot and its members' canonical centres from the images
+/// ([`super::part_motion::follow`]): the members fitted at `reference` are followed as
+/// one rigid body from their centres there (their canonical centres); the others get
+/// none. `None` when the motion is lost or fewer than [`MIN_MEMBERS`] were fitted there.
+#[allow(clippy::type_complexity)]
+fn followed_poses(
+    group: &[usize],
+    valid: &[Vec<bool>],
+    pos: &[Vec<[f64; 3]>],
+    reference: usize,
+    seq: &super::part_motion::Sequence,
+    depths: &[Option<super::depth::Aligned>],
+) -> Option<(Vec<([f64; 4], [f64; 3])>, Vec<Option<[f64; 3]>>)> {
+    use glam::DVec3;
+    let here: Vec<usize> = group
+        .iter()
+        .copied()
+        .filter(|&m| valid[m][reference])
+        .collect();
+    if here.len() < MIN_MEMBERS {
+        return None;
+    }
+    // Each member stands for the window around its pixel at the reference frame, a
+    // patch facing the camera at its depth: a dozen members alone would be a dozen
+    // brightness samples for six unknowns.
+    let cam = &seq.cameras[seq.frame_at[reference]];
+    let r = super::part_motion::PATCH_RADIUS;
+    let patch = |m: usize| -> Vec<DVec3> {
+        let Some((q, z)) = cam.project_world(DVec3::from_array(pos[m][reference])) else {
+            return Vec::new();
+        };
+        (-r..=r)
+            .flat_map(|j| (-r..=r).map(move |i| glam::DVec2::new(i as f64, j as f64)))
+            .map(|d| cam.unproject_world(q + d, z))
+            .collect()
+    };
+    let patches: Vec<Vec<DVec3>> = here.iter().map(|&m| patch(m)).collect();
+    let xs: Vec<DVec3> = patches.iter().flatten().copied().collect();
+    // At each train frame with an aligned prior, the body is moved along the ray of its
+    // centroid to the prior's median distance under its members.
+    let centres: Vec<DVec3> = here
+        .iter()
+        .map(|&m| DVec3::from_array(pos[m][reference]))
+        .collect();
+    let fix = |k: usize, m: &super::part_motion::Motion| -> super::part_motion::Motion {
+        let Some(Some(d)) = depths.get(k) else {
+            return *m;
+        };
+        let cam = &seq.cameras[seq.frame_at[k]];
+        let mut ratios: Vec<f64> = (centres.iter())
+            .filter_map(|&x| {
+                let (q, z) = cam.project_world(m.apply(x))?;
+                Some(d.at(q)? / z)
+            })
+            .filter(|r| r.is_finite() && *r > 0.0)
+            .collect();
+        if ratios.len() < MIN_MEMBERS {
+            return *m;
+        }
+        ratios.sort_by(f64::total_cmp);
+        let s = ratios[ratios.len() / 2];
+        let eye = cam.cam_to_world.centre();
+        let g = m.apply(m.centre);
+        super::part_motion::Motion {
+            shift: m.shift + (eye + s * (g - eye) - g),
+            ..*m
+        }
+    };
+    let motions = super::part_motion::follow(seq, &xs, reference, &fix)?;
+    let motions = super::part_motion::at_frames(seq, &motions);
+    let mut canon: Vec<Option<[f64; 3]>> = vec![None; pos.len()];
+    for &m in &here {
+        canon[m] = Some(pos[m][reference]);
+    }
+    // x ↦ R(x − c) + c + v  is  x ↦ R x + (c + v − R c).
+    let mut poses: Vec<([f64; 4], [f64; 3])> = Vec::with_capacity(motions.len());
+    for m in &motions {
+        let t = m.centre + m.shift - m.rot * m.centre;
+        let mut q = [m.rot.w, m.rot.x, m.rot.y, m.rot.z];
+        // One hemisphere from knot to knot, as `chain` keeps it.
+        if let Some((p, _)) = poses.last()
+            && (0..4).map(|i| q[i] * p[i]).sum::<f64>() < 0.0
+        {
+            q = q.map(|v| -v);
+        }
+        poses.push((q, t.to_array()));
+    }
+    Some((poses, canon))
 }

@@ -118,6 +118,12 @@ pub struct TrackSettings {
     /// on ([`super::fill`]) instead of ending it: the tracks of a reference frame advance
     /// together, frame by frame. 0 = off.
     pub fill: u32,
+    /// With `parts`, a group whose members were followed at too few train frames (the
+    /// gate above) is followed instead as one rigid body through the images
+    /// ([`super::part_motion`]): the frames and this many event images per frame
+    /// interval (the frames alone where the scene has no events). 0 = such groups keep
+    /// their own trajectories.
+    pub part_steps: u32,
 }
 
 /// Where the windows of trajectories hand over (`tracks.handover`; [`super::init::windows`]).
@@ -171,6 +177,7 @@ impl Default for TrackSettings {
             parts: true,
             bundle: true,
             fill: 0,
+            part_steps: 0,
         }
     }
 }

@@ -259,10 +259,14 @@ pub struct TracksSummary {
     /// Gaussians (of the middle frame's, and of each window's with `tracks.window`).
     pub moving_share: f64,
     /// Rigid parts made of them (`tracks.parts`), their members, and the groups turned
-    /// away because too few of their members were followed at some frame.
+    /// away because too few of their members were followed at some frame (or, with
+    /// `tracks.part_steps`, because their motion was lost in the images).
     pub parts: usize,
     pub part_members: usize,
     pub groups_not_parts: usize,
+    /// Of the parts, those whose motion was followed through the images
+    /// (`tracks.part_steps`).
+    pub parts_followed: usize,
     /// Train frames whose depth prior was aligned to the still scene and used.
     pub prior_frames: usize,
     pub train_frames: usize,
@@ -414,17 +418,26 @@ pub(crate) fn initial_splats(
                             depths: &aligned,
                             depth_sigma: st.depth_sigma,
                         };
+                        let sequence = (st.part_steps > 0)
+                            .then(|| part_sequence(&images, &cams, source.as_ref(), st.part_steps));
                         let p = crate::tracks::parts::into_parts(
                             &mut s,
                             &times,
                             &cams,
                             st.moving_pixels,
                             st.bundle.then_some(&evidence),
+                            sequence.as_ref(),
                         );
                         eprintln!(
                             "tracks: {} rigid parts of {} Gaussians; {} moving Gaussians keep their own trajectories",
                             p.parts, p.members, p.left
                         );
+                        if p.followed > 0 {
+                            eprintln!(
+                                "tracks: {} of the parts followed as rigid bodies through the images (members followed at too few frames)",
+                                p.followed
+                            );
+                        }
                         if p.unseen > 0 {
                             eprintln!(
                                 "tracks: {} groups not made parts: at some frame under a third of their members had been followed",
@@ -433,6 +446,7 @@ pub(crate) fn initial_splats(
                         }
                         (sum.parts, sum.part_members) = (p.parts, p.members);
                         sum.groups_not_parts = p.unseen;
+                        sum.parts_followed = p.followed;
                     }
                     summary = Some(sum);
                     *tracks = crate::tracks::loss::TrackTerm::new(table);
@@ -456,12 +470,41 @@ pub(crate) fn initial_splats(
     }
 }
 
+/// The train frames and `steps` event images per interval between them (`source`'s
+/// events; the frames alone without), for parts to be followed through.
+fn part_sequence(
+    images: &[crate::tracks::Image],
+    cams: &[&scene::Camera],
+    source: Option<&crate::tracks::events::EventSource>,
+    steps: u32,
+) -> crate::tracks::part_motion::Sequence {
+    use crate::tracks::lk::Grey;
+    let k = &cams[0].intrinsics;
+    let (w, h) = (k.width as usize, k.height as usize);
+    let grey: Vec<Grey> = images
+        .iter()
+        .map(|v| Grey::from_planar(v.rgb, w, h))
+        .collect();
+    let between = match source {
+        Some(src) => crate::tracks::events::between(
+            &grey,
+            &crate::tracks::events::EventSource {
+                steps: steps as usize,
+                ..*src
+            },
+        ),
+        None => Vec::new(),
+    };
+    crate::tracks::part_motion::Sequence::new(grey, between, cams)
+}
+
 /// Whether the init reads the scene's events: the tracks init (no PLY given), chaining
 /// its tracks through event images (`tracks.event_steps` > 0), on a scene with events.
 /// The stage hashes the events into its record's inputs by this same answer.
 pub(crate) fn reads_events(settings: &TrainSettings, scene: &Scene, ply: Option<&Path>) -> bool {
+    let tr = &settings.tracks;
     ply.is_none()
-        && settings.tracks.event_steps > 0
+        && (tr.event_steps > 0 || (tr.parts && tr.part_steps > 0))
         && scene.train.events.is_some()
         && settings.init.resolve() == Init::Tracks
 }
