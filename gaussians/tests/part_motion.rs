@@ -1,7 +1,8 @@
 //! A part's rigid motion from brightness (`tracks::part_motion`, issue #30): a textured
 //! plane drawn by ray casting through two cameras, moved between them by a known rigid
-//! motion; the motion found from the images must put every point where the known one
-//! does.
+//! motion, must be found to that motion; and a group of movers fitted at one frame only,
+//! on a textured square that turns and drifts, must be followed as one part whose poses
+//! put every member where the known motion does (`tracks.part_steps`).
 
 use gaussians::tracks::lk::{Grey, Pyramid};
 use gaussians::tracks::part_motion::{self, LEVELS, Motion};
@@ -23,8 +24,10 @@ fn camera(eye: DVec3, yaw_deg: f64) -> Camera {
     }
 }
 
-/// The image of the plane `z = PLANE_Z` (material frame) moved by `m`, seen by `cam`.
-fn draw(cam: &Camera, m: &Motion) -> Grey {
+/// The image of the plane `z = PLANE_Z` (material frame) moved by `m`, seen by `cam`:
+/// textured within `half` of its centre's axis lines (everywhere: `f64::INFINITY`), flat
+/// grey outside.
+fn draw(cam: &Camera, m: &Motion, half: f64) -> Grey {
     let n = SIZE as usize;
     let inverse = |p: DVec3| m.rot.inverse() * (p - m.centre - m.shift) + m.centre;
     let data = (0..n * n)
@@ -33,9 +36,11 @@ fn draw(cam: &Camera, m: &Motion) -> Grey {
             // The ray in the plane's material frame.
             let o = inverse(cam.cam_to_world.centre());
             let d = inverse(cam.unproject_world(px, 1.0)) - o;
-            let s = (PLANE_Z - o.z) / d.z;
-            let x = o + s * d;
-            texture(x.x, x.y) as f32
+            let x = o + (PLANE_Z - o.z) / d.z * d;
+            match x.x.abs() <= half && x.y.abs() <= half {
+                true => texture(x.x, x.y) as f32,
+                false => 0.3,
+            }
         })
         .collect();
     Grey {
@@ -59,8 +64,8 @@ fn a_moved_plane_is_followed_to_the_known_motion() {
         camera(DVec3::new(0.1, 0.0, 0.0), 1.5),
     );
     let (a, b) = (
-        Pyramid::new(draw(&ca, &rest), LEVELS),
-        Pyramid::new(draw(&cb, &truth), LEVELS),
+        Pyramid::new(draw(&ca, &rest, f64::INFINITY), LEVELS),
+        Pyramid::new(draw(&cb, &truth, f64::INFINITY), LEVELS),
     );
     // The plane's points under the central pixels of the first image.
     let xs: Vec<DVec3> = (16..48)
@@ -91,7 +96,10 @@ fn a_moved_plane_is_followed_to_the_known_motion() {
 #[test]
 fn too_few_points_inside_the_images_are_not_followed() {
     let cam = camera(DVec3::ZERO, 0.0);
-    let img = Pyramid::new(draw(&cam, &Motion::identity(DVec3::ZERO)), LEVELS);
+    let img = Pyramid::new(
+        draw(&cam, &Motion::identity(DVec3::ZERO), f64::INFINITY),
+        LEVELS,
+    );
     // Behind the camera: no point projects.
     let xs = vec![DVec3::new(0.0, 0.0, 5.0); 100];
     assert!(
@@ -113,29 +121,6 @@ fn body_motion(k: usize) -> Motion {
     }
 }
 
-/// A textured square (half-size 1.2) on a flat grey background, moved by `m`.
-fn draw_square(cam: &Camera, m: &Motion) -> Grey {
-    let n = SIZE as usize;
-    let inverse = |p: DVec3| m.rot.inverse() * (p - m.centre - m.shift) + m.centre;
-    let data = (0..n * n)
-        .map(|i| {
-            let px = DVec2::new((i % n) as f64, (i / n) as f64);
-            let o = inverse(cam.cam_to_world.centre());
-            let d = inverse(cam.unproject_world(px, 1.0)) - o;
-            let x = o + (PLANE_Z - o.z) / d.z * d;
-            match x.x.abs() <= 1.2 && x.y.abs() <= 1.2 {
-                true => texture(x.x, x.y) as f32,
-                false => 0.3,
-            }
-        })
-        .collect();
-    Grey {
-        width: n,
-        height: n,
-        data,
-    }
-}
-
 /// A group whose members were fitted at the middle frame only (so the seen-share gate
 /// turns it away) is followed through the frames as one part when the images are given:
 /// its poses put every member where the known motion does at every frame.
@@ -145,7 +130,7 @@ fn a_group_seen_at_one_frame_is_followed_through_the_images() {
     let times = [0.0, 0.25, 0.5, 0.75, 1.0];
     let cam = camera(DVec3::ZERO, 0.0);
     let cams = [&cam; 5];
-    let grey: Vec<Grey> = (0..5).map(|k| draw_square(&cam, &body_motion(k))).collect();
+    let grey: Vec<Grey> = (0..5).map(|k| draw(&cam, &body_motion(k), 1.2)).collect();
     let seq = part_motion::Sequence::new(grey, Vec::new(), &cams);
     // Movers on the square at the middle frame, every second pixel inside its inner part,
     // each with a trajectory fitted there alone.

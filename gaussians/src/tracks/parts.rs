@@ -159,7 +159,6 @@ pub fn into_parts(
     }
     nearest.sort_by(f64::total_cmp);
     let reach = PART_REACH * nearest.get(nearest.len() / 2).copied().unwrap_or(0.0);
-    let k1 = NonZeroUsize::new(NEAREST + 1).expect("positive");
     // Two neighbours move together: from this knot to every other knot both were
     // fitted at, their displacements differ by at most `pixels` seen from here.
     let together = |i: usize, j: usize, k: usize| {
@@ -177,21 +176,8 @@ pub fn into_parts(
             })
     };
     for (k, slot) in trees.iter().enumerate() {
-        let Some((here, pts, tree)) = slot else {
-            continue;
-        };
-        for (a, p) in pts.iter().enumerate() {
-            let found = tree
-                .query(p)
-                .nearest_n::<SquaredEuclidean<f64>>(k1)
-                .execute();
-            for q in found.iter().filter(|q| q.distance.sqrt() <= reach) {
-                let (i, j) = (here[a], here[q.item as usize]);
-                if i != j && together(i, j, k) {
-                    let (x, y) = (find(&mut up, i), find(&mut up, j));
-                    up[x] = y;
-                }
-            }
+        if let Some((here, pts, tree)) = slot {
+            join_near(&mut up, here, pts, tree, reach, |i, j| together(i, j, k));
         }
     }
     let mut groups: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
@@ -230,19 +216,8 @@ pub fn into_parts(
             (Some(_), Some((here, pts, tree))) if !seen_share(&group) => {
                 let inside: std::collections::HashSet<usize> = group.iter().copied().collect();
                 let mut up: Vec<usize> = (0..movers.len()).collect();
-                for (a, p) in (pts.iter().enumerate()).filter(|(a, _)| inside.contains(&here[*a])) {
-                    let found = tree
-                        .query(p)
-                        .nearest_n::<SquaredEuclidean<f64>>(k1)
-                        .execute();
-                    for q in found.iter().filter(|q| q.distance.sqrt() <= reach) {
-                        let (i, j) = (here[a], here[q.item as usize]);
-                        if i != j && inside.contains(&j) {
-                            let (x, y) = (find(&mut up, i), find(&mut up, j));
-                            up[x] = y;
-                        }
-                    }
-                }
+                let both = |i: usize, j: usize| inside.contains(&i) && inside.contains(&j);
+                join_near(&mut up, here, pts, tree, reach, both);
                 let mut parts: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
                 for &m in (here.iter()).filter(|&&m| inside.contains(&m) && lives(m, reference)) {
                     parts.entry(find(&mut up, m)).or_default().push(m);
@@ -365,6 +340,32 @@ pub fn into_parts(
     s.part = member;
     s.parts = out;
     summary
+}
+
+/// Joins in `up` each of the points `pts` (movers `here`) to its [`NEAREST`] neighbours
+/// in `tree` within `reach` that `accept` takes.
+fn join_near(
+    up: &mut [usize],
+    here: &[usize],
+    pts: &[[f64; 3]],
+    tree: &ImmutableKdTree<f64, 3>,
+    reach: f64,
+    accept: impl Fn(usize, usize) -> bool,
+) {
+    let k1 = NonZeroUsize::new(NEAREST + 1).expect("positive");
+    for (a, p) in pts.iter().enumerate() {
+        let found = tree
+            .query(p)
+            .nearest_n::<SquaredEuclidean<f64>>(k1)
+            .execute();
+        for q in found.iter().filter(|q| q.distance.sqrt() <= reach) {
+            let (i, j) = (here[a], here[q.item as usize]);
+            if i != j && accept(i, j) {
+                let (x, y) = (find(up, i), find(up, j));
+                up[x] = y;
+            }
+        }
+    }
 }
 
 /// Bundle adjust one part's `poses` and its members' canonical centres `canon` (those of
