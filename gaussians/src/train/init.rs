@@ -499,7 +499,8 @@ fn part_sequence(
 }
 
 /// Whether the init reads the scene's events: the tracks init (no PLY given), chaining
-/// its tracks through event images (`tracks.event_steps` > 0), on a scene with events.
+/// its tracks through event images (`tracks.event_steps` > 0) or following parts through
+/// them (`tracks.part_steps` > 0 with `tracks.parts`), on a scene with events.
 /// The stage hashes the events into its record's inputs by this same answer.
 pub(crate) fn reads_events(settings: &TrainSettings, scene: &Scene, ply: Option<&Path>) -> bool {
     let tr = &settings.tracks;
