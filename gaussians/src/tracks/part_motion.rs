@@ -323,3 +323,96 @@ pub fn follow(
 pub fn at_frames(seq: &Sequence, motions: &[Motion]) -> Vec<Motion> {
     seq.frame_at.iter().map(|&i| motions[i]).collect()
 }
+
+/// A group's poses per knot and its members' canonical centres from the images
+/// ([`follow`]): the members fitted at `reference` are followed as
+/// one rigid body from their centres there (their canonical centres); the others get
+/// none. `None` when the motion is lost or fewer than `min_members` were fitted there.
+/// (`valid[m][k]`: member `m`'s trajectory was fitted at knot `k`; `pos[m][k]` its centre
+/// there, as `parts::into_parts` holds them.)
+#[allow(clippy::type_complexity)]
+pub(crate) fn group_poses(
+    group: &[usize],
+    valid: &[Vec<bool>],
+    pos: &[Vec<[f64; 3]>],
+    reference: usize,
+    seq: &Sequence,
+    depths: &[Option<super::depth::Aligned>],
+    min_members: usize,
+) -> Option<(Vec<([f64; 4], [f64; 3])>, Vec<Option<[f64; 3]>>)> {
+    use glam::DVec3;
+    let here: Vec<usize> = group
+        .iter()
+        .copied()
+        .filter(|&m| valid[m][reference])
+        .collect();
+    if here.len() < min_members {
+        return None;
+    }
+    // Each member stands for the window around its pixel at the reference frame, a
+    // patch facing the camera at its depth: a dozen members alone would be a dozen
+    // brightness samples for six unknowns.
+    let cam = &seq.cameras[seq.frame_at[reference]];
+    let r = PATCH_RADIUS;
+    let patch = |m: usize| -> Vec<DVec3> {
+        let Some((q, z)) = cam.project_world(DVec3::from_array(pos[m][reference])) else {
+            return Vec::new();
+        };
+        (-r..=r)
+            .flat_map(|j| (-r..=r).map(move |i| glam::DVec2::new(i as f64, j as f64)))
+            .map(|d| cam.unproject_world(q + d, z))
+            .collect()
+    };
+    let patches: Vec<Vec<DVec3>> = here.iter().map(|&m| patch(m)).collect();
+    let xs: Vec<DVec3> = patches.iter().flatten().copied().collect();
+    // At each train frame with an aligned prior, the body is moved along the ray of its
+    // centroid to the prior's median distance under its members.
+    let centres: Vec<DVec3> = here
+        .iter()
+        .map(|&m| DVec3::from_array(pos[m][reference]))
+        .collect();
+    let fix = |k: usize, m: &Motion| -> Motion {
+        let Some(Some(d)) = depths.get(k) else {
+            return *m;
+        };
+        let cam = &seq.cameras[seq.frame_at[k]];
+        let mut ratios: Vec<f64> = (centres.iter())
+            .filter_map(|&x| {
+                let (q, z) = cam.project_world(m.apply(x))?;
+                Some(d.at(q)? / z)
+            })
+            .filter(|r| r.is_finite() && *r > 0.0)
+            .collect();
+        if ratios.len() < min_members {
+            return *m;
+        }
+        ratios.sort_by(f64::total_cmp);
+        let s = ratios[ratios.len() / 2];
+        let eye = cam.cam_to_world.centre();
+        let g = m.apply(m.centre);
+        Motion {
+            shift: m.shift + (eye + s * (g - eye) - g),
+            ..*m
+        }
+    };
+    let motions = follow(seq, &xs, reference, &fix)?;
+    let motions = at_frames(seq, &motions);
+    let mut canon: Vec<Option<[f64; 3]>> = vec![None; pos.len()];
+    for &m in &here {
+        canon[m] = Some(pos[m][reference]);
+    }
+    // x ↦ R(x − c) + c + v  is  x ↦ R x + (c + v − R c).
+    let mut poses: Vec<([f64; 4], [f64; 3])> = Vec::with_capacity(motions.len());
+    for m in &motions {
+        let t = m.centre + m.shift - m.rot * m.centre;
+        let mut q = [m.rot.w, m.rot.x, m.rot.y, m.rot.z];
+        // One hemisphere from knot to knot, as `chain` keeps it.
+        if let Some((p, _)) = poses.last()
+            && (0..4).map(|i| q[i] * p[i]).sum::<f64>() < 0.0
+        {
+            q = q.map(|v| -v);
+        }
+        poses.push((q, t.to_array()));
+    }
+    Some((poses, canon))
+}

@@ -17,8 +17,8 @@
 //! points, its poses at most knots guessed (BENCHMARKS.md, "Parts only where their
 //! motion was seen"). With images to follow them through (`tracks.part_steps`), such a
 //! group is split instead into its members living at the reference knot, joined there by
-//! distance, and each component's poses come from its brightness (`followed_poses`,
-//! [`super::part_motion`]). With the tracks' pixels and the depth
+//! distance, and each component's poses come from its brightness
+//! ([`super::part_motion`]). With the tracks' pixels and the depth
 //! priors ([`Evidence`]), the poses and the members' canonical centres are then bundle
 //! adjusted ([`super::bundle`]) to where the members were seen and to the prior's depths
 //! there, a member whose median reprojection error stays over `tracks.moving_pixels`
@@ -251,7 +251,15 @@ pub fn into_parts(
         };
         let brightness = brightness.filter(|_| by_brightness);
         let (poses, canon) = match brightness {
-            Some(seq) => match followed_poses(&group, &valid, &pos, reference, seq, depths) {
+            Some(seq) => match super::part_motion::group_poses(
+                &group,
+                &valid,
+                &pos,
+                reference,
+                seq,
+                depths,
+                MIN_MEMBERS,
+            ) {
                 Some(pc) => pc,
                 None => {
                     unseen += 1;
@@ -520,94 +528,4 @@ fn chain(
         }
     }
     (poses, canon)
-}
-
-/// A group's poses per knot and its members' canonical centres from the images
-/// ([`super::part_motion::follow`]): the members fitted at `reference` are followed as
-/// one rigid body from their centres there (their canonical centres); the others get
-/// none. `None` when the motion is lost or fewer than [`MIN_MEMBERS`] were fitted there.
-#[allow(clippy::type_complexity)]
-fn followed_poses(
-    group: &[usize],
-    valid: &[Vec<bool>],
-    pos: &[Vec<[f64; 3]>],
-    reference: usize,
-    seq: &super::part_motion::Sequence,
-    depths: &[Option<super::depth::Aligned>],
-) -> Option<(Vec<([f64; 4], [f64; 3])>, Vec<Option<[f64; 3]>>)> {
-    use glam::DVec3;
-    let here: Vec<usize> = group
-        .iter()
-        .copied()
-        .filter(|&m| valid[m][reference])
-        .collect();
-    if here.len() < MIN_MEMBERS {
-        return None;
-    }
-    // Each member stands for the window around its pixel at the reference frame, a
-    // patch facing the camera at its depth: a dozen members alone would be a dozen
-    // brightness samples for six unknowns.
-    let cam = &seq.cameras[seq.frame_at[reference]];
-    let r = super::part_motion::PATCH_RADIUS;
-    let patch = |m: usize| -> Vec<DVec3> {
-        let Some((q, z)) = cam.project_world(DVec3::from_array(pos[m][reference])) else {
-            return Vec::new();
-        };
-        (-r..=r)
-            .flat_map(|j| (-r..=r).map(move |i| glam::DVec2::new(i as f64, j as f64)))
-            .map(|d| cam.unproject_world(q + d, z))
-            .collect()
-    };
-    let patches: Vec<Vec<DVec3>> = here.iter().map(|&m| patch(m)).collect();
-    let xs: Vec<DVec3> = patches.iter().flatten().copied().collect();
-    // At each train frame with an aligned prior, the body is moved along the ray of its
-    // centroid to the prior's median distance under its members.
-    let centres: Vec<DVec3> = here
-        .iter()
-        .map(|&m| DVec3::from_array(pos[m][reference]))
-        .collect();
-    let fix = |k: usize, m: &super::part_motion::Motion| -> super::part_motion::Motion {
-        let Some(Some(d)) = depths.get(k) else {
-            return *m;
-        };
-        let cam = &seq.cameras[seq.frame_at[k]];
-        let mut ratios: Vec<f64> = (centres.iter())
-            .filter_map(|&x| {
-                let (q, z) = cam.project_world(m.apply(x))?;
-                Some(d.at(q)? / z)
-            })
-            .filter(|r| r.is_finite() && *r > 0.0)
-            .collect();
-        if ratios.len() < MIN_MEMBERS {
-            return *m;
-        }
-        ratios.sort_by(f64::total_cmp);
-        let s = ratios[ratios.len() / 2];
-        let eye = cam.cam_to_world.centre();
-        let g = m.apply(m.centre);
-        super::part_motion::Motion {
-            shift: m.shift + (eye + s * (g - eye) - g),
-            ..*m
-        }
-    };
-    let motions = super::part_motion::follow(seq, &xs, reference, &fix)?;
-    let motions = super::part_motion::at_frames(seq, &motions);
-    let mut canon: Vec<Option<[f64; 3]>> = vec![None; pos.len()];
-    for &m in &here {
-        canon[m] = Some(pos[m][reference]);
-    }
-    // x ↦ R(x − c) + c + v  is  x ↦ R x + (c + v − R c).
-    let mut poses: Vec<([f64; 4], [f64; 3])> = Vec::with_capacity(motions.len());
-    for m in &motions {
-        let t = m.centre + m.shift - m.rot * m.centre;
-        let mut q = [m.rot.w, m.rot.x, m.rot.y, m.rot.z];
-        // One hemisphere from knot to knot, as `chain` keeps it.
-        if let Some((p, _)) = poses.last()
-            && (0..4).map(|i| q[i] * p[i]).sum::<f64>() < 0.0
-        {
-            q = q.map(|v| -v);
-        }
-        poses.push((q, t.to_array()));
-    }
-    Some((poses, canon))
 }
